@@ -1,0 +1,20 @@
+"""thinfilm-mi: multilayer thin-film BSDFs for Mitsuba 3.
+
+The library (this package) holds the optics core (:mod:`thinfilm_mi.optics`),
+materials (:mod:`thinfilm_mi.materials`) and the public :class:`Stack` API. The
+Mitsuba plugins live in :mod:`thinfilm_mi.plugins` and are registered by
+:func:`thinfilm_mi.register` (called on import when Mitsuba is importable).
+"""
+from __future__ import annotations
+
+from ._llvm import LLVMVersionError, require_llvm
+from .errors import MaterialError, ThinFilmError
+from .materials import Material, refractive_index, resolve as resolve_material
+from .stack import Layer, RTResult, Stack, parse_layers
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Stack", "Layer", "RTResult", "parse_layers", "Material", "refractive_index",
+    "resolve_material", "ThinFilmError", "MaterialError", "LLVMVersionError", "require_llvm",
+]

@@ -1,0 +1,63 @@
+"""Runs the optics core in float64 on numpy data (Dr.Jit's LLVM backend).
+
+The numpy API (:class:`thinfilm_mi.Stack`) and the tables build on this. Inputs
+are flat numpy arrays; the core is traced once per call into one LLVM kernel
+that evaluates every output together.
+"""
+from __future__ import annotations
+
+import numpy as np
+import drjit as dr
+from drjit.llvm import Float64
+
+from ._llvm import require_llvm
+from .optics import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
+
+
+def to_drjit(a: np.ndarray):
+    """A real numpy array as a Float64, a complex one as :class:`Cx` of Float64;
+    arrays whose values are all equal become Python scalars (kernel literals)."""
+    a = np.asarray(a)
+    if np.iscomplexobj(a):
+        return Cx(to_drjit(a.real), to_drjit(a.imag))
+    a = np.ascontiguousarray(a, dtype=np.float64).ravel()
+    if a.size and np.all(a == a[0]):
+        return float(a[0])
+    return Float64(a)
+
+
+def to_numpy(v) -> np.ndarray:
+    if isinstance(v, Cx):
+        return to_numpy(v.re) + 1j * to_numpy(v.im)
+    return np.array(v, dtype=np.float64)
+
+
+def reference_rt(n0, cos0, films, thicknesses, n_exit, wavelength, size=None):
+    """Float64 amplitudes and powers; every argument a numpy array of the same
+    flat length (or broadcastable scalars). Returns a dict of Dr.Jit arrays."""
+    require_llvm()
+    size = np.size(wavelength) if size is None else size
+    cos0_d = Float64(np.broadcast_to(np.asarray(cos0, np.float64), (size,)).copy())
+    wl = to_drjit(np.broadcast_to(wavelength, (size,)))
+    n0_d = to_drjit(np.broadcast_to(n0, (size,)))
+    film_d = [(to_drjit(np.broadcast_to(n, (size,))), float(d)) for n, d in zip(films, thicknesses)]
+    nex = to_drjit(np.broadcast_to(n_exit, (size,)).astype(np.complex128))
+    a = stack_amplitudes(n0_d, cos0_d, film_d, nex, wl)
+    q0 = dr.select(a.grazing, 1.0, a.q0)
+    fs = transmittance_factor_s(a.q_exit, q0)
+    fp = transmittance_factor_p(a.n_exit, a.q_exit, q0)
+    out = {
+        "rs": a.rs, "rp": a.rp, "ts": a.ts, "tp": a.tp,
+        "Rs": a.rs.abs2(), "Rp": a.rp.abs2(),
+        "Ts": dr.select(a.grazing, 0.0, a.ts.abs2() * fs),
+        "Tp": dr.select(a.grazing, 0.0, a.tp.abs2() * fp),
+    }
+    # Broadcast literals to full arrays so every output has `size` entries.
+    for k, v in list(out.items()):
+        if isinstance(v, Cx):
+            out[k] = Cx(v.re + dr.zeros(Float64, size), v.im + dr.zeros(Float64, size))
+        else:
+            out[k] = v + dr.zeros(Float64, size)
+    leaves = [x for v in out.values() for x in ((v.re, v.im) if isinstance(v, Cx) else (v,))]
+    dr.eval(*leaves)
+    return out
