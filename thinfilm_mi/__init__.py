@@ -14,7 +14,16 @@ from .stack import Layer, RTResult, Stack, parse_layers
 
 __version__ = "0.1.0"
 
+from .registry import PLUGINS, register  # noqa: E402
+
+try:  # Mitsuba is a dependency, but keep the optics usable if its import fails.
+    import mitsuba as _mi  # noqa: F401
+except ImportError:  # pragma: no cover
+    pass
+else:
+    register()
+
 __all__ = [
     "Stack", "Layer", "RTResult", "parse_layers", "Material", "refractive_index",
-    "resolve_material", "ThinFilmError", "MaterialError", "LLVMVersionError", "require_llvm",
+    "resolve_material", "register", "PLUGINS", "ThinFilmError", "MaterialError", "LLVMVersionError", "require_llvm",
 ]

@@ -1,0 +1,152 @@
+r"""
+.. _bsdf-thinfilm_conductor:
+
+Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
+----------------------------------------------------------------
+
+.. pluginparameters::
+
+ * - layers
+   - |string|
+   - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."``, e.g.
+     ``"SiO2 500"`` or ``"1.46 500; 0.42+2.47j 20"``. A material is a number,
+     a complex number ``n+kj``, or a material name (``python -m thinfilm_mi
+     materials`` lists them). Default: ``""`` (no films: a bare conductor).
+ * - thin_film_ior, thin_film_thickness
+   - |string| or |float|, |float|
+   - Shorthand for one film (index or material name, thickness in nm), named as
+     in Blender and OpenPBR. Not together with ``layers``.
+ * - material
+   - |string|
+   - The substrate: a material name, e.g. ``Au``, ``Cu``, ``Si`` (default: ``Au``).
+     Not together with ``eta``/``k``.
+ * - eta, k
+   - |spectrum| or |texture|
+   - The substrate's index ``eta + i k`` given directly, as Mitsuba's
+     ``conductor`` takes it (both must be given).
+ * - ext_ior
+   - |float| or |string|
+   - Exterior index (real), a number or a non-absorbing material name
+     (default: 1.000277, air).
+ * - specular_reflectance
+   - |spectrum| or |texture|
+   - Optional factor on the reflectance; physically it should stay 1 (default: 1.0).
+
+A perfectly smooth conductor (metal or semiconductor substrate) under a stack of
+thin films, each of which may be dielectric, metallic or semiconducting (complex
+index). The reflectance is the exact composite reflectance of the multilayer
+(Rouard's recursion, Hirayama et al. eq. 1-5), evaluated at the path's
+wavelengths in the render kernel, for unpolarised light. Only spectral,
+unpolarised variants are supported.
+
+The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
+(``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``
+as differentiable, opaque parameters: changing them does not recompile.
+
+.. tabs::
+    .. code-tab:: xml
+
+        <bsdf type="thinfilm_conductor">
+            <string name="material" value="Si"/>
+            <string name="layers" value="SiO2 500"/>
+        </bsdf>
+
+    .. code-tab:: python
+
+        {'type': 'thinfilm_conductor', 'material': 'Si', 'layers': 'SiO2 500'}
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.kernel import (KernelStack, SpectralIndex, check_unqueried, check_variant,
+                                ext_ior_from_props, films_from_props)
+
+NAME = "thinfilm_conductor"
+
+
+def substrate_from_props(props, plugin: str) -> SpectralIndex:
+    """The conductor substrate: ``material`` or ``eta`` + ``k`` (as Mitsuba's conductor)."""
+    has_eta, has_k = props.has_property("eta"), props.has_property("k")
+    if props.has_property("material") and (has_eta or has_k):
+        raise ThinFilmError(f"{plugin}: give either 'material' "
+                            f"({props.get('material')!r}) or 'eta' + 'k', not both")
+    if has_eta or has_k:
+        if not (has_eta and has_k):
+            raise ThinFilmError(f"{plugin}: 'eta' and 'k' must be given together "
+                                f"(only '{'eta' if has_eta else 'k'}' was given)")
+        values = {}
+        for name in ("eta", "k"):
+            v = props.get(name)
+            if isinstance(v, (int, float)):
+                if not (v == v) or (name == "eta" and v <= 0) or (name == "k" and v < 0):
+                    raise ThinFilmError(f"{plugin}: '{name}' must be "
+                                        f"{'> 0' if name == 'eta' else '>= 0'}, got {v!r}")
+                v = mi.load_dict({"type": "uniform", "value": float(v)})
+            elif not isinstance(v, mi.Texture):
+                raise ThinFilmError(f"{plugin}: '{name}' must be a number or a spectrum/texture, "
+                                    f"got {v!r}")
+            values[name] = v
+        return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
+    return SpectralIndex.from_material(props.get("material", "Au"), "material")
+
+
+def optional_texture(props, name: str):
+    if not props.has_property(name):
+        return None
+    return props.get_texture(name)
+
+
+class ThinFilmConductor(mi.BSDF):
+    def __init__(self, props):
+        check_variant(NAME)
+        mi.BSDF.__init__(self, props)
+        films = films_from_props(props, NAME)
+        substrate = substrate_from_props(props, NAME)
+        self.stack = KernelStack(films, ext_ior_from_props(props), substrate)
+        self.specular_reflectance = optional_texture(props, "specular_reflectance")
+        check_unqueried(props, NAME)
+        flags = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide
+        self.m_components = [flags]
+        self.m_flags = flags
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        bs = dr.zeros(mi.BSDFSample3f)
+        if not ctx.is_enabled(mi.BSDFFlags.DeltaReflection):
+            return bs, mi.Spectrum(0.0)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        active = mi.Bool(active) & (cos_i > 0)
+        value = self.stack.reflectance(si, cos_i, active)
+        if self.specular_reflectance is not None:
+            value *= self.specular_reflectance.eval(si, active)
+        bs.wo = mi.reflect(si.wi)
+        bs.eta = 1.0
+        bs.pdf = 1.0
+        bs.sampled_component = mi.UInt32(0)
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DeltaReflection)
+        return bs, dr.select(active, value, 0.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        return mi.Spectrum(0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        return mi.Float(0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return mi.Spectrum(0.0), mi.Float(0.0)
+
+    def traverse(self, callback):
+        self.stack.traverse(callback)
+        if self.specular_reflectance is not None:
+            callback.put("specular_reflectance", self.specular_reflectance,
+                         mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys):
+        self.stack.parameters_changed()
+
+    def to_string(self):
+        return (f"ThinFilmConductor[\n  layers = {self.stack.describe()},\n"
+                f"  substrate = {self.stack.substrate.label},\n"
+                f"  ext_ior = {self.stack.ambient.label}\n]")
