@@ -64,7 +64,7 @@ DEFAULT_MAX_PASS_SAMPLES = 1 << 22
 MIN_PASSES = 8
 
 __all__ = [
-    "render_main", "add_render_arguments", "build_parser", "render_file", "load_scene",
+    "render_main", "run", "add_render_arguments", "setup_llvm_only", "setup_variant", "build_parser", "render_file", "load_scene",
     "parse_defines", "parse_size", "plan_passes", "RenderResult", "CLIError",
 ]
 
@@ -182,16 +182,24 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
 # set-up and scene loading
 
 
+def setup_llvm_only() -> None:
+    """:func:`thinfilm_mi.require_llvm`, its :class:`~thinfilm_mi.LLVMVersionError`
+    (which says how to fix the machine) turned into a one-line :class:`UsageError`."""
+    import thinfilm_mi
+
+    try:
+        thinfilm_mi.require_llvm()
+    except thinfilm_mi.LLVMVersionError as e:
+        raise UsageError(str(e)) from e
+
+
 def setup_variant(variant: str) -> None:
     """Check LLVM (``llvm_*`` variants), set the Mitsuba variant and register the
     thin-film plugins for it."""
     import thinfilm_mi
 
     if variant.startswith("llvm_"):
-        try:
-            thinfilm_mi.require_llvm()
-        except thinfilm_mi.LLVMVersionError as e:
-            raise UsageError(str(e)) from e
+        setup_llvm_only()
 
     import mitsuba as mi
 

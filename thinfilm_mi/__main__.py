@@ -1,0 +1,331 @@
+"""``python -m thinfilm_mi``: command-line tools of thinfilm-mi.
+
+Subcommands::
+
+    render     render a scene (the same options as ``thinfilm-render``)
+    materials  list the named materials
+    spectrum   print (or plot) R and T of a stack against wavelength at given angles
+    demo       render scenes/demo.xml into OUT/demo.exr and OUT/demo.png
+
+Examples::
+
+    python -m thinfilm_mi render scenes/demo.xml --spp 64 --size 640x480
+    python -m thinfilm_mi spectrum --layers "1.46 500; 0.42+2.47j 20" --substrate 1.6 \\
+        --angles 0,30,60 --wl 360:830:5 --plot rt.png
+    python -m thinfilm_mi demo --out out
+"""
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import sys
+import traceback
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from . import cli
+
+PROG = "python -m thinfilm_mi"
+
+#: The demo stack of the README: a 500 nm SiO2-like film over 20 nm of an
+#: Au-like metal on glass (constant indices).
+DEMO_LAYERS = "1.46 500; 0.42+2.47j 20"
+DEMO_SUBSTRATE = "1.6"
+DEMO_DESCRIPTION = "SiO2-like 1.46 500 nm; Au-like 0.42+2.47j 20 nm on glass 1.6"
+
+
+def _error(prog: str, message: str, code: int = 2, exc: BaseException | None = None,
+           verbose: bool = False) -> int:
+    if verbose and exc is not None:
+        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
+    print(f"{prog}: error: {cli.one_line(message)}", file=sys.stderr)
+    return code
+
+
+# --------------------------------------------------------------------------------------
+# materials
+
+
+def cmd_materials(args: argparse.Namespace) -> int:
+    from . import materials
+
+    fmt = getattr(materials, "format_material_table", None)
+    if fmt is None:
+        print("no material table: this version of thinfilm_mi.materials has no named "
+              "materials (format_material_table is missing); use numeric indices such as "
+              "'1.46' or '0.42+2.47j'", file=sys.stderr)
+        return 0
+    try:
+        table = fmt()
+    except Exception as e:
+        return _error(f"{PROG} materials", f"cannot list materials: {type(e).__name__}: {e}", 1,
+                      e, args.verbose)
+    print(table if isinstance(table, str) else "\n".join(map(str, table)))
+    return 0
+
+
+# --------------------------------------------------------------------------------------
+# spectrum
+
+
+def parse_angles(text: str) -> np.ndarray:
+    """``"0,30,60"`` (degrees) -> array of degrees."""
+    try:
+        values = [float(t) for t in re.split(r"[,\s]+", text.strip()) if t]
+    except ValueError:
+        raise cli.UsageError(f"--angles {text!r}: expected degrees separated by commas, e.g. 0,30,60") from None
+    if not values:
+        raise cli.UsageError(f"--angles {text!r}: no angle given")
+    for v in values:
+        if not (math.isfinite(v) and 0.0 <= v <= 90.0):
+            raise cli.UsageError(f"--angles {text!r}: angles must be in [0, 90] degrees, got {v:g}")
+    return np.array(values, dtype=np.float64)
+
+
+def parse_wavelengths(text: str) -> np.ndarray:
+    """``"START:STOP:STEP"`` (nm, STOP included when on the grid), ``"START:STOP"``
+    (5 nm steps) or a comma-separated list."""
+    text = text.strip()
+    try:
+        if ":" in text:
+            parts = [float(p) for p in text.split(":")]
+            if len(parts) == 2:
+                parts.append(5.0)
+            if len(parts) != 3:
+                raise ValueError
+            start, stop, step = parts
+            if not (step > 0 and stop >= start):
+                raise cli.UsageError(f"--wl {text!r}: need STOP >= START and STEP > 0")
+            n = int(math.floor((stop - start) / step + 1e-9)) + 1
+            wl = start + step * np.arange(n)
+        else:
+            wl = np.array([float(t) for t in re.split(r"[,\s]+", text) if t])
+    except ValueError:
+        raise cli.UsageError(f"--wl {text!r}: expected START:STOP:STEP in nm, e.g. 360:830:5, "
+                             "or a list 450,550,650") from None
+    if wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
+        raise cli.UsageError(f"--wl {text!r}: wavelengths must be positive numbers of nm")
+    return wl
+
+
+def spectrum_table(stack, wavelengths: np.ndarray, angles_deg: np.ndarray):
+    """``(R, T)`` arrays of shape (len(wavelengths), len(angles))."""
+    res = stack.rt(wavelengths[:, None], np.radians(angles_deg)[None, :])
+    return np.asarray(res.R, dtype=np.float64), np.asarray(res.T, dtype=np.float64)
+
+
+def format_spectrum(wavelengths: np.ndarray, angles_deg: np.ndarray, R: np.ndarray,
+                    T: np.ndarray) -> str:
+    """Columns ``wl_nm  R@0  T@0  R@30  T@30 ...`` with a one-line header."""
+    cols = ["wl_nm"]
+    for a in angles_deg:
+        cols += [f"R@{a:g}", f"T@{a:g}"]
+    width = max(10, max(len(c) for c in cols) + 2)
+    lines = ["".join(c.rjust(width) for c in cols)]
+    for i, wl in enumerate(wavelengths):
+        cells = [f"{wl:.6g}"]
+        for j in range(len(angles_deg)):
+            cells += [f"{R[i, j]:.6f}", f"{T[i, j]:.6f}"]
+        lines.append("".join(c.rjust(width) for c in cells))
+    return "\n".join(lines)
+
+
+def plot_spectrum(path: str | Path, stack, wavelengths, angles_deg, R, T) -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
+    colors = plt.cm.viridis(np.linspace(0, 0.9, len(angles_deg)))
+    for j, a in enumerate(angles_deg):
+        ax.plot(wavelengths, R[:, j], color=colors[j], label=f"R, {a:g}°")
+        ax.plot(wavelengths, T[:, j], color=colors[j], ls="--", label=f"T, {a:g}°")
+    ax.set_xlabel("wavelength (nm)")
+    ax.set_ylabel("fraction of incident power")
+    ax.set_ylim(-0.02, 1.02)
+    ax.set_title(repr(stack), fontsize=9)
+    ax.legend(fontsize=7, ncol=2)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def cmd_spectrum(args: argparse.Namespace) -> int:
+    prog = f"{PROG} spectrum"
+    from . import Stack
+    from .errors import ThinFilmError
+
+    try:
+        angles = parse_angles(args.angles)
+        wl = parse_wavelengths(args.wl)
+        cli.setup_llvm_only()
+        stack = Stack(args.layers, substrate=args.substrate, ambient=args.ambient)
+        R, T = spectrum_table(stack, wl, angles)
+    except (cli.CLIError, ThinFilmError, ValueError) as e:
+        return _error(prog, str(e), 2, e, args.verbose)
+    print(f"# {stack!r}; R, T unpolarised; angles in degrees in the ambient medium")
+    print(format_spectrum(wl, angles, R, T))
+    if args.plot:
+        try:
+            path = plot_spectrum(args.plot, stack, wl, angles, R, T)
+        except Exception as e:
+            return _error(prog, f"cannot write plot {args.plot}: {e}", 1, e, args.verbose)
+        print(f"{prog}: wrote {path}", file=sys.stderr)
+    return 0
+
+
+# --------------------------------------------------------------------------------------
+# demo
+
+
+def find_demo_scene() -> Path | None:
+    """``scenes/demo.xml`` of the working directory or of the source checkout."""
+    for root in (Path.cwd(), Path(__file__).resolve().parent.parent):
+        candidate = root / "scenes" / "demo.xml"
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def reflectance_colours(wavelengths: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """sRGB (clipped, display-encoded) colour of ``R`` (wavelength x angle)
+    under D65 for the CIE 1931 2° observer."""
+    import colour
+
+    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
+    d65 = colour.SDS_ILLUMINANTS["D65"]
+    xyz_bar = np.stack([np.interp(wavelengths, cmfs.wavelengths, cmfs.values[:, i], left=0, right=0)
+                        for i in range(3)], axis=1)
+    illum = np.interp(wavelengths, d65.wavelengths, d65.values, left=0, right=0)
+    weights = xyz_bar * illum[:, None]
+    norm = weights[:, 1].sum()
+    XYZ = np.einsum("wa,wc->ac", R, weights) / norm
+    rgb = colour.XYZ_to_sRGB(XYZ, apply_cctf_encoding=True)
+    return np.clip(rgb, 0.0, 1.0)
+
+
+def write_reflectance_image(path: str | Path) -> Path:
+    """The demo stack's reflectance over angle and wavelength, with its D65 colour."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from . import Stack
+
+    stack = Stack(DEMO_LAYERS, substrate=DEMO_SUBSTRATE)
+    wl = np.arange(360.0, 830.0 + 1e-9, 2.0)
+    angles = np.linspace(0.0, 89.0, 90)
+    R, _ = spectrum_table(stack, wl, angles)
+    rgb = reflectance_colours(wl, R)
+
+    fig, (ax, ax_c) = plt.subplots(1, 2, figsize=(8, 4.2), dpi=120,
+                                   gridspec_kw={"width_ratios": [12, 1]})
+    im = ax.imshow(R.T, origin="lower", aspect="auto", cmap="magma", vmin=0, vmax=1,
+                   extent=(wl[0], wl[-1], angles[0], angles[-1]))
+    ax.set_xlabel("wavelength (nm)")
+    ax.set_ylabel("angle of incidence (°)")
+    ax.set_title(f"R(λ, θ): {DEMO_DESCRIPTION}", fontsize=8)
+    fig.colorbar(im, ax=ax, label="reflectance (unpolarised)")
+    ax_c.imshow(rgb[:, None, :], origin="lower", aspect="auto",
+                extent=(0, 1, angles[0], angles[-1]))
+    ax_c.set_xticks([])
+    ax_c.set_title("D65\nsRGB", fontsize=8)
+    ax_c.yaxis.tick_right()
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def cmd_demo(args: argparse.Namespace) -> int:
+    prog = f"{PROG} demo"
+    out = Path(args.out)
+    scene = find_demo_scene()
+    if scene is not None:
+        try:
+            result = cli.render_file(
+                scene, out / "demo.exr", spp=args.spp, size=cli.parse_size(args.size),
+                variant=args.variant, seed=args.seed, progress=sys.stderr, verbose=args.verbose)
+        except cli.CLIError as e:
+            return cli.report_error(e, args.verbose)
+        print(cli.summary(result), file=sys.stderr)
+        return 0
+    try:
+        cli.setup_llvm_only()
+        path = write_reflectance_image(out / "demo_reflectance.png")
+    except cli.CLIError as e:
+        return _error(prog, str(e), e.code, e, args.verbose)
+    except Exception as e:
+        return _error(prog, f"{type(e).__name__}: {e}", 1, e, args.verbose)
+    print(f"{prog}: scenes/demo.xml not found, so no render; wrote the demo stack's "
+          f"reflectance over angle and wavelength to {path}", file=sys.stderr)
+    return 0
+
+
+# --------------------------------------------------------------------------------------
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = cli._ArgumentParser(prog=PROG, description="thinfilm-mi command-line tools")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub.required = True
+
+    p = sub.add_parser("render", help="render a scene (same options as thinfilm-render)",
+                       description="Render a Mitsuba 3 scene into a linear EXR and an sRGB PNG.")
+    cli.add_render_arguments(p)
+    p.set_defaults(func=lambda a: cli.run(a))
+
+    p = sub.add_parser("materials", help="list the named materials")
+    p.add_argument("--verbose", action="store_true")
+    p.set_defaults(func=cmd_materials)
+
+    p = sub.add_parser("spectrum", help="R and T of a stack against wavelength",
+                       description="Print (and optionally plot) the unpolarised reflectance R "
+                                   "and transmittance T of a thin-film stack.")
+    p.add_argument("--layers", required=True, metavar="'MAT NM; ...'",
+                   help="films from the ambient side inwards, e.g. '1.46 500; 0.42+2.47j 20'")
+    p.add_argument("--substrate", default="1.0", help="substrate material (default 1.0)")
+    p.add_argument("--ambient", default="1.0", help="ambient material (default 1.0)")
+    p.add_argument("--angles", default="0", help="angles of incidence in degrees, e.g. 0,30,60")
+    p.add_argument("--wl", default="360:830:5", help="wavelengths START:STOP:STEP in nm "
+                                                     "(default 360:830:5)")
+    p.add_argument("--plot", metavar="OUT.png", help="also plot R and T into this image")
+    p.add_argument("--verbose", action="store_true")
+    p.set_defaults(func=cmd_spectrum)
+
+    p = sub.add_parser("demo", help="render scenes/demo.xml into OUT/demo.exr and OUT/demo.png")
+    p.add_argument("--out", default="out", help="output folder (default out)")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
+    p.add_argument("--size", metavar="WxH", help="film size (default: the scene's)")
+    p.add_argument("--variant", default=cli.DEFAULT_VARIANT)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--verbose", action="store_true")
+    p.set_defaults(func=cmd_demo)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except cli.UsageError as e:
+        prog = cli.PROG if argv[:1] == ["render"] else PROG
+        return _error(prog, str(e), 2, e, "--verbose" in argv)
+    except SystemExit as e:  # --help
+        return int(e.code or 0)
+    return args.func(args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
