@@ -1,0 +1,249 @@
+"""The command-line tools: thinfilm-render and python -m thinfilm_mi."""
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+OpenEXR = pytest.importorskip("OpenEXR")
+
+from thinfilm_mi import Stack, cli  # noqa: E402
+from thinfilm_mi import __main__ as tf_main  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+PREFIX = "thinfilm-render: error:"
+
+# Only built-in plugins. The sphere is a gold conductor in a uniform white
+# environment: the background is exactly 1, the sphere yellowish (R > B).
+SCENE = """<scene version="3.0.0">
+  <default name="spp" value="2"/>
+  <default name="resx" value="20"/>
+  <default name="resy" value="10"/>
+  <integrator type="path"><integer name="max_depth" value="3"/></integrator>
+  <sensor type="perspective">
+    <float name="fov" value="60"/>
+    <transform name="to_world"><lookat origin="0,0,5" target="0,0,0" up="0,1,0"/></transform>
+    <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+    <film type="hdrfilm">
+      <integer name="width" value="$resx"/><integer name="height" value="$resy"/>
+      <rfilter type="box"/>
+    </film>
+  </sensor>
+  <shape type="sphere"><bsdf type="conductor"><string name="material" value="Au"/></bsdf></shape>
+  <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+</scene>
+"""
+
+
+@pytest.fixture
+def scene(tmp_path) -> Path:
+    path = tmp_path / "tiny.xml"
+    path.write_text(SCENE)
+    return path
+
+
+def _read_exr(path):
+    with OpenEXR.File(str(path), separate_channels=True) as f:
+        header = dict(f.header())
+        channels = {k: np.array(v.pixels) for k, v in f.channels().items()}
+    return channels, header
+
+
+def _png_size(path):
+    import mitsuba as mi
+
+    return tuple(int(v) for v in mi.Bitmap(str(path)).size())
+
+
+def _error_lines(err: str) -> list[str]:
+    return [l for l in err.splitlines() if l.strip()]
+
+
+def test_render_in_process(scene, tmp_path, capfd):
+    out = tmp_path / "res" / "tiny.exr"
+    rc = cli.render_main([str(scene), "-o", str(out), "--spp", "3", "--size", "24x16", "--seed", "7"])
+    captured = capfd.readouterr()
+    assert rc == 0, captured.err
+    channels, header = _read_exr(out)
+    assert sorted(channels) == ["B", "G", "R"]
+    assert channels["R"].shape == (16, 24)
+    assert header["scene"] == str(scene.resolve())
+    assert header["variant"] == "llvm_ad_spectral"
+    assert header["spp"] == 3
+    assert header["seed"] == 7
+    assert float(header["renderTime"]) >= 0.0
+    # the picture is the scene: a white background (spectral noise averages out
+    # over the top row), a gold sphere in the middle (red above blue)
+    background = [channels[c][0, :].mean() for c in "RGB"]
+    assert np.allclose(background, 1.0, atol=0.2), background
+    centre = [channels[c][6:10, 10:14].mean() for c in "RGB"]
+    assert centre[0] > centre[2] + 0.2, centre
+    assert 0.5 < centre[0] < 1.1, centre
+    assert _png_size(out.with_suffix(".png")) == (24, 16)
+    assert "3 spp" in captured.err and "samples/s" in captured.err
+
+
+def test_scene_parameters_and_defaults(scene, tmp_path, monkeypatch, capfd):
+    # without --spp/--size the scene's own $spp/$resx/$resy (set here with -D) apply;
+    # without -o the output goes to out/<stem>.exr in the working directory
+    monkeypatch.chdir(tmp_path)
+    rc = cli.render_main([str(scene), "-D", "resx=12", "-D", "resy=6", "-D", "spp=1"])
+    assert rc == 0, capfd.readouterr().err
+    channels, header = _read_exr(tmp_path / "out" / "tiny.exr")
+    assert channels["G"].shape == (6, 12)
+    assert header["spp"] == 1
+    assert header["parameters"] == "resx=12 resy=6 spp=1"
+    assert (tmp_path / "out" / "tiny.png").is_file()
+
+
+def test_size_override_on_scene_without_film(tmp_path, capfd):
+    # no film and no $resx: --size adds a film of that size
+    text = SCENE.replace("<film", "<!-- <film").replace("</film>", "</film> -->")
+    path = tmp_path / "nofilm.xml"
+    path.write_text(text)
+    out = tmp_path / "nofilm.exr"
+    assert cli.render_main([str(path), "-o", str(out), "--spp", "1", "--size", "9x5"]) == 0
+    channels, _ = _read_exr(out)
+    assert channels["R"].shape == (5, 9)
+
+
+def test_render_subprocess(scene, tmp_path):
+    out = tmp_path / "sub.exr"
+    proc = subprocess.run(
+        [sys.executable, "-m", "thinfilm_mi", "render", str(scene), "-o", str(out),
+         "--spp", "2", "--size", "8x6"],
+        capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    channels, header = _read_exr(out)
+    assert channels["B"].shape == (6, 8)
+    assert header["spp"] == 2
+    assert out.with_suffix(".png").is_file()
+
+
+@pytest.mark.parametrize("case", ["bad-define", "missing-file", "unknown-plugin", "unused-define"])
+def test_errors_are_one_line(case, scene, tmp_path, capfd):
+    args = {
+        "bad-define": [str(scene), "-D", "foo"],
+        "missing-file": [str(tmp_path / "nope.xml")],
+        "unknown-plugin": None,
+        "unused-define": [str(scene), "-D", "nosuchparam=1"],
+    }[case]
+    if args is None:
+        bad = tmp_path / "bad.xml"
+        bad.write_text(SCENE.replace('type="conductor"', 'type="no_such_bsdf"'))
+        args = [str(bad)]
+    rc = cli.render_main(args + ["-o", str(tmp_path / "e.exr")])
+    err = capfd.readouterr().err
+    lines = _error_lines(err)
+    assert rc == 2
+    assert len(lines) == 1, err
+    assert lines[0].startswith(PREFIX)
+    assert not (tmp_path / "e.exr").exists()
+    if case == "unknown-plugin":
+        assert "no_such_bsdf" in lines[0]
+
+
+def test_unknown_plugin_error_subprocess(scene, tmp_path):
+    bad = tmp_path / "bad.xml"
+    bad.write_text(SCENE.replace('type="sphere"', 'type="no_such_shape"'))
+    proc = subprocess.run([sys.executable, "-m", "thinfilm_mi", "render", str(bad)],
+                          capture_output=True, text=True, cwd=tmp_path, timeout=300)
+    lines = _error_lines(proc.stderr)
+    assert proc.returncode == 2
+    assert len(lines) == 1, proc.stderr
+    assert lines[0].startswith(PREFIX) and "no_such_shape" in lines[0]
+    assert "Traceback" not in proc.stderr
+
+
+def test_verbose_adds_traceback(tmp_path, capfd):
+    rc = cli.render_main([str(tmp_path / "nope.xml"), "--verbose"])
+    err = capfd.readouterr().err
+    assert rc == 2
+    assert "Traceback" in err
+    assert _error_lines(err)[-1].startswith(PREFIX)
+
+
+def test_one_line_condenses_plugin_tracebacks():
+    msg = ('[parser.cpp:1718] At s.xml (line 12, col 25): failed to instantiate bsdf plugin of '
+           'type "x": Traceback (most recent call last):\n  File "p.py", line 7, in __init__\n'
+           'ValueError: thickness: must be >= 0, got -3')
+    assert cli.one_line(msg) == ('At s.xml (line 12, col 25): failed to instantiate bsdf plugin '
+                                 'of type "x": ValueError: thickness: must be >= 0, got -3')
+
+
+@pytest.mark.parametrize("spp,pixels,cap", [(1, 100, 1 << 22), (7, 100, 1 << 22),
+                                            (1000, 1000, 10_000), (64, 1 << 22, 1 << 22)])
+def test_plan_passes(spp, pixels, cap):
+    plan = cli.plan_passes(spp, pixels, cap)
+    assert sum(plan) == spp
+    assert max(plan) - min(plan) <= 1
+    assert len(plan) >= min(spp, cli.MIN_PASSES)
+    assert max(plan) * pixels <= max(cap, pixels)
+    seeds = {cli.pass_seed(0, i) for i in range(len(plan))} | {cli.pass_seed(1, i) for i in range(len(plan))}
+    assert len(seeds) == 2 * len(plan)
+
+
+def test_parse_helpers():
+    assert cli.parse_defines(["a=1", "b_2= x=y"]) == {"a": "1", "b_2": " x=y"}
+    assert cli.parse_size("640x480") == (640, 480)
+    for bad in ("640", "0x4", "axb"):
+        with pytest.raises(cli.UsageError):
+            cli.parse_size(bad)
+    with pytest.raises(cli.UsageError):
+        cli.parse_defines(["1a=3"])
+
+
+def test_spectrum_matches_stack(capsys):
+    layers, angles = "1.46 500; 0.42+2.47j 20", [0.0, 30.0, 60.0]
+    rc = tf_main.main(["spectrum", "--layers", layers, "--substrate", "1.6", "--ambient", "1.0",
+                       "--angles", "0,30,60", "--wl", "400:700:20"])
+    out = capsys.readouterr().out
+    assert rc == 0
+    rows = [l.split() for l in out.splitlines() if l.strip() and not l.startswith("#")]
+    assert rows[0] == ["wl_nm", "R@0", "T@0", "R@30", "T@30", "R@60", "T@60"]
+    table = np.array(rows[1:], dtype=float)
+    wl = np.arange(400.0, 701.0, 20.0)
+    np.testing.assert_array_equal(table[:, 0], wl)
+    stack = Stack(layers, substrate=1.6, ambient=1.0)
+    for j, a in enumerate(angles):
+        res = stack.rt(wl, np.radians(a))
+        np.testing.assert_allclose(table[:, 1 + 2 * j], res.R, atol=1e-6)
+        np.testing.assert_allclose(table[:, 2 + 2 * j], res.T, atol=1e-6)
+
+
+def test_spectrum_plot_and_bad_input(tmp_path, capsys):
+    plot = tmp_path / "rt.png"
+    assert tf_main.main(["spectrum", "--layers", "1.46 100", "--angles", "0", "--wl", "400:500:50",
+                         "--plot", str(plot)]) == 0
+    assert plot.is_file() and plot.stat().st_size > 1000
+    capsys.readouterr()
+    assert tf_main.main(["spectrum", "--layers", "1.46", "--angles", "0"]) == 2
+    assert len(_error_lines(capsys.readouterr().err)) == 1
+    assert tf_main.main(["spectrum", "--layers", "1.46 10", "--angles", "95"]) == 2
+
+
+def test_materials_runs(capsys):
+    from thinfilm_mi import materials
+
+    rc = tf_main.main(["materials"])
+    captured = capsys.readouterr()
+    assert rc == 0, captured.err
+    if hasattr(materials, "format_material_table"):
+        assert captured.out.strip()
+    else:
+        assert "no material table" in captured.err
+
+
+def test_demo_reflectance_image(tmp_path):
+    # the fallback of `demo` while scenes/demo.xml does not exist (and a check of its plot)
+    path = tf_main.write_reflectance_image(tmp_path / "demo_reflectance.png")
+    assert _png_size(path)[0] > 400
+
+
+def test_console_script_declared():
+    text = (REPO / "pyproject.toml").read_text()
+    assert 'thinfilm-render = "thinfilm_mi.cli:render_main"' in text
