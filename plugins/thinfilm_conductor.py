@@ -69,8 +69,8 @@ NAME = "thinfilm_conductor"
 
 def substrate_from_props(props, plugin: str) -> SpectralIndex:
     """The conductor substrate: ``material`` or ``eta`` + ``k`` (as Mitsuba's conductor)."""
-    has_eta, has_k = props.has_property("eta"), props.has_property("k")
-    if props.has_property("material") and (has_eta or has_k):
+    has_eta, has_k = ("eta" in props), ("k" in props)
+    if ("material" in props) and (has_eta or has_k):
         raise ThinFilmError(f"{plugin}: give either 'material' "
                             f"({props.get('material')!r}) or 'eta' + 'k', not both")
     if has_eta or has_k:
@@ -85,16 +85,19 @@ def substrate_from_props(props, plugin: str) -> SpectralIndex:
                     raise ThinFilmError(f"{plugin}: '{name}' must be "
                                         f"{'> 0' if name == 'eta' else '>= 0'}, got {v!r}")
                 v = mi.load_dict({"type": "uniform", "value": float(v)})
-            elif not isinstance(v, mi.Texture):
-                raise ThinFilmError(f"{plugin}: '{name}' must be a number or a spectrum/texture, "
-                                    f"got {v!r}")
+            else:
+                try:
+                    v = props.get_unbounded_texture(name)
+                except Exception as e:
+                    raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
+                                        f"spectrum/texture, got {v!r} ({e})") from None
             values[name] = v
         return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
     return SpectralIndex.from_material(props.get("material", "Au"), "material")
 
 
 def optional_texture(props, name: str):
-    if not props.has_property(name):
+    if not (name in props):
         return None
     return props.get_texture(name)
 

@@ -72,12 +72,12 @@ DEFAULT_INT_IOR = 1.5046
 
 
 def optional_texture(props, name: str):
-    return props.get_texture(name) if props.has_property(name) else None
+    return props.get_texture(name) if (name in props) else None
 
 
 def spectral_mean(x):
     """Average of a spectrum over its wavelengths (a Float)."""
-    return dr.mean(x, axis=0) if dr.depth(x) > 1 else x
+    return sum(x[i] for i in range(len(x))) * (1.0 / len(x))
 
 
 class ThinFilmDielectric(mi.BSDF):

@@ -95,6 +95,8 @@ class SpectralIndex:
             mat = _materials.resolve(spec)
         except ValueError as e:
             msg = str(e)
+            if msg.startswith("material: "):
+                msg = msg[len("material: "):]
             raise ThinFilmError(msg if msg.startswith(name) else f"{name}: {msg}") from None
         if mat.constant is not None:
             c = mat.constant
@@ -243,9 +245,9 @@ def _rt(n0, cos0, films, n_exit, wl, transmission: bool):
 
 def films_from_props(props, plugin: str) -> list[tuple[SpectralIndex, float]]:
     """The film list of a plugin: ``layers`` or ``thin_film_ior`` + ``thin_film_thickness``."""
-    has_layers = props.has_property("layers")
-    has_ior = props.has_property("thin_film_ior")
-    has_thk = props.has_property("thin_film_thickness")
+    has_layers = ("layers" in props)
+    has_ior = ("thin_film_ior" in props)
+    has_thk = ("thin_film_thickness" in props)
     if has_layers and (has_ior or has_thk):
         raise ThinFilmError(f"{plugin}: give either 'layers' or 'thin_film_ior' + "
                             "'thin_film_thickness', not both")
