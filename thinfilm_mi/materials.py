@@ -26,8 +26,8 @@ Accepted specifications (:func:`resolve`), wherever a material is accepted:
   Bare names do *not* fall back to Mitsuba presets: a name means one dataset,
   and Mitsuba's ``Au`` (luxpop/Palik) differs from the default ``Au``
   (Johnson & Christy). Unknown names suggest the ``mitsuba:`` form when it exists;
-* a file path: ``.csv`` (columns wavelength, n[, k]; wavelengths in nm unless
-  the header says ``um``/``µm``), ``.spd`` (Mitsuba's format: ``X.eta.spd``
+* a file path (or ``os.PathLike``): ``.csv``/``.txt`` (columns wavelength,
+  n[, k]; wavelengths in nm unless the header says ``um``/``µm``), ``.spd`` (Mitsuba's format: ``X.eta.spd``
   with ``X.k.spd`` beside it, or a single ``.spd`` holding n), or
   ``.yml``/``.yaml`` in the refractiveindex.info format.
 
@@ -262,7 +262,7 @@ class DispersiveMaterial(Material):
             bad = ~np.isfinite(wl) | (wl < lo * (1 - _RANGE_RTOL)) | (wl > hi * (1 + _RANGE_RTOL))
             if np.any(bad):
                 raise MaterialError(
-                    f"material {self.name!r}: wavelength {wl[bad].flat[0]!r} nm is outside its data "
+                    f"material {self.name!r}: wavelength {float(wl[bad].flat[0])!r} nm is outside its data "
                     f"({lo:g}-{hi:g} nm; no extrapolation)"
                 )
         wl = np.clip(wl, lo, hi)
@@ -272,8 +272,8 @@ class DispersiveMaterial(Material):
         if out.size and not (np.all(np.isfinite(out)) and np.all(out.real > 0)):
             bad = ~np.isfinite(out) | (out.real <= 0)
             raise MaterialError(
-                f"material {self.name!r}: its dispersion formula gives n = {out[bad].flat[0]!r} at "
-                f"{wl[bad].flat[0]!r} nm"
+                f"material {self.name!r}: its dispersion formula gives n = {complex(out[bad].flat[0])!r} at "
+                f"{float(wl[bad].flat[0])!r} nm"
             )
         return out
 
@@ -609,7 +609,8 @@ def _load_csv(path: Path, where: str) -> DispersiveMaterial:
         s = line.strip()
         if not s or s.startswith("#"):
             continue
-        cells = [c.strip() for c in re.split(r"[,;\t]|\s+", s) if c.strip()]
+        sep = r"[,;\t]" if re.search(r"[,;\t]", s) else r"\s+"
+        cells = [c.strip() for c in re.split(sep, s) if c.strip()]
         try:
             rows.append([float(c) for c in cells])
         except ValueError:
@@ -771,9 +772,11 @@ def resolve(spec: Any, *, require_range: tuple[float, float] | None = SPECTRAL_R
         text = spec.strip().replace(" ", "")
         if re.fullmatch(r"[0-9eE.+\-ij()]+", text) and re.search(r"[0-9]", text):
             try:
-                return ConstantMaterial(complex(text.replace("i", "j")))
+                value = complex(text.replace("i", "j"))
             except ValueError:
-                pass
+                value = None
+            if value is not None:  # validated outside the try: MaterialError is a ValueError
+                return ConstantMaterial(value)
     elif not isinstance(spec, os.PathLike):
         raise MaterialError(f"material: expected a number, a name or a file, got {spec!r}")
     key = _cache_key(spec)
