@@ -1,0 +1,398 @@
+r"""
+.. _bsdf-thinfilm_diffuse:
+
+Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
+----------------------------------------------------------------
+
+.. pluginparameters::
+
+ * - reflectance
+   - |spectrum| or |texture|
+   - Albedo ``k_d`` of the diffuse base, in [0, 1] (default: 0.5).
+ * - layers
+   - |string|
+   - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."``, e.g.
+     ``"SiO2 500; Au 2"``. The innermost film is normally the paper's absorbing
+     film (a thin metal or semiconductor). Default: ``""`` (no films: exactly
+     Mitsuba's ``diffuse``).
+ * - thin_film_ior, thin_film_thickness
+   - |string| or |float|, |float|
+   - Shorthand for one film (index or material name, thickness in nm). Not
+     together with ``layers``.
+ * - ext_ior
+   - |float| or |string|
+   - Exterior index, real (default: 1.000277, air).
+ * - model
+   - |string|
+   - ``"multiple"`` (default): the paper's model plus the interreflection
+     between the base and the coating; ``"single"``: the paper's first-order
+     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10).
+
+A perfectly diffuse (Lambertian) base under a stack of thin films, after
+Hirayama et al. section 2.4. Component 0 is the delta reflection of the
+coating, component 1 the diffuse lobe; the thin films are evaluated at the
+path's wavelengths in the render kernel (float32), for unpolarised light.
+
+**The two parts of the stack.** With films ``1..N`` (outside in) and an
+*absorbing* innermost film ``N`` (``k > 0`` somewhere in 360-830 nm), the
+stack is split as in the paper's table step: the *coating* is films
+``1..N-1`` with film ``N`` as its (semi-infinite) exit medium, and film ``N``
+only attenuates. Then, for an angle ``θ`` measured in the ambient medium,
+
+* ``k_r(θ)``, ``k_t(θ)``: reflectance and transmittance (power entering film
+  ``N``, appendix A-21) of the coating over film ``N`` (eq. 5-6);
+* ``k_a(θ)``: the attenuation through film ``N`` along the refracted direction
+  (appendix A-18, ``exp(-4π Im(q_N) d_N / λ)`` with ``q_N = n̂_N cos θ_N``, the
+  same tangential wave vector ``n_0 sin θ``; see ``optics.film_attenuation``
+  for the A-7 sign typo);
+* ``t(θ) = k_t(θ) k_a(θ)``: the power fraction of light arriving at ``θ`` that
+  reaches the base (eq. 10).
+
+If the innermost film does not absorb (or there are no films), there is no film
+``N``: the coating is the whole stack, its exit medium is the base medium
+(index ``ext_ior``, see below), ``k_a = 1``, and ``k_r``, ``t = k_t`` are the
+exact composite reflectance and transmittance of all films. With no films
+``k_r = 0`` and ``t = 1``, and both models *are* Mitsuba's ``diffuse``
+(the kernel takes that path without any stack work: bit-identical results).
+
+**model = "single"** (eq. 8-10). With ``ω_i`` the viewing direction (the
+paper's ``θ_i``) and ``ω_o`` the light direction (``θ_l``)::
+
+    specular (component 0):  k_r(θ_i)                                 (eq. 8, I_r term)
+    diffuse  (component 1):  f = k_t(θ_i) k_a(θ_i) · k_d/π · k_a(θ_l) k_t(θ_l)
+                             (eval returns f cos θ_l)                  (eq. 8-10)
+
+Eq. 10 gives the light reaching the base, ``L' = k_a k_t(θ_l) L``; eq. 9 lets
+the base reflect ``k_d L' cos θ_l'`` and crosses film ``N`` again (second
+``k_a``, taken along the viewing direction's refracted path: ``k_a(θ_i)``);
+eq. 8 multiplies by ``k_t(θ_i)`` for the exit. The paper writes ``k_t`` and
+``k_r`` as functions of the viewing angle ``θ_i``; the exit factor
+``k_t(θ_i) k_a(θ_i)`` is the transmission of light *leaving* towards the
+viewer, equal by reciprocity to that of light arriving from the viewer. Since
+``k_t`` is a ratio of normal fluxes (A-19), ``L' cos θ_l'`` in eq. 9 is read as
+the irradiance on the base, ``k_a k_t(θ_l) L cos θ_l`` per unit solid angle of
+the light: the cosine is that of the light direction outside, which is what
+Mitsuba multiplies by. The ``1/π`` is the Lambert normalisation of ``k_d``
+(the paper's ``k_d`` is an albedo, as in ``diffuse``). **No** ``(n_N/n_0)^2``
+radiance scaling is applied: the paper applies none (eq. 10), the index of an
+absorbing film ``N`` defines no radiance invariant, and the base is treated as
+radiating into a medium matched to the ambient (index ``ext_ior``), for which
+the factor is exactly 1 — which is also what makes the film-free case equal to
+``diffuse``. The resulting ``f`` is symmetric in ``ω_i, ω_o`` (reciprocal).
+
+**model = "multiple"** (default) keeps the same ``k_r`` and ``t`` and adds the
+light that the coating reflects back onto the base, summed as a geometric
+series as Mitsuba's ``plastic`` does for a bare interface::
+
+    f = t(θ_i) t(θ_l) · k_d / (π (1 - k_d R_dh))
+
+``R_dh = 2 ∫ R_up(μ) μ dμ`` is the coating's hemispherical reflectance seen
+from the base (``μ = cos θ`` in the ambient parametrisation of the internal
+directions, which is exact for the base medium ``ext_ior``). Without film
+``N``, ``R_up`` is the exact reflectance of the reversed stack lit from the
+base medium; with film ``N``, ``R_up = k_a^2 k_r`` (down and up through film
+``N``, the coating reflecting alike from both sides: exact for a lossless
+coating, and ``R_up + t <= k_r + k_t <= 1`` in any case). ``R_dh`` is computed
+per wavelength at load time (and when a thickness changes) with the float64
+core over a Gauss-Legendre rule and stored as a ``regular`` spectrum. The
+internal light is Lambertian (the base re-diffuses everything it receives), so
+the exit factor is the same ``t(θ)`` and the radiance scaling ``1/η^2`` of
+``plastic`` is 1 (matched base medium). The albedo for light from ``θ_i`` is
+``k_r + t(θ_i) k_d T_hemi/(1 - k_d R_dh)`` with ``T_hemi = 2∫ t μ dμ``: for a
+lossless stack ``T_hemi = 1 - R_dh`` and a white base gives exactly 1; for any
+stack it is at most ``k_r + t <= 1``. ``"single"`` is the first term of the
+series, hence never brighter than ``"multiple"``.
+
+**Specular part.** Both models use the paper's ``k_r`` (coating over film
+``N``; the exact full-stack reflectance when there is no absorbing film ``N``).
+The exact reflectance of *all* films over the base medium is not used with an
+absorbing film ``N``: paired with the first-order ``t`` it can exceed energy
+conservation (e.g. 50 nm Si, where the thin-film reflectance in the red is far
+above that of bulk Si while ``k_t`` is that of bulk Si).
+
+**Sampling.** Component 0 is chosen with probability proportional to the
+spectral mean of ``k_r(θ_i)``, component 1 proportional to that of its albedo
+estimate ``t(θ_i) k_d T_hemi [/(1 - k_d R_dh)]``; the diffuse direction is
+cosine-weighted and its pdf is multiplied by the selection probability, as in
+``plastic``. When the context enables one component only, the other one's
+stack work is skipped. Thicknesses (``layers.N.thickness``) are opaque and
+exposed to ``mi.traverse``; ``R_dh`` and ``T_hemi`` are recomputed (and not
+differentiated) when they change.
+
+.. tabs::
+    .. code-tab:: xml
+
+        <bsdf type="thinfilm_diffuse">
+            <rgb name="reflectance" value="0.8, 0.1, 0.1"/>
+            <string name="layers" value="SiO2 500; Au 2"/>
+        </bsdf>
+
+    .. code-tab:: python
+
+        {'type': 'thinfilm_diffuse', 'layers': 'SiO2 500; Au 2',
+         'reflectance': {'type': 'rgb', 'value': [0.8, 0.1, 0.1]}}
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.hemispherical import GRID, hemispherical_factors, texture_on_grid
+from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant,
+                                ext_ior_from_props, films_from_props, opaque_float)
+from thinfilm_mi.optics import film_attenuation
+
+NAME = "thinfilm_diffuse"
+MODELS = ("single", "multiple")
+
+#: Tolerance on ``reflectance <= 1``: sRGB white upsampled to a spectrum peaks
+#: a hair above 1; anything larger would let ``1 - k_d R_dh`` approach 0.
+_ALBEDO_SLACK = 1e-3
+
+
+def spectral_mean(x):
+    """Average of a spectrum over its wavelengths (a Float)."""
+    return dr.mean(x, axis=0) if dr.depth_v(x) > 1 else x
+
+
+def _absorbs(index) -> bool:
+    mat = index.material
+    if mat is None:
+        return True
+    if mat.constant is not None:
+        return mat.constant.imag > 0
+    return bool(np.any(mat.index(GRID).imag > 0))
+
+
+def _reflectance_from_props(props):
+    if not props.has_property("reflectance"):
+        return mi.load_dict({"type": "uniform", "value": 0.5})
+    value = props.get("reflectance")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if not (0.0 <= value <= 1.0):
+            raise ThinFilmError(f"{NAME}: 'reflectance' must be in [0, 1] (an albedo), "
+                                f"got {value!r}")
+    tex = props.get_texture("reflectance")
+    try:
+        top = float(dr.ravel(tex.max())[0]) if dr.is_array_v(tex.max()) else float(tex.max())
+    except RuntimeError:  # textures without max() (e.g. checkerboard): not checkable
+        top = None
+    if top is not None and top > 1.0 + _ALBEDO_SLACK:
+        raise ThinFilmError(f"{NAME}: 'reflectance' must not exceed 1 (energy conservation), "
+                            f"got a maximum of {top:.6g}")
+    return tex
+
+
+def _spectrum(tex, values):
+    """``values`` on the 1 nm grid as a ``regular`` spectrum, updating ``tex`` in place
+    when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
+    ``regular`` spectrum refuses a zero integral)."""
+    values = np.asarray(values, dtype=np.float64)
+    if not np.any(values > 0):
+        return mi.load_dict({"type": "uniform", "value": 0.0})
+    params = mi.traverse(tex) if tex is not None else None
+    if params is not None and "values" in params:
+        params["values"] = mi.Float(values.astype(np.float32))
+        params.update()
+        return tex
+    return mi.load_dict({"type": "regular", "wavelength_min": float(GRID[0]),
+                         "wavelength_max": float(GRID[-1]),
+                         "values": ", ".join(f"{v:.9g}" for v in values)})
+
+
+class ThinFilmDiffuse(mi.BSDF):
+    def __init__(self, props):
+        check_variant(NAME)
+        mi.BSDF.__init__(self, props)
+        model = props.get("model", "multiple")
+        if model not in MODELS:
+            raise ThinFilmError(f"{NAME}: 'model' must be 'single' or 'multiple', got {model!r}")
+        self.model = model
+        films = films_from_props(props, NAME)
+        ext = ext_ior_from_props(props)
+        self.reflectance = _reflectance_from_props(props)
+        check_unqueried(props, NAME)
+
+        self.no_films = len(films) == 0
+        if films and _absorbs(films[-1][0]):
+            # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
+            self.coating = KernelStack(films[:-1], ext, films[-1][0])
+            self.film_n = films[-1][0]
+            self.film_n_thickness = opaque_float(films[-1][1])
+        else:
+            # No absorbing film N: all films over the base medium (matched to the ambient).
+            self.coating = KernelStack(films, ext, ext)
+            self.film_n = None
+            self.film_n_thickness = None
+
+        self.t_hemi = None
+        self.r_dh = None
+        self._update_hemispherical()
+
+        self.m_components = [
+            mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide,
+            mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide,
+        ]
+        self.m_flags = self.m_components[0] | self.m_components[1]
+
+    # -- load-time tables ----------------------------------------------------
+    def _update_hemispherical(self) -> None:
+        """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters."""
+        if self.no_films:
+            t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
+        else:
+            n_amb = texture_on_grid(self.coating.ambient.eta)
+
+            def index(ix):
+                return texture_on_grid(ix.eta) + 1j * texture_on_grid(ix.k)
+
+            def thickness(d):
+                return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
+
+            coating = [(index(ix), thickness(d))
+                       for ix, d in zip(self.coating.indices, self.coating.thickness)]
+            n_exit = index(self.coating.substrate)
+            film_n = None
+            if self.film_n is not None:
+                film_n = (index(self.film_n), thickness(self.film_n_thickness))
+            t_hemi, r_dh = hemispherical_factors(n_amb, coating, n_exit, film_n)
+        self.t_hemi = _spectrum(self.t_hemi, t_hemi)
+        self.r_dh = _spectrum(self.r_dh, r_dh)
+
+    # -- kernel helpers ------------------------------------------------------
+    def _factors(self, si, cos_theta, active, transmission: bool):
+        """``k_r`` and (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side)."""
+        if not transmission:
+            return self.coating.reflectance(si, cos_theta, active), None
+        k_r, k_t = self.coating.reflectance(si, cos_theta, active, transmission=True)
+        if self.film_n is not None:
+            n0 = self.coating.ambient.eval_real(si, active)
+            k_t = k_t * film_attenuation(n0, cos_theta, self.film_n.eval(si, active),
+                                         self.film_n_thickness, si.wavelengths)
+        return k_r, k_t
+
+    def _series(self, si, kd, active):
+        """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
+        if self.model == "single":
+            return mi.Spectrum(1.0)
+        return dr.rcp(1.0 - kd * self.r_dh.eval(si, active))
+
+    def _prob_specular(self, si, k_r, t_i, kd, series, active):
+        spec = spectral_mean(k_r)
+        diff = spectral_mean(t_i * kd * self.t_hemi.eval(si, active) * series)
+        total = spec + diff
+        return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
+
+    # -- BSDF interface ------------------------------------------------------
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
+        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        bs = dr.zeros(mi.BSDFSample3f)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        active = mi.Bool(active) & (cos_i > 0)
+        if not (has_spec or has_diff) or (self.no_films and not has_diff):
+            return bs, mi.Spectrum(0.0)
+
+        if self.no_films:  # exactly Mitsuba's diffuse (component index 1 here)
+            bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
+            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+            bs.eta = 1.0
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+            bs.sampled_component = mi.UInt32(1)
+            value = self.reflectance.eval(si, active)
+            return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
+
+        k_r, t_i = self._factors(si, cos_i, active, transmission=has_diff)
+        if has_diff:
+            kd = self.reflectance.eval(si, active)
+            series = self._series(si, kd, active)
+        if has_spec and has_diff:
+            prob_spec = self._prob_specular(si, k_r, t_i, kd, series, active)
+        else:
+            prob_spec = mi.Float(1.0 if has_spec else 0.0)
+        sel_spec = active & (sample1 < prob_spec)
+        sel_diff = active & ~sel_spec
+
+        wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
+        bs.wo = dr.select(sel_spec, mi.reflect(si.wi), wo_diff)
+        bs.eta = 1.0
+        bs.sampled_component = dr.select(sel_spec, mi.UInt32(0), mi.UInt32(1))
+        bs.sampled_type = dr.select(sel_spec, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
+                                    mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
+        pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo_diff)
+        bs.pdf = dr.detach(dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff))
+
+        weight = mi.Spectrum(0.0)
+        if has_spec:
+            weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
+        if has_diff:
+            cos_o = mi.Frame3f.cos_theta(wo_diff)
+            _, t_o = self._factors(si, cos_o, sel_diff, transmission=True)
+            # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
+            w_diff = kd * t_i * t_o * series / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0)
+            weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
+        return bs, dr.select(active & (bs.pdf > 0), weight, 0.0)
+
+    def _eval_pdf(self, ctx, si, wo, active, want_value: bool, want_pdf: bool):
+        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
+        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        if not has_diff:
+            return mi.Spectrum(0.0), mi.Float(0.0)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        cos_o = mi.Frame3f.cos_theta(wo)
+        active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0)
+        pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo) if want_pdf else mi.Float(0.0)
+
+        if self.no_films:  # exactly Mitsuba's diffuse
+            value = (self.reflectance.eval(si, active) * dr.inv_pi * cos_o) if want_value \
+                else mi.Spectrum(0.0)
+            return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+
+        need_prob = want_pdf and has_spec
+        value = mi.Spectrum(0.0)
+        if want_value or need_prob:
+            kd = self.reflectance.eval(si, active)
+            series = self._series(si, kd, active)
+            k_r, t_i = self._factors(si, cos_i, active, transmission=True)
+        if want_value:
+            _, t_o = self._factors(si, cos_o, active, transmission=True)
+            value = kd * t_i * t_o * series * dr.inv_pi * cos_o
+        if need_prob:
+            pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active))
+        return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active, True, False)[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active, False, True)[1]
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active, True, True)
+
+    def traverse(self, callback):
+        self.coating.traverse(callback)
+        if self.film_n is not None:
+            i = len(self.coating)
+            callback.put(f"layers.{i}.thickness", self.film_n_thickness,
+                         mi.ParamFlags.Differentiable)
+            self.film_n.traverse(callback, f"layers.{i}.")
+        callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys):
+        self.coating.parameters_changed()
+        if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
+            dr.make_opaque(self.film_n_thickness)
+        if not keys or any(k.startswith("layers.") for k in keys):
+            self._update_hemispherical()
+
+    def to_string(self):
+        layers = self.coating.describe()
+        if self.film_n is not None:
+            d = self.film_n_thickness
+            d = float(dr.ravel(d)[0]) if dr.is_array_v(d) else d
+            layers = f"{layers} over absorbing film {self.film_n.label} {d:g} nm"
+        return (f"ThinFilmDiffuse[\n  model = {self.model},\n  layers = {layers},\n"
+                f"  ext_ior = {self.coating.ambient.label}\n]")

@@ -1,0 +1,122 @@
+"""Hemispherical (cosine-weighted) averages of a coating, for ``thinfilm_diffuse``.
+
+The coated Lambertian BSDF needs, per wavelength, two angular integrals of the
+coating between the ambient and the diffuse base:
+
+* ``T_hemi = 2 ∫_0^1 t(μ) μ dμ`` — the fraction of the base's Lambertian
+  exitance that leaves through the coating (by reciprocity ``t`` is the same
+  factor that lets light in at ``μ = cos θ`` in the ambient);
+* ``R_dh = 2 ∫_0^1 R_up(μ) μ dμ`` — the fraction that the coating sends back
+  down onto the base (its hemispherical reflectance seen from below).
+
+Both are computed once at load time (and again when a thickness changes) with
+the float64 run of the optics core (:mod:`thinfilm_mi.optics` on
+``drjit.llvm.Float64``) over a Gauss-Legendre rule in ``μ``, on a 1 nm grid of
+wavelengths; the plugin stores them as ``regular`` spectra. Because ``T_hemi``
+and ``R_dh`` use the same nodes, ``T_hemi + R_dh = 1`` holds to rounding for a
+lossless coating whatever the quadrature error of each, which is what makes a
+lossless coating on a white base conserve energy exactly.
+"""
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import drjit as dr
+import numpy as np
+from drjit.llvm import Float64
+
+from ._llvm import require_llvm
+from .optics import (Cx, film_attenuation, stack_amplitudes, transmittance_factor_p,
+                     transmittance_factor_s)
+from .stack import SPECTRAL_RANGE
+
+__all__ = ["GRID", "texture_on_grid", "unpolarised_rt", "hemispherical_factors"]
+
+#: The wavelengths (nm) at which the hemispherical factors are tabulated.
+GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
+                   int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)
+
+#: Gauss-Legendre nodes in μ = cos θ. A 500 nm SiO2 film changes its phase by
+#: about one wave over the hemisphere; 128 nodes integrate such oscillations
+#: (and those of films ten times thicker) to well below 1e-6.
+DEFAULT_NODES = 128
+
+
+def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
+    """A Mitsuba spectral texture evaluated at ``wavelengths`` (float64 numpy).
+
+    Evaluated through the texture itself (not its source data), so values edited
+    through ``mi.traverse`` are seen exactly as the render kernel sees them.
+    """
+    import mitsuba as mi
+
+    wl = np.asarray(wavelengths, dtype=np.float64)
+    n = wl.size
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    w = mi.Float(wl.astype(np.float32))
+    si.wavelengths = mi.Spectrum(w, w, w, w)
+    value = tex.eval(si)
+    return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
+
+
+def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
+    """Unpolarised ``R`` (and ``T``, the power entering ``n_exit``), any array type."""
+    a = stack_amplitudes(n0, cos0, films, n_exit, wl, transmission=transmission)
+    R = dr.minimum(0.5 * (a.rs.abs2() + a.rp.abs2()), 1.0)
+    if not transmission:
+        return R
+    q0 = dr.select(a.grazing, 1.0, a.q0)
+    T = 0.5 * (a.ts.abs2() * transmittance_factor_s(a.q_exit, q0)
+               + a.tp.abs2() * transmittance_factor_p(a.n_exit, a.q_exit, q0))
+    T = dr.select(a.grazing, 0.0, dr.clip(T, 0.0, 1.0 - R))
+    return R, T
+
+
+def _cx(a: np.ndarray, reps: int) -> Cx:
+    a = np.repeat(np.asarray(a, dtype=np.complex128), reps)
+    return Cx(Float64(a.real.copy()), Float64(a.imag.copy()))
+
+
+def hemispherical_factors(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
+                          n_exit: np.ndarray, film_n: tuple[np.ndarray, float] | None,
+                          wavelengths: np.ndarray = GRID, nodes: int = DEFAULT_NODES):
+    """``(T_hemi, R_dh)`` per wavelength (float64 numpy arrays).
+
+    ``n_amb`` (real), the coating's film indices and ``n_exit`` are arrays over
+    ``wavelengths``. Two configurations, matching ``thinfilm_diffuse``:
+
+    * ``film_n`` is ``None``: the coating lies directly on a base medium of index
+      ``n_exit`` (real). ``t = T`` of the coating and ``R_up`` is the exact
+      reflectance of the reversed coating lit from the base medium.
+    * ``film_n = (index, thickness)``: the paper's absorbing innermost film.
+      The coating's exit medium is ``n_exit`` = that film, semi-infinite;
+      ``t = k_t k_a`` and ``R_up = k_a^2 k_r`` (down and up through the film,
+      and the coating reflecting equally from both sides, which is exact for
+      a lossless coating and keeps ``R_up + t <= 1`` otherwise).
+    """
+    require_llvm()
+    x, w = np.polynomial.legendre.leggauss(int(nodes))
+    mu = 0.5 * (x + 1.0)          # nodes on (0, 1)
+    wmu = 0.5 * w                 # weights for ∫_0^1
+    nw, nm = len(wavelengths), len(mu)
+    wl = Float64(np.repeat(np.asarray(wavelengths, np.float64), nm))
+    cos0 = Float64(np.tile(mu, nw))
+    n0 = Float64(np.repeat(np.asarray(n_amb, np.float64), nm))
+    films = [(_cx(n, nm), float(d)) for n, d in coating]
+    exit_ = _cx(n_exit, nm)
+    R, T = unpolarised_rt(n0, cos0, films, exit_, wl)
+    if film_n is None:
+        t = T
+        R_up = unpolarised_rt(exit_.re, cos0, films[::-1], Cx(n0, 0.0), wl, transmission=False)
+    else:
+        k_a = film_attenuation(n0, cos0, _cx(film_n[0], nm), float(film_n[1]), wl)
+        t = T * k_a
+        R_up = R * k_a * k_a
+    dr.eval(t, R_up)
+    t = np.array(t, dtype=np.float64).reshape(nw, nm)
+    R_up = np.array(R_up, dtype=np.float64).reshape(nw, nm)
+    weight = 2.0 * wmu * mu
+    T_hemi = np.clip(t @ weight, 0.0, 1.0)
+    R_dh = np.clip(R_up @ weight, 0.0, 1.0 - T_hemi)
+    return T_hemi, R_dh
