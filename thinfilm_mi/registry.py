@@ -14,6 +14,7 @@ import importlib
 PLUGINS = {
     "thinfilm_conductor": ("thinfilm_conductor", "ThinFilmConductor"),
     "thinfilm_dielectric": ("thinfilm_dielectric", "ThinFilmDielectric"),
+    "thinfilm_diffuse": ("thinfilm_diffuse", "ThinFilmDiffuse"),
 }
 
 _callback_installed = False
