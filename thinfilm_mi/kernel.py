@@ -2,7 +2,7 @@
 
 * :class:`SpectralIndex` — a complex index ``n + ik`` as two Mitsuba textures
   evaluated at ``si.wavelengths`` (a ``uniform`` spectrum for a constant, a
-  ``regular`` spectrum sampled every nanometre over 360-830 nm for a dataset,
+  ``irregular`` spectrum on the dataset's knots and a 1 nm grid for a dataset,
   or the user's own ``eta``/``k`` textures). Evaluation is Mitsuba's C++
   texture code: no Python per call in LLVM variants, and the values are opaque
   kernel inputs, so editing them through ``mi.traverse`` does not recompile.
@@ -25,7 +25,7 @@ from . import materials as _materials
 from ._llvm import require_llvm
 from .errors import ThinFilmError
 from .optics import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
-from .stack import SPECTRAL_RANGE, check_thickness, parse_layers
+from .stack import AMBIENT_K_TOL, SPECTRAL_RANGE, check_thickness, parse_layers
 
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
 DEFAULT_EXT_IOR = 1.000277
@@ -85,10 +85,10 @@ class SpectralIndex:
         """Build from anything :func:`thinfilm_mi.materials.resolve` accepts.
 
         Constant indices become ``uniform`` spectra (their ``value`` is exposed
-        to ``mi.traverse``); datasets become ``regular`` spectra sampled every
-        nanometre over 360-830 nm (linear interpolation of a 1 nm resampling of
-        the dataset's own interpolant: the extra error is below 1e-4 of the
-        index for every dataset we ship).
+        to ``mi.traverse``); datasets become ``irregular`` spectra (linear
+        interpolation, Mitsuba's C++ code) on a 1 nm grid over 360-830 nm merged
+        with the dataset's own knots: tabulated data are reproduced exactly and
+        formulas to better than 1e-7.
         """
         mi = _mi()
         try:
@@ -103,20 +103,27 @@ class SpectralIndex:
             return cls(mi.load_dict({"type": "uniform", "value": float(c.real)}),
                        mi.load_dict({"type": "uniform", "value": float(c.imag)}),
                        mat.name, c, mat)
+        # A 1 nm grid (enough for formulas: error ~ h^2 n''/8 < 1e-7) plus the
+        # dataset's own knots, so tabulated data are reproduced exactly.
+        knots = getattr(mat, "knots", lambda: np.empty(0))()
+        grid = np.unique(np.concatenate(
+            [_GRID, knots[(knots > _GRID[0]) & (knots < _GRID[-1])]]))
         try:
-            values = mat.index(_GRID)
+            values = mat.index(grid)
         except ValueError as e:
             raise ThinFilmError(f"{name}: {e}") from None
         if not np.all(np.isfinite(values)) or np.any(values.imag < 0) or np.any(values.real <= 0):
             raise ThinFilmError(f"{name}: material {mat.name!r} has non-finite, n <= 0 or k < 0 "
                                 "values in 360-830 nm")
 
-        def regular(v):
-            return mi.load_dict({"type": "regular", "wavelength_min": float(_GRID[0]),
-                                 "wavelength_max": float(_GRID[-1]),
+        def spectrum(v):
+            if np.all(v == v[0]):  # e.g. k = 0 everywhere (Mitsuba's spectra need mass)
+                return mi.load_dict({"type": "uniform", "value": float(v[0])})
+            return mi.load_dict({"type": "irregular",
+                                 "wavelengths": ", ".join(f"{x:.12g}" for x in grid),
                                  "values": ", ".join(f"{x:.9g}" for x in v)})
 
-        return cls(regular(values.real), regular(values.imag), mat.name, None, mat)
+        return cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat)
 
     @classmethod
     def from_textures(cls, eta_tex, k_tex, label: str) -> "SpectralIndex":
@@ -148,18 +155,21 @@ def _check_real_medium(index: SpectralIndex, name: str) -> SpectralIndex:
         return index
     if mat.constant is not None:
         c = mat.constant
-        if c.imag != 0 or c.real <= 0:
+        if c.imag > AMBIENT_K_TOL or c.real <= 0:
             raise ThinFilmError(f"{name}: must be a real index > 0 (a non-absorbing medium), got {c!r}")
         return index
     k = mat.index(_GRID).imag
-    if np.any(k > 0):
+    if np.any(k > AMBIENT_K_TOL):
         raise ThinFilmError(f"{name}: must be a non-absorbing medium, got {mat.name!r} "
                             f"(k up to {k.max():.3g} in 360-830 nm)")
     return index
 
 
 def real_index(spec: Any, name: str) -> SpectralIndex:
-    """A non-absorbing medium (``ext_ior``, ``int_ior``) as a :class:`SpectralIndex`."""
+    """A non-absorbing medium (``ext_ior``, ``int_ior``) as a :class:`SpectralIndex`.
+
+    Media with ``k <= AMBIENT_K_TOL`` (glasses, water) are accepted; where light
+    arrives *from* them only their real part is used."""
     if isinstance(spec, (int, float)) and not isinstance(spec, bool):
         if not math.isfinite(spec) or spec <= 0:
             raise ThinFilmError(f"{name}: must be a finite real index > 0, got {spec!r}")

@@ -250,6 +250,13 @@ class DispersiveMaterial(Material):
                         f"material {name!r}: k must be >= 0, its table has k = {vals.min()!r}"
                     )
 
+    def knots(self) -> np.ndarray:
+        """Wavelengths (nm) of the tabulated data points, where the linear
+        interpolant may bend (empty for formulas). Resampling on a grid that
+        includes them reproduces the interpolant exactly."""
+        parts = [p.wl for p in (self._n, self._k) if isinstance(p, _Table)]
+        return np.unique(np.concatenate(parts)) if parts else np.empty(0)
+
     def covers(self, lo: float, hi: float) -> bool:
         """Whether the data cover ``[lo, hi]`` nm."""
         a, b = self.wavelength_range
