@@ -247,3 +247,26 @@ def test_demo_reflectance_image(tmp_path):
 def test_console_script_declared():
     text = (REPO / "pyproject.toml").read_text()
     assert 'thinfilm-render = "thinfilm_mi.cli:render_main"' in text
+
+
+def test_teapot_mesh_loads():
+    # scenes/meshes/teapot.ply (scripts/make_teapot.py): y-up, height 1, on y = 0, with normals
+    import mitsuba as mi
+
+    path = REPO / "scenes" / "meshes" / "teapot.ply"
+    if not path.is_file():
+        pytest.skip("scenes/meshes/teapot.ply not built")
+    previous = mi.variant()
+    mi.set_variant("llvm_ad_rgb")
+    try:
+        mesh = mi.load_dict({"type": "ply", "filename": str(path)})
+    finally:
+        if previous is not None:
+            mi.set_variant(previous)
+    bbox = mesh.bbox()
+    lo, hi = np.array(bbox.min), np.array(bbox.max)
+    assert np.allclose([lo[1], hi[1]], [0.0, 1.0], atol=1e-5)
+    assert np.allclose(lo[[0, 2]], -hi[[0, 2]], atol=1e-5)
+    assert hi[0] > 1.5 * hi[2]  # spout and handle along x
+    assert mesh.has_vertex_normals() and mesh.face_count() > 10_000
+    assert path.stat().st_size < 1.5e6
