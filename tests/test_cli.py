@@ -147,6 +147,41 @@ def test_errors_are_one_line(case, scene, tmp_path, capfd):
         assert "no_such_bsdf" in lines[0]
 
 
+def test_files_resolved_next_to_the_scene(tmp_path, monkeypatch, capfd):
+    # a mesh named relative to the scene file loads whatever the working directory
+    (tmp_path / "scene" / "m").mkdir(parents=True)
+    (tmp_path / "scene" / "m" / "quad.obj").write_text(
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0\nv -1 1 0\nf 1 2 3\nf 1 3 4\n")
+    text = SCENE.replace('<shape type="sphere">',
+                         '<shape type="obj"><string name="filename" value="m/quad.obj"/>')
+    path = tmp_path / "scene" / "quad.xml"
+    path.write_text(text)
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    monkeypatch.chdir(elsewhere)
+    rc = cli.render_main([str(path), "-o", str(tmp_path / "q.exr"), "--spp", "1", "--size", "8x6"])
+    assert rc == 0, capfd.readouterr().err
+    channels, _ = _read_exr(tmp_path / "q.exr")
+    assert channels["R"].shape == (6, 8)
+
+
+def test_plugin_value_error_is_one_line(tmp_path, capfd):
+    # a thin-film BSDF refusing its parameters (a ValueError raised in Python)
+    import thinfilm_mi
+
+    if not hasattr(thinfilm_mi, "register"):
+        pytest.skip("thin-film plugins not registered by this version")
+    bad = tmp_path / "neg.xml"
+    bad.write_text(SCENE.replace(
+        '<bsdf type="conductor"><string name="material" value="Au"/></bsdf>',
+        '<bsdf type="thinfilm_conductor"><string name="layers" value="1.46 -5"/></bsdf>'))
+    rc = cli.render_main([str(bad), "-o", str(tmp_path / "neg.exr")])
+    lines = _error_lines(capfd.readouterr().err)
+    assert rc == 2
+    assert len(lines) == 1 and lines[0].startswith(PREFIX)
+    assert "-5" in lines[0] and "Traceback" not in lines[0]
+
+
 def test_unknown_plugin_error_subprocess(scene, tmp_path):
     bad = tmp_path / "bad.xml"
     bad.write_text(SCENE.replace('type="sphere"', 'type="no_such_shape"'))

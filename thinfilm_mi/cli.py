@@ -292,6 +292,11 @@ def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
     if not path.is_file():
         raise UsageError(f"scene file is not a file: {path}")
     config = mi.parser.ParserConfig(variant or mi.variant())
+    # Like mi.load_file: files named in the scene (meshes, textures, data) are
+    # looked up next to the scene file first; the search path is restored after.
+    resolver = mi.file_resolver()
+    saved = [str(p) for p in resolver]
+    resolver.prepend(str(path.resolve().parent))
     try:
         state = mi.parser.parse_file(config, str(path), **dict(params or {}))
         _apply_overrides(state, size, spp, log)
@@ -301,6 +306,10 @@ def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
         raise
     except Exception as e:  # Mitsuba reports parse, parameter and plugin errors as exceptions
         raise UsageError(f"cannot load scene {path}: {one_line(e)}") from e
+    finally:
+        resolver.clear()
+        for p in saved:
+            resolver.append(p)
     if not isinstance(scene, mi.Scene):
         raise UsageError(f"{path} describes a {type(scene).__name__}, not a <scene>")
     return scene
