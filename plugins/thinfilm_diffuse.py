@@ -167,7 +167,7 @@ def _absorbs(index) -> bool:
 
 
 def _reflectance_from_props(props):
-    if not props.has_property("reflectance"):
+    if "reflectance" not in props:
         return mi.load_dict({"type": "uniform", "value": 0.5})
     value = props.get("reflectance")
     if isinstance(value, (int, float)) and not isinstance(value, bool):
