@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml
 venv: $(STAMP)
 
 demo: $(STAMP)
-	$(PY) -m thinfilm_mi demo --out out
+	$(PY) -m thinfilm_mi demo --out out --spp 64
 
 test: $(STAMP)
 	$(PY) -m pytest -q
