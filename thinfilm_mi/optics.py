@@ -420,6 +420,22 @@ def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission
 
     media = [Cx.of(n0)] + [Cx.of(n) for n, _ in films] + [Cx.of(n_exit)]
     qs = [Cx(q0, 0.0)] + [_normal_index(m, beta2, beta2_max) for m in media[1:]]
+    # A film whose q is within rounding of 0 (|q|^2 below the rounding error
+    # ~eps (|n|^2 + beta^2) of q^2 = n^2 - beta^2: exactly at, or within rounding
+    # of, its critical angle) makes the Rouard step 0/0: gamma -> -1 and
+    # 1 + r gamma E -> 0. A film's response is an even function of its q (the
+    # characteristic matrix holds cos(delta), q sin(delta) and sin(delta)/q), so
+    # replacing such a q by the real eps_q = 2 sqrt(eps) (|n| + beta) changes q^2
+    # only by the amount its own rounding already leaves open. Two neighbours
+    # at q = 0 (the same medium) then get r = 0 as they should.
+    eps = 2.0 ** -24 if _is_float32(cos0) else 2.0 ** -53
+    beta = dr.sqrt(beta2)
+    for j in range(1, len(media) - 1):
+        m, q = media[j], qs[j]
+        size = dr.abs(m.re) + dr.abs(m.im) + beta
+        eps_q = (2.0 * math.sqrt(eps)) * size
+        small = q.abs2() < eps_q * eps_q
+        qs[j] = Cx(dr.select(small, eps_q, q.re), q.im if _is_zero(q.im) else dr.select(small, 0.0, q.im))
     inv_wl = 1.0 / wavelength
     E = [None] * len(media)
     e1 = [None] * len(media) if (amplitudes and transmission) else None
@@ -434,23 +450,7 @@ def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission
             if not _is_zero(q.im):
                 mag2[j + 1] = dr.exp((-4.0 * math.pi) * (q.im * u))
 
-    # Pairs of neighbours that can both have q = 0 exactly need the guard of
-    # _recursion; a literal absorbing index never has q = 0.
-    def can_vanish(m):
-        return not (_is_literal(m.im) and m.im != 0)
-
-    zero_pairs = []
-    for j in range(len(media) - 1):
-        if can_vanish(media[j]) and can_vanish(media[j + 1]):
-            qa, qb = qs[j], qs[j + 1]
-            z = (qa.re == 0) & (qb.re == 0)
-            if not _is_zero(qa.im):
-                z = z & (qa.im == 0)
-            if not _is_zero(qb.im):
-                z = z & (qb.im == 0)
-            zero_pairs.append(z)
-        else:
-            zero_pairs.append(None)
+    zero_pairs = [None] * (len(media) - 1)
 
     adm = {}
     if s:

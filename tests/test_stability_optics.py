@@ -1,0 +1,150 @@
+"""Property tests of the optics core on extreme inputs (hypothesis).
+
+Stacks of 1-30 films with n in [1, 6], k in [0, 20], d in [0, 100 um] (exactly
+0 included), angles including normal, grazing (cos = 1e-7 and exactly 0), the
+critical angles of the stack +- a tiny offset, light coming from inside a dense
+dielectric (TIR), wavelengths 360-830 nm; float32 (drjit.llvm.Float) and
+float64 (drjit.llvm.Float64). Properties: every output finite, 0 <= R, T <= 1,
+R + T <= 1 + 1e-5, and R + T = 1 for lossless stacks.
+
+To keep the number of compiled kernels small (hypothesis draws many stacks),
+every example is evaluated with opaque array inputs and the film count is drawn
+from a few values; one example evaluates a whole batch of angles.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import drjit as dr
+from drjit.llvm import Float, Float64
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+
+from thinfilm_mi import optics
+
+FILM_COUNTS = (1, 2, 7, 30)
+
+index = st.tuples(st.floats(1.0, 6.0), st.one_of(st.just(0.0), st.floats(0.0, 20.0)))
+thickness = st.one_of(st.just(0.0), st.floats(0.0, 100.0), st.floats(0.0, 100_000.0))
+
+
+@st.composite
+def stacks(draw, lossless=False):
+    L = draw(st.sampled_from(FILM_COUNTS))
+    films = []
+    for _ in range(L):
+        n, k = draw(index)
+        films.append((complex(n, 0.0 if lossless else k), draw(thickness)))
+    n0 = draw(st.one_of(st.just(1.0), st.floats(1.0, 6.0)))  # > 1: TIR from inside
+    ne, ke = draw(index)
+    n_exit = complex(ne, 0.0 if lossless else ke)
+    wl = draw(st.floats(360.0, 830.0))
+    return n0, films, n_exit, wl
+
+
+def angles(n0, films, n_exit):
+    """Normal, grazing, random, and every critical angle of the stack +- tiny;
+    returns (cos, mask of the near-critical ones)."""
+    cos = [1.0, 0.0, 1e-7, 1e-4, 0.5, 0.9]
+    near = [False] * len(cos)
+    for n, _ in list(films) + [(n_exit, 0.0)]:
+        n = complex(n)
+        if n.imag == 0 and n.real < n0:
+            s = n.real / n0
+            c = math.sqrt((1 - s) * (1 + s))
+            for dc in (0.0, 1e-7, -1e-7, 1e-6, -1e-6, 1e-3):
+                cos.append(min(max(c + dc, 0.0), 1.0))
+                near.append(True)
+    return np.array(cos), np.array(near)
+
+
+def evaluate(Arr, n0, films, n_exit, wl, cos0):
+    size = cos0.size
+
+    def arr(v):
+        a = Arr(np.full(size, v, dtype=np.float64))
+        dr.make_opaque(a)
+        return a
+
+    f = [(optics.Cx(arr(complex(n).real), arr(complex(n).imag)), arr(d)) for n, d in films]
+    ne = optics.Cx(arr(n_exit.real), arr(n_exit.imag))
+    c = Arr(cos0)
+    dr.make_opaque(c)
+    out = optics.stack_rt(arr(n0), c, f, ne, arr(wl))
+    amp = optics.stack_amplitudes(arr(n0), c, f, ne, arr(wl))
+    leaves = [np.array(x, np.float64) for x in out]
+    for z in (amp.rs, amp.rp, amp.ts, amp.tp):
+        leaves += [np.array(z.re, np.float64), np.array(z.im, np.float64)]
+    return leaves[:4], leaves[4:]
+
+
+# Tolerances. Away from critical angles every Rouard step conserves flux to a
+# few ulp, so |R + T - 1| <~ 31 interfaces * few eps: 1e-9 (float64) and 1e-5
+# (float32) are loose. At (or within 1e-3 in cos of) the critical angle of a
+# film, q is known only to ~sqrt(eps) |n| (q^2 = n^2 - beta^2 is rounded to eps
+# n^2) and the core floors it at eps_q = 2 sqrt(eps)(|n| + beta); the step
+# (r + gamma E)/(1 + r gamma E) then cancels to a relative precision of
+# ~eps / eps_q ~ sqrt(eps) / 2: 1.2e-4 in float32 per such film (1e-8 in
+# float64). We allow 5e-4 (float32) and 1e-7 (float64) there.
+TOL = {Float64: 1e-9, Float: 1e-5}
+TOL_CRITICAL = {Float64: 1e-7, Float: 5e-4}
+
+SETTINGS = settings(max_examples=8, deadline=None, derandomize=True,
+                    phases=(Phase.explicit, Phase.reuse, Phase.generate),  # no slow shrinking
+                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+
+def check(Arr, stack, lossless):
+    n0, films, n_exit, wl = stack
+    cos0, near = angles(n0, films, n_exit)
+    (Rs, Rp, Ts, Tp), amps = evaluate(Arr, n0, films, n_exit, wl, cos0)
+    for name, v in zip(("Rs", "Rp", "Ts", "Tp"), (Rs, Rp, Ts, Tp)):
+        assert np.all(np.isfinite(v)), (name, v)
+        assert np.all((v >= 0) & (v <= 1)), (name, v)
+    for v in amps:
+        assert np.all(np.isfinite(v))
+    # R + T <= 1 + tol: the clamps keep each of R, T in [0, 1], the sum is only
+    # as exact as the arithmetic (see TOL above).
+    tol = np.where(near, TOL_CRITICAL[Arr], TOL[Arr])
+    assert np.all(Rs + Ts <= 1 + tol) and np.all(Rp + Tp <= 1 + tol)
+    graze = cos0 == 0
+    assert np.all(Rs[graze] == 1) and np.all(Ts[graze] == 0)
+    if lossless:
+        assert np.all(np.abs(Rs + Ts - 1) <= tol), np.max(np.abs(Rs + Ts - 1))
+        assert np.all(np.abs(Rp + Tp - 1) <= tol), np.max(np.abs(Rp + Tp - 1))
+
+
+@pytest.mark.parametrize("Arr", [Float, Float64], ids=["float32", "float64"])
+@SETTINGS
+@given(stack=stacks())
+def test_absorbing_stacks_stay_physical(Arr, stack):
+    check(Arr, stack, lossless=False)
+
+
+@pytest.mark.parametrize("Arr", [Float, Float64], ids=["float32", "float64"])
+@SETTINGS
+@given(stack=stacks(lossless=True))
+def test_lossless_stacks_conserve_energy(Arr, stack):
+    check(Arr, stack, lossless=True)
+
+
+@pytest.mark.parametrize("Arr", [Float, Float64], ids=["float32", "float64"])
+def test_adjacent_layers_both_at_q_zero(Arr):
+    """Two neighbouring films of the same index n = n0 sin(theta) both have q = 0
+    exactly: the interface between them must be transparent, not 0/0."""
+    n0 = 2.0
+    cos0 = np.array([math.sqrt(0.75), 0.1, 1.0])  # sin = 1/2: beta = 1 = n of both films
+    films = [(1.0, 50.0), (1.0, 80.0), (1.5, 100.0)]
+    (Rs, Rp, Ts, Tp), amps = evaluate(Arr, n0, films, 1.5 + 0j, 500.0, cos0)
+    for v in (Rs, Rp, Ts, Tp, *amps):
+        assert np.all(np.isfinite(v))
+    # the same stack with the two films merged into one 130 nm film
+    (Rs2, Rp2, Ts2, Tp2), _ = evaluate(Arr, n0, [(1.0, 130.0), (1.5, 100.0)], 1.5 + 0j, 500.0, cos0)
+    # at q = 0 the core floors q at eps_q (see TOL_CRITICAL above): float32
+    # agrees to ~sqrt(eps) there.
+    tol = 1e-12 if Arr is Float64 else TOL_CRITICAL[Float]
+    np.testing.assert_allclose(Rs, Rs2, atol=tol)
+    np.testing.assert_allclose(Tp, Tp2, atol=tol)
