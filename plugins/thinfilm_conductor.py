@@ -62,6 +62,7 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (KernelStack, SpectralIndex, check_unqueried, check_variant,
+                                optional_texture,
                                 ext_ior_from_props, films_from_props)
 
 NAME = "thinfilm_conductor"
@@ -94,12 +95,6 @@ def substrate_from_props(props, plugin: str) -> SpectralIndex:
             values[name] = v
         return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
     return SpectralIndex.from_material(props.get("material", "Au"), "material")
-
-
-def optional_texture(props, name: str):
-    if not (name in props):
-        return None
-    return props.get_texture(name)
 
 
 class ThinFilmConductor(mi.BSDF):

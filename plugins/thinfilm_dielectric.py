@@ -63,16 +63,13 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant,
+                                optional_texture,
                                 ext_ior_from_props, films_from_props, real_index)
 
 NAME = "thinfilm_dielectric"
 
 #: Mitsuba's default interior index of ``dielectric`` (BK7 at 589 nm).
 DEFAULT_INT_IOR = 1.5046
-
-
-def optional_texture(props, name: str):
-    return props.get_texture(name) if (name in props) else None
 
 
 def spectral_mean(x):

@@ -27,8 +27,8 @@ import numpy as np
 from drjit.llvm import Float64
 
 from ._llvm import require_llvm
-from .optics import (Cx, film_attenuation, stack_amplitudes, transmittance_factor_p,
-                     transmittance_factor_s)
+from .optics import Cx, film_attenuation
+from .kernel import unpolarised_rt
 from .stack import SPECTRAL_RANGE
 
 __all__ = ["GRID", "texture_on_grid", "unpolarised_rt", "hemispherical_factors"]
@@ -58,19 +58,6 @@ def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
     si.wavelengths = mi.Spectrum(w, w, w, w)
     value = tex.eval(si)
     return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
-
-
-def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
-    """Unpolarised ``R`` (and ``T``, the power entering ``n_exit``), any array type."""
-    a = stack_amplitudes(n0, cos0, films, n_exit, wl, transmission=transmission)
-    R = dr.minimum(0.5 * (a.rs.abs2() + a.rp.abs2()), 1.0)
-    if not transmission:
-        return R
-    q0 = dr.select(a.grazing, 1.0, a.q0)
-    T = 0.5 * (a.ts.abs2() * transmittance_factor_s(a.q_exit, q0)
-               + a.tp.abs2() * transmittance_factor_p(a.n_exit, a.q_exit, q0))
-    T = dr.select(a.grazing, 0.0, dr.clip(T, 0.0, 1.0 - R))
-    return R, T
 
 
 def _cx(a: np.ndarray, reps: int) -> Cx:

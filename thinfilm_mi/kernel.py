@@ -231,17 +231,22 @@ class KernelStack:
         if isinstance(inside, bool):
             films = self.films_at(si, active, reverse=inside, thickness_scale=thickness_scale)
             if inside:
-                return _rt(n_sub.re, cos_theta, films, Cx(n_amb, 0.0), wl, transmission)
-            return _rt(n_amb, cos_theta, films, n_sub, wl, transmission)
+                return unpolarised_rt(n_sub.re, cos_theta, films, Cx(n_amb, 0.0), wl, transmission)
+            return unpolarised_rt(n_amb, cos_theta, films, n_sub, wl, transmission)
         films = self.films_at(si, active, thickness_scale=thickness_scale)
-        out_r = _rt(n_amb, cos_theta, films, n_sub, wl, transmission)
-        in_r = _rt(n_sub.re, cos_theta, films[::-1], Cx(n_amb, 0.0), wl, transmission)
+        out_r = unpolarised_rt(n_amb, cos_theta, films, n_sub, wl, transmission)
+        in_r = unpolarised_rt(n_sub.re, cos_theta, films[::-1], Cx(n_amb, 0.0), wl, transmission)
         if transmission:
             return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
         return dr.select(inside, in_r, out_r)
 
 
-def _rt(n0, cos0, films, n_exit, wl, transmission: bool):
+def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
+    """Unpolarised ``R`` (and ``T``, the power entering ``n_exit``), any array type.
+
+    ``R = (Rs + Rp) / 2`` clamped to 1; ``T`` clipped to ``[0, 1 - R]``; at grazing
+    incidence ``T = 0``. Shared by the kernels and the float64 hemispherical terms.
+    """
     a = stack_amplitudes(n0, cos0, films, n_exit, wl, transmission=transmission)
     R = dr.minimum(0.5 * (a.rs.abs2() + a.rp.abs2()), 1.0)
     if not transmission:
@@ -251,6 +256,11 @@ def _rt(n0, cos0, films, n_exit, wl, transmission: bool):
                + a.tp.abs2() * transmittance_factor_p(a.n_exit, a.q_exit, q0))
     T = dr.select(a.grazing, 0.0, dr.clip(T, 0.0, 1.0 - R))
     return R, T
+
+
+def optional_texture(props, name: str):
+    """The texture ``name`` of a plugin's properties, or ``None`` if it was not given."""
+    return props.get_texture(name) if name in props else None
 
 
 def films_from_props(props, plugin: str) -> list[tuple[SpectralIndex, float]]:
