@@ -61,9 +61,8 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.kernel import (KernelStack, SpectralIndex, check_unqueried, check_variant,
-                                optional_texture,
-                                ext_ior_from_props, films_from_props)
+from thinfilm_mi.kernel import (SpectralIndex, check_unqueried, check_variant,
+                                optional_texture, stack_from_props)
 
 NAME = "thinfilm_conductor"
 
@@ -101,9 +100,7 @@ class ThinFilmConductor(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
-        films = films_from_props(props, NAME)
-        substrate = substrate_from_props(props, NAME)
-        self.stack = KernelStack(films, ext_ior_from_props(props), substrate)
+        self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
         self.specular_reflectance = optional_texture(props, "specular_reflectance")
         check_unqueried(props, NAME)
         flags = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide

@@ -62,9 +62,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant,
-                                optional_texture,
-                                ext_ior_from_props, films_from_props, real_index)
+from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
+                                stack_from_props)
 
 NAME = "thinfilm_dielectric"
 
@@ -81,11 +80,9 @@ class ThinFilmDielectric(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
-        films = films_from_props(props, NAME)
-        ext = ext_ior_from_props(props)
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
-        self.stack = KernelStack(films, ext, interior)
-        self.eta = interior.mean_real() / ext.mean_real()
+        self.stack = stack_from_props(props, NAME, interior)
+        self.eta = interior.mean_real() / self.stack.ambient.mean_real()
         self.specular_reflectance = optional_texture(props, "specular_reflectance")
         self.specular_transmittance = optional_texture(props, "specular_transmittance")
         check_unqueried(props, NAME)

@@ -185,11 +185,14 @@ class KernelStack:
     """
 
     def __init__(self, films: Sequence[tuple[SpectralIndex, float]], ambient: SpectralIndex,
-                 substrate: SpectralIndex):
+                 substrate: SpectralIndex, thickness_texture=None):
         self.indices = [f[0] for f in films]
         self.thickness = [opaque_float(f[1]) for f in films]
         self.ambient = ambient
         self.substrate = substrate
+        #: Optional Mitsuba texture; every film's thickness is multiplied by its
+        #: value at the hit (clamped to >= 0).
+        self.thickness_texture = thickness_texture
 
     def __len__(self) -> int:
         return len(self.indices)
@@ -204,6 +207,14 @@ class KernelStack:
         for i, (ix, d) in enumerate(zip(self.indices, self.thickness)):
             callback.put(f"layers.{i}.thickness", d, mi.ParamFlags.Differentiable)
             ix.traverse(callback, f"layers.{i}.")
+        if self.thickness_texture is not None:
+            callback.put("thickness", self.thickness_texture, mi.ParamFlags.Differentiable)
+
+    def thickness_scale_at(self, si, active=True):
+        """The thickness texture's value at the hit (>= 0), or ``None`` without one."""
+        if self.thickness_texture is None:
+            return None
+        return dr.maximum(self.thickness_texture.eval_1(si, active), 0.0)
 
     def parameters_changed(self) -> None:
         for i, d in enumerate(self.thickness):
@@ -226,6 +237,8 @@ class KernelStack:
         evaluated and blended with ``dr.select``.
         """
         wl = si.wavelengths
+        if thickness_scale is None:
+            thickness_scale = self.thickness_scale_at(si, active)
         n_amb = self.ambient.eval_real(si, active)
         n_sub = self.substrate.eval(si, active)
         if isinstance(inside, bool):
@@ -286,6 +299,38 @@ def films_from_props(props, plugin: str) -> list[tuple[SpectralIndex, float]]:
         raise ThinFilmError(f"{plugin}: {e}") from None
     return [(SpectralIndex.from_material(m, f"layers[{i}] material"), d)
             for i, (m, d) in enumerate(parsed)]
+
+
+def thickness_texture_from_props(props, plugin: str):
+    """The optional ``thickness`` scale texture (any Mitsuba texture, or a number)."""
+    if "thickness" not in props:
+        return None
+    value = props.get("thickness")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if not math.isfinite(value) or value < 0:
+            raise ThinFilmError(f"{plugin}: 'thickness' (a scale on every film's thickness) "
+                                f"must be a finite number >= 0 or a texture, got {value!r}")
+    try:
+        return props.get_texture("thickness")
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{plugin}: 'thickness' must be a number or a texture, "
+                            f"got {value!r} ({e})") from None
+
+
+def stack_from_props(props, plugin: str, substrate: SpectralIndex,
+                     ambient: SpectralIndex | None = None) -> KernelStack:
+    """The :class:`KernelStack` of a thin-film BSDF from its properties.
+
+    Reads ``layers`` (or ``thin_film_ior`` + ``thin_film_thickness``),
+    ``ext_ior`` (unless ``ambient`` is given) and the optional ``thickness``
+    texture. Every thin-film BSDF builds its stack here, so the stack options
+    are the same for all of them.
+    """
+    films = films_from_props(props, plugin)
+    if ambient is None:
+        ambient = ext_ior_from_props(props)
+    return KernelStack(films, ambient, substrate,
+                       thickness_texture=thickness_texture_from_props(props, plugin))
 
 
 def ext_ior_from_props(props) -> SpectralIndex:
