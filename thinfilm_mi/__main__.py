@@ -2,7 +2,7 @@
 
 Subcommands::
 
-    render     render a scene (the same options as ``thinfilm-render``)
+    render     render one or more scenes (the same options as ``thinfilm-render``)
     materials  list the named materials
     spectrum   print (or plot) R and T of a stack against wavelength at given angles
     demo       render scenes/demo.xml into OUT/demo.exr and OUT/demo.png
@@ -280,8 +280,8 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
-    p = sub.add_parser("render", help="render a scene (same options as thinfilm-render)",
-                       description="Render a Mitsuba 3 scene into a linear EXR and an sRGB PNG.")
+    p = sub.add_parser("render", help="render scenes (same options as thinfilm-render)",
+                       description="Render Mitsuba 3 scenes into linear EXRs and sRGB PNGs.")
     cli.add_render_arguments(p)
     p.set_defaults(func=lambda a: cli.run(a))
 

@@ -3,8 +3,13 @@
 Mitsuba's own ``mitsuba`` executable cannot load Python plugins, so this
 command does the same job from Python::
 
-    thinfilm-render SCENE.xml [-o OUT.exr] [--spp N] [--size WxH]
-                    [--variant V] [-D name=value ...] [--seed S] [--verbose]
+    thinfilm-render SCENE.xml [SCENE.xml ...] [-o OUT.exr | --out-dir DIR]
+                    [--spp N] [--size WxH] [--variant V] [-D name=value ...]
+                    [--seed S] [--verbose]
+
+Several scenes are rendered one after the other in the same process (Mitsuba
+and the plugins are set up once), each into ``DIR/<scene-stem>.exr``; ``-o``
+names the output of a single scene only.
 
 What it does, in order:
 
@@ -37,7 +42,9 @@ What it does, in order:
 
 Exit codes: 0 success; 2 a bad command line, scene, parameter or machine set-up
 (one line ``thinfilm-render: error: ...`` on stderr); 1 a failure while
-rendering or writing the output. ``--verbose`` adds the traceback.
+rendering or writing the output. ``--verbose`` adds the traceback. With several
+scenes, a scene that fails is reported (one line) and the others are still
+rendered; the exit status is then the highest of the failures'.
 """
 from __future__ import annotations
 
@@ -65,7 +72,7 @@ MIN_PASSES = 8
 
 __all__ = [
     "render_main", "run", "add_render_arguments", "setup_llvm_only", "setup_variant", "build_parser", "render_file", "load_scene",
-    "parse_defines", "parse_size", "plan_passes", "RenderResult", "CLIError",
+    "parse_defines", "parse_size", "plan_passes", "plan_outputs", "RenderResult", "CLIError",
 ]
 
 
@@ -147,10 +154,12 @@ def parse_size(text: str | None) -> tuple[int, int] | None:
 
 def add_render_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
     """The options of ``thinfilm-render`` (shared with ``python -m thinfilm_mi render``)."""
-    parser.add_argument("scene", help="Mitsuba 3 scene file (XML)")
+    parser.add_argument("scene", nargs="+", help="Mitsuba 3 scene file(s) (XML)")
     parser.add_argument("-o", "--output", metavar="OUT.exr",
-                        help=f"output EXR (a PNG preview is written beside it); "
-                             f"default {DEFAULT_OUT_DIR}/<scene-stem>.exr")
+                        help=f"output EXR of a single scene (a PNG preview is written beside "
+                             f"it); default OUT_DIR/<scene-stem>.exr")
+    parser.add_argument("--out-dir", default=DEFAULT_OUT_DIR, metavar="OUT_DIR",
+                        help=f"folder of the outputs not named with -o (default {DEFAULT_OUT_DIR})")
     parser.add_argument("--spp", type=int, metavar="N",
                         help="samples per pixel (default: the scene's sampler sample_count)")
     parser.add_argument("--size", metavar="WxH", help="film size in pixels, e.g. 640x480")
@@ -443,8 +452,8 @@ def render_scene(scene, spp: int, seed: int = 0, sensor: int = 0,
     return image, _film_channels(film, image.shape[2]), len(plan), seconds
 
 
-def default_output(scene: str | os.PathLike) -> Path:
-    return Path(DEFAULT_OUT_DIR) / (Path(scene).stem + ".exr")
+def default_output(scene: str | os.PathLike, out_dir: str | os.PathLike = DEFAULT_OUT_DIR) -> Path:
+    return Path(out_dir) / (Path(scene).stem + ".exr")
 
 
 def render_file(scene_path: str | os.PathLike, output: str | os.PathLike | None = None, *,
@@ -533,25 +542,54 @@ def summary(result: RenderResult) -> str:
             f" -> {written}")
 
 
+def plan_outputs(scenes: Sequence[str], output: str | None,
+                 out_dir: str | os.PathLike = DEFAULT_OUT_DIR) -> list[Path]:
+    """The EXR path of each scene: ``output`` for a single scene, else
+    ``out_dir/<stem>.exr`` (two scenes with the same stem are an error)."""
+    scenes = list(scenes)
+    if output is not None:
+        if len(scenes) != 1:
+            raise UsageError(f"-o {output!r} names one output but {len(scenes)} scenes were "
+                             "given; use --out-dir for several scenes")
+        return [Path(output)]
+    outs = [default_output(s, out_dir) for s in scenes]
+    seen: dict[Path, str] = {}
+    for scene, out in zip(scenes, outs):
+        if out in seen:
+            raise UsageError(f"{seen[out]} and {scene} would both be written to {out}; "
+                             "render them separately with -o")
+        seen[out] = scene
+    return outs
+
+
 def run(args: argparse.Namespace) -> int:
     """Run a parsed ``thinfilm-render`` command line; returns the exit status."""
     try:
-        result = render_file(
-            args.scene, args.output, spp=args.spp, size=parse_size(args.size),
-            variant=args.variant, params=parse_defines(args.defines), seed=args.seed,
-            sensor=args.sensor, max_pass_samples=args.max_pass_samples,
-            progress=sys.stderr, verbose=args.verbose)
+        scenes = list(args.scene) if isinstance(args.scene, (list, tuple)) else [args.scene]
+        outputs = plan_outputs(scenes, args.output, getattr(args, "out_dir", DEFAULT_OUT_DIR))
+        size, params = parse_size(args.size), parse_defines(args.defines)
     except CLIError as e:
         return report_error(e, args.verbose)
-    except KeyboardInterrupt:
-        print(f"{PROG}: error: interrupted", file=sys.stderr)
-        return 130
-    except Exception as e:  # anything unforeseen is a failure, still reported in one line
-        err = RenderFailure(f"{type(e).__name__}: {one_line(e)}")
-        err.__cause__ = e
-        return report_error(err, args.verbose)
-    print(summary(result), file=sys.stderr)
-    return 0
+    status = 0
+    for scene, out in zip(scenes, outputs):
+        try:
+            result = render_file(
+                scene, out, spp=args.spp, size=size, variant=args.variant, params=params,
+                seed=args.seed, sensor=args.sensor, max_pass_samples=args.max_pass_samples,
+                progress=sys.stderr, verbose=args.verbose)
+        except CLIError as e:
+            status = max(status, report_error(e, args.verbose))
+            continue
+        except KeyboardInterrupt:
+            print(f"{PROG}: error: interrupted", file=sys.stderr)
+            return 130
+        except Exception as e:  # anything unforeseen is a failure, still reported in one line
+            err = RenderFailure(f"{type(e).__name__}: {one_line(e)}")
+            err.__cause__ = e
+            status = max(status, report_error(err, args.verbose))
+            continue
+        print(summary(result), file=sys.stderr)
+    return status
 
 
 def report_error(error: CLIError, verbose: bool = False) -> int:

@@ -1,0 +1,100 @@
+"""Every scene in scenes/*.xml renders through the command line at a tiny size.
+
+One ``python -m thinfilm_mi render scenes/*.xml`` subprocess renders all of
+them (the CLI takes several scenes and sets Mitsuba up once), so scenes added
+later are covered without editing this file. Each EXR must read back with the
+requested size, RGB channels, finite pixels that are not all black and have
+no negative luminance, and its metadata (scene path, variant, spp, seed, no parameters). The
+error paths of the CLI (bad -D, missing file, unknown plugin) are in
+tests/test_cli.py.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("OpenEXR")
+
+from thinfilm_mi import cli  # noqa: E402
+from thinfilm_mi.exr import read_exr  # noqa: E402
+
+REPO = Path(__file__).resolve().parent.parent
+SCENES = sorted((REPO / "scenes").glob("*.xml"))
+WIDTH, HEIGHT, SPP, SEED = 24, 16, 1, 3
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """Render every scene once; returns (output folder, the CLI's stderr)."""
+    out = tmp_path_factory.mktemp("scenes")
+    proc = subprocess.run(
+        [sys.executable, "-m", "thinfilm_mi", "render", *map(str, SCENES), "--out-dir", str(out),
+         "--size", f"{WIDTH}x{HEIGHT}", "--spp", str(SPP), "--seed", str(SEED)],
+        capture_output=True, text=True, cwd=out, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    return out, proc.stderr
+
+
+def test_scenes_exist():
+    names = {p.stem for p in SCENES}
+    assert "demo" in names
+    # the paper's Fig. 8-10 scenes (README and notebooks/02_rendering.ipynb use them)
+    assert any(n.startswith("fig8") for n in names)
+    assert any(n.startswith("fig9") for n in names)
+    assert any(n.startswith("fig10") for n in names)
+
+
+@pytest.mark.parametrize("scene", SCENES, ids=[p.stem for p in SCENES])
+def test_scene_renders(scene, rendered):
+    out, err = rendered
+    exr = out / f"{scene.stem}.exr"
+    assert exr.is_file(), err[-4000:]
+    channels, header = read_exr(exr)
+    assert sorted(channels) == ["B", "G", "R"]
+    image = np.stack([channels[c] for c in "RGB"], axis=-1)
+    assert image.shape == (HEIGHT, WIDTH, 3)
+    assert np.all(np.isfinite(image)), f"{scene.name}: NaN/inf pixels"
+    # single spectral samples can fall outside the sRGB gamut (a negative channel),
+    # but their luminance Y (CIE y-bar >= 0 weighting of a radiance >= 0) cannot
+    luminance = image @ np.array([0.2126, 0.7152, 0.0722])
+    assert luminance.min() >= -1e-4, f"{scene.name}: negative luminance {luminance.min()}"
+    assert image.mean() > 1e-3, f"{scene.name}: black image"
+    assert header["scene"] == str(scene.resolve())
+    assert header["variant"] == cli.DEFAULT_VARIANT
+    assert header["spp"] == SPP
+    assert header["seed"] == SEED
+    assert header["parameters"] == ""
+    assert (out / f"{scene.stem}.png").is_file()
+    assert f"-> {exr}" in err  # the one-line summary of this scene
+
+
+def test_several_scenes_need_out_dir_not_o(tmp_path):
+    # -o names one file; with several scenes it is a one-line usage error, nothing rendered
+    with pytest.raises(cli.UsageError, match="--out-dir"):
+        cli.plan_outputs([str(SCENES[0]), str(SCENES[-1])], str(tmp_path / "x.exr"))
+    with pytest.raises(cli.UsageError, match="both be written"):
+        cli.plan_outputs(["a/s.xml", "b/s.xml"], None, tmp_path)
+    assert cli.plan_outputs(["a/s.xml", "b/t.xml"], None, tmp_path) == [tmp_path / "s.exr",
+                                                                         tmp_path / "t.exr"]
+
+
+def test_failing_scene_does_not_stop_the_others(tmp_path, capfd):
+    # a missing scene among several: one error line, the good scene is still rendered, exit 2
+    good = tmp_path / "good.xml"
+    good.write_text("""<scene version="3.0.0"><integrator type="path"/>
+  <sensor type="perspective"><film type="hdrfilm"><integer name="width" value="4"/>
+  <integer name="height" value="3"/></film></sensor>
+  <emitter type="constant"/></scene>""")
+    rc = cli.render_main([str(tmp_path / "missing.xml"), str(good), "--out-dir", str(tmp_path / "o"),
+                          "--spp", "1"])
+    err = capfd.readouterr().err
+    assert rc == 2
+    errors = [l for l in err.splitlines() if "error:" in l]
+    assert len(errors) == 1 and "missing.xml" in errors[0]
+    channels, _ = read_exr(tmp_path / "o" / "good.exr")
+    assert channels["R"].shape == (3, 4)
+    assert not (tmp_path / "o" / "missing.exr").exists()
