@@ -15,6 +15,8 @@ PLUGINS = {
     "thinfilm_conductor": ("thinfilm_conductor", "ThinFilmConductor"),
     "thinfilm_dielectric": ("thinfilm_dielectric", "ThinFilmDielectric"),
     "thinfilm_diffuse": ("thinfilm_diffuse", "ThinFilmDiffuse"),
+    "thinfilm_roughconductor": ("thinfilm_roughconductor", "ThinFilmRoughConductor"),
+    "thinfilm_roughdielectric": ("thinfilm_roughdielectric", "ThinFilmRoughDielectric"),
 }
 
 _callback_installed = False
