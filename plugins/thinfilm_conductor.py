@@ -61,8 +61,8 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.kernel import (SpectralIndex, check_unqueried, check_variant,
-                                optional_texture, stack_from_props)
+from thinfilm_mi.kernel import (SpectralIndex, check_texture_at_least, check_unqueried,
+                                check_variant, optional_texture, stack_from_props)
 
 NAME = "thinfilm_conductor"
 
@@ -91,6 +91,7 @@ def substrate_from_props(props, plugin: str) -> SpectralIndex:
                 except Exception as e:
                     raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
                                         f"spectrum/texture, got {v!r} ({e})") from None
+                check_texture_at_least(v, 0.0, f"{plugin}: '{name}'", strict=(name == "eta"))
             values[name] = v
         return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
     return SpectralIndex.from_material(props.get("material", "Au"), "material")

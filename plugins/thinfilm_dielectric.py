@@ -81,7 +81,7 @@ class ThinFilmDielectric(mi.BSDF):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
-        self.stack = stack_from_props(props, NAME, interior)
+        self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
         self.eta = interior.mean_real() / self.stack.ambient.mean_real()
         self.specular_reflectance = optional_texture(props, "specular_reflectance")
         self.specular_transmittance = optional_texture(props, "specular_transmittance")

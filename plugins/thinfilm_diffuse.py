@@ -141,7 +141,8 @@ import numpy as np
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.hemispherical import GRID, hemispherical_factors, texture_on_grid
 from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant,
-                                ext_ior_from_props, films_from_props, opaque_float)
+                                ext_ior_from_props, films_from_props, opaque_float,
+                                stack_options_from_props)
 from thinfilm_mi.optics import film_attenuation
 
 NAME = "thinfilm_diffuse"
@@ -213,17 +214,19 @@ class ThinFilmDiffuse(mi.BSDF):
         films = films_from_props(props, NAME)
         ext = ext_ior_from_props(props)
         self.reflectance = _reflectance_from_props(props)
+        options = stack_options_from_props(props, NAME, thickness_texture=False)
         check_unqueried(props, NAME)
 
         self.no_films = len(films) == 0
         if films and _absorbs(films[-1][0]):
             # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
-            self.coating = KernelStack(films[:-1], ext, films[-1][0])
+            self.coating = KernelStack(films[:-1], ext, films[-1][0], sides={False: True},
+                                       **options)
             self.film_n = films[-1][0]
             self.film_n_thickness = opaque_float(films[-1][1])
         else:
             # No absorbing film N: all films over the base medium (matched to the ambient).
-            self.coating = KernelStack(films, ext, ext)
+            self.coating = KernelStack(films, ext, ext, sides={False: True}, **options)
             self.film_n = None
             self.film_n_thickness = None
 

@@ -104,7 +104,7 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         mi.BSDF.__init__(self, props)
         self.microfacet = Microfacet(props, NAME)
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
-        self.stack = stack_from_props(props, NAME, interior)
+        self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
         n_int, n_ext = interior.mean_real(), self.stack.ambient.mean_real()
         if n_int == n_ext:
             raise ThinFilmError(f"{NAME}: 'int_ior' ({interior.label}) and 'ext_ior' "

@@ -66,7 +66,7 @@ RNG_STACKS = [
 def test_conductor_weight_is_stack_reflectance(variant, films, cos_theta):
     layers = "; ".join(f"{complex(n).real}{complex(n).imag:+}j {d}" for n, d in films)
     sub = 4.08 + 0.03j
-    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers,
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "tabulate": False,
                          "eta": sub.real, "k": sub.imag, "ext_ior": 1.0})
     bs, w = weight(bsdf, cos_theta)
     theta = float(np.arccos(cos_theta))
@@ -95,7 +95,7 @@ FILMS_ABSORBING = [(1.46, 500.0), (0.42 + 2.47j, 20.0), (1.2 + 7.0j, 10.0)]
 @pytest.mark.parametrize("cos_theta", [0.9, 0.5, 0.1, -0.95, -0.8, -0.3])
 def test_dielectric_components_match_core_from_both_sides(variant, cos_theta):
     layers = "1.46 500; 0.42+2.47j 20; 1.2+7j 10"
-    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": layers, "int_ior": 1.6,
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": layers, "int_ior": 1.6, "tabulate": False,
                          "ext_ior": 1.0})
     stack = tf.Stack(FILMS_ABSORBING, substrate=1.6, ambient=1.0)
     if cos_theta < 0:
@@ -126,7 +126,7 @@ def test_dielectric_components_match_core_from_both_sides(variant, cos_theta):
 
 @pytest.mark.parametrize("cos_theta", [1.0, 0.6, 0.05, -1.0, -0.9, -0.7, -0.3, -0.01])
 def test_dielectric_energy_and_tir(variant, cos_theta):
-    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": "2.1 130; 0.05+3.2j 8",
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": "2.1 130; 0.05+3.2j 8", "tabulate": False,
                          "int_ior": 1.5})
     bs_r, w_r = weight(bsdf, cos_theta, component=0)
     bs_t, w_t = weight(bsdf, cos_theta, component=1)
@@ -198,8 +198,10 @@ def test_no_films_renders_like_mitsuba(kind):
 
 def test_thickness_edit_does_not_recompile():
     mi.set_variant("llvm_ad_spectral")
+    # Exact mode: the kernel reads the thickness as an opaque input. (A table is
+    # rebuilt on an edit; tests/test_tables.py covers that mode.)
     scene = _scene({"type": "thinfilm_conductor", "layers": "1.46 300; 0.42+2.47j 15",
-                    "eta": 4.0, "k": 0.05}, size=16)
+                    "eta": 4.0, "k": 0.05, "tabulate": False}, size=16)
     params = mi.traverse(scene)
     assert "obj.bsdf.layers.0.thickness" in params.keys()
     assert "obj.bsdf.layers.1.eta.value" in params.keys()
@@ -305,7 +307,7 @@ def test_named_materials_in_kernel_match_numpy_datasets(variant, substrate, laye
     # spectra must reproduce the datasets' own linear interpolation, so the only
     # difference left is float32 rounding.
     wls = [401.3, 487.77, 612.5, 777.7]
-    bsdf = mi.load_dict({"type": "thinfilm_conductor", "material": substrate, "layers": layers,
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "material": substrate, "layers": layers, "tabulate": False,
                          "ext_ior": 1.0})
     si = interaction(0.8, wls)
     _, w = bsdf.sample(context(), si, 0.5, mi.Point2f(0.5, 0.5))
@@ -316,7 +318,7 @@ def test_named_materials_in_kernel_match_numpy_datasets(variant, substrate, laye
 def test_dispersive_glass_and_air_media_are_accepted():
     mi.set_variant("llvm_ad_spectral")
     # BK7 (k ~ 1e-8) and Ciddor air are non-absorbing for our purposes.
-    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "int_ior": "BK7", "ext_ior": "air",
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "int_ior": "BK7", "ext_ior": "air", "tabulate": False,
                          "layers": "SiO2 500; Au 20"})
     assert "BK7" in str(bsdf)
     _, w = weight(bsdf, -0.9, component=0)

@@ -28,7 +28,7 @@ from drjit.llvm import Float64
 
 from ._llvm import require_llvm
 from .optics import Cx, film_attenuation
-from .kernel import unpolarised_rt
+from .kernel import texture_on_grid, unpolarised_rt
 from .stack import SPECTRAL_RANGE
 
 __all__ = ["GRID", "texture_on_grid", "unpolarised_rt", "hemispherical_factors"]
@@ -41,23 +41,6 @@ GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
 #: about one wave over the hemisphere; 128 nodes integrate such oscillations
 #: (and those of films ten times thicker) to well below 1e-6.
 DEFAULT_NODES = 128
-
-
-def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
-    """A Mitsuba spectral texture evaluated at ``wavelengths`` (float64 numpy).
-
-    Evaluated through the texture itself (not its source data), so values edited
-    through ``mi.traverse`` are seen exactly as the render kernel sees them.
-    """
-    import mitsuba as mi
-
-    wl = np.asarray(wavelengths, dtype=np.float64)
-    n = wl.size
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    w = mi.Float(wl.astype(np.float32))
-    si.wavelengths = mi.Spectrum(w, w, w, w)
-    value = tex.eval(si)
-    return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
 
 
 def _cx(a: np.ndarray, reps: int) -> Cx:

@@ -22,6 +22,7 @@ import drjit as dr
 import numpy as np
 
 from . import materials as _materials
+from . import tables as _tables
 from ._llvm import require_llvm
 from .errors import ThinFilmError
 from .optics import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
@@ -176,16 +177,95 @@ def real_index(spec: Any, name: str) -> SpectralIndex:
     return _check_real_medium(SpectralIndex.from_material(spec, name), name)
 
 
+#: Default coherence thickness (nm): thicker films are averaged incoherently.
+DEFAULT_COHERENCE_THICKNESS = 5000.0
+#: Default target for the tables: max abs error in R and T.
+DEFAULT_TABLE_ERROR = 1e-3
+#: ``tabulate="auto"`` uses a table for stacks of at least this many films (after
+#: the skips); below it the exact recursion is as cheap as a lookup (see
+#: benchmarks/speed_vs_error.py).
+AUTO_MIN_FILMS = 2
+#: A film is optically opaque when the amplitude of light crossing it once,
+#: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
+#: is below this: what lies beneath then changes r by less than ~1e-9.
+OPAQUE_AMPLITUDE = 1e-9
+
+
+def texture_on_grid(tex, wavelengths: np.ndarray = _GRID) -> np.ndarray:
+    """A Mitsuba spectral texture evaluated at ``wavelengths`` (float64 numpy).
+
+    Evaluated through the texture itself (not its source data), so values edited
+    through ``mi.traverse`` are seen exactly as the render kernel sees them.
+    """
+    mi = _mi()
+    wl = np.asarray(wavelengths, dtype=np.float64).ravel()
+    n = wl.size
+    if not dr.is_jit_v(mi.Float):   # scalar variants: four wavelengths per call
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        padded = np.concatenate([wl, np.full((-n) % 4, wl[-1] if n else 500.0)])
+        out = []
+        for i in range(0, padded.size, 4):
+            si.wavelengths = mi.Spectrum(*[float(x) for x in padded[i:i + 4]])
+            out.extend(float(v) for v in tex.eval(si))
+        return np.asarray(out[:n], dtype=np.float64)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    w = mi.Float(wl.astype(np.float32))
+    si.wavelengths = mi.Spectrum(w, w, w, w)
+    value = tex.eval(si)
+    return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
+
+
+def _scalar(d) -> float:
+    return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
+
+
+class _Side:
+    """How one lighting side of a stack is evaluated, after the skips.
+
+    ``films`` are ``(SpectralIndex, thickness, incoherent)`` from the side the
+    light comes from; ``exit`` is the exit medium (the substrate, the ambient,
+    or the first optically opaque film, in which case ``opaque`` is true and
+    ``T = 0``); ``table`` is a :class:`~thinfilm_mi.tables.Table` or ``None``.
+    """
+
+    def __init__(self, n0: SpectralIndex, films, exit_: SpectralIndex, exit_real: bool,
+                 opaque: bool, transmission: bool):
+        self.n0 = n0
+        self.films = films
+        self.exit = exit_
+        self.exit_real = exit_real
+        self.opaque = opaque
+        self.transmission = transmission
+        self.table = None
+
+    @property
+    def incoherent(self) -> list[bool]:
+        return [f[2] for f in self.films]
+
+
 class KernelStack:
     """Films between an ambient medium and a substrate, for evaluation in kernels.
 
     ``films`` is a list of ``(SpectralIndex, thickness_nm)``; thicknesses are
     stored as opaque ``mi.Float`` so a sweep never recompiles. ``ambient`` must
-    be non-absorbing.
+    be non-absorbing. ``sides`` maps ``inside`` (False: lit from the ambient,
+    True: from the substrate) to whether ``T`` is needed there; it decides what
+    is tabulated. Other combinations are still evaluated, exactly.
+
+    What a scene does not need is skipped (re-decided in
+    :meth:`parameters_changed`): films of zero thickness are dropped; below an
+    optically opaque film (:data:`OPAQUE_AMPLITUDE`) nothing is evaluated and
+    ``T = 0``; films thicker than ``coherence_thickness`` are averaged
+    incoherently; with ``tabulate`` (``"auto"``, ``True``, ``False``) the
+    needed sides are read from a verified table (:mod:`thinfilm_mi.tables`)
+    within ``table_error``; identical stacks share one table.
     """
 
     def __init__(self, films: Sequence[tuple[SpectralIndex, float]], ambient: SpectralIndex,
-                 substrate: SpectralIndex, thickness_texture=None):
+                 substrate: SpectralIndex, thickness_texture=None, *,
+                 tabulate: bool | str = "auto", table_error: float = DEFAULT_TABLE_ERROR,
+                 coherence_thickness: float = DEFAULT_COHERENCE_THICKNESS,
+                 sides: dict | None = None, plugin: str = "thin-film BSDF"):
         self.indices = [f[0] for f in films]
         self.thickness = [opaque_float(f[1]) for f in films]
         self.ambient = ambient
@@ -193,12 +273,80 @@ class KernelStack:
         #: Optional Mitsuba texture; every film's thickness is multiplied by its
         #: value at the hit (clamped to >= 0).
         self.thickness_texture = thickness_texture
+        self.tabulate = tabulate
+        self.table_error = table_error
+        self.coherence_thickness = coherence_thickness
+        self.sides = dict(sides) if sides is not None else {False: False}
+        self.plugin = plugin
+        self._resolution = {}   # inside -> (nu, nv) of the last table: never shrinks
+        if tabulate is True and thickness_texture is not None:
+            raise ThinFilmError(f"{plugin}: 'tabulate' is true but a 'thickness' texture is "
+                                "given: a table over (angle, wavelength) cannot follow a "
+                                "thickness that varies over the surface (use 'auto' or false)")
+        self._plan()
 
     def __len__(self) -> int:
         return len(self.indices)
 
+    # -- planning (load time and after parameter changes) ---------------------
+    def _thickness_values(self) -> list[float]:
+        return [_scalar(d) for d in self.thickness]
+
+    def _opaque(self, index: SpectralIndex, d: float) -> bool:
+        if self.thickness_texture is not None or d <= 0:
+            return False   # a texture may thin the film anywhere
+        k = texture_on_grid(index.k)
+        return bool(np.max(np.exp(-2.0 * math.pi * k * d / _GRID)) < OPAQUE_AMPLITUDE)
+
+    def _side(self, inside: bool, transmission: bool) -> _Side:
+        films = [(ix, d, dv > self.coherence_thickness)
+                 for ix, d, dv in zip(self.indices, self.thickness, self._thickness_values())
+                 if dv > 0]
+        if inside:
+            films = films[::-1]
+            n0, exit_, exit_real = self.substrate, self.ambient, True
+        else:
+            n0, exit_, exit_real = self.ambient, self.substrate, False
+        opaque = False
+        for j, (ix, d, _) in enumerate(films):
+            if self._opaque(ix, _scalar(d)):
+                films, exit_, exit_real, opaque = films[:j], ix, False, True
+                break
+        return _Side(n0, films, exit_, exit_real, opaque, transmission)
+
+    def _plan(self) -> None:
+        self.plan = {inside: self._side(inside, t) for inside, t in self.sides.items()}
+        # "auto" tabulates in vectorised variants only: in scalar variants every
+        # call is Python anyway and the load-time build would dominate.
+        want = self.tabulate is True or (
+            self.tabulate == "auto" and self.thickness_texture is None
+            and dr.is_jit_v(_mi().Float)
+            and max((len(s.films) for s in self.plan.values()), default=0) >= AUTO_MIN_FILMS)
+        self.table_failed = []
+        if not want:
+            return
+        for inside, side in self.plan.items():
+            if side.films:
+                side.table = _tables_cache(self, side, self._resolution.get(inside))
+                if side.table is None:
+                    self.table_failed.append(inside)
+                else:
+                    self._resolution[inside] = (side.table.nu, side.table.nv)
+        if self.tabulate is True and self.table_failed:
+            import warnings
+            warnings.warn(f"{self.plugin}: the stack {self.describe()} cannot be tabulated "
+                          f"within table_error={self.table_error:g} in {_tables.MAX_TEXELS} "
+                          "texels; it is evaluated exactly", stacklevel=3)
+
+    def mode(self) -> str:
+        """``"table"`` if every planned side reads a table, ``"exact"`` if none, else ``"mixed"``."""
+        tabled = [s.table is not None for s in self.plan.values() if s.films]
+        if tabled and all(tabled):
+            return "table"
+        return "mixed" if any(tabled) else "exact"
+
     def describe(self) -> str:
-        films = "; ".join(f"{ix.label} {float(dr.ravel(d)[0]) if dr.is_array_v(d) else d:g} nm"
+        films = "; ".join(f"{ix.label} {_scalar(d):g} nm"
                           for ix, d in zip(self.indices, self.thickness))
         return f"[{films}]" if films else "[no films]"
 
@@ -210,21 +358,55 @@ class KernelStack:
         if self.thickness_texture is not None:
             callback.put("thickness", self.thickness_texture, mi.ParamFlags.Differentiable)
 
+    def parameters_changed(self) -> None:
+        for i, d in enumerate(self.thickness):
+            if dr.is_jit_v(d):
+                dr.make_opaque(d)
+            if not math.isfinite(_scalar(d)) or _scalar(d) < 0:
+                raise ThinFilmError(f"{self.plugin}: layers.{i}.thickness must be a finite "
+                                    f"number >= 0 (nm), got {_scalar(d)!r}")
+        self._plan()
+
     def thickness_scale_at(self, si, active=True):
         """The thickness texture's value at the hit (>= 0), or ``None`` without one."""
         if self.thickness_texture is None:
             return None
         return dr.maximum(self.thickness_texture.eval_1(si, active), 0.0)
 
-    def parameters_changed(self) -> None:
-        for i, d in enumerate(self.thickness):
-            if dr.is_jit_v(d):
-                dr.make_opaque(d)
+    # -- evaluation -------------------------------------------------------------
+    def _differentiating(self) -> bool:
+        return any(dr.grad_enabled(d) for d in self.thickness if dr.is_diff_v(d))
 
-    def films_at(self, si, active=True, reverse: bool = False, thickness_scale=None):
+    def _full_side(self, inside: bool, transmission: bool) -> _Side:
+        """Every film, no skips, no table (for gradients through every film)."""
+        films = [(ix, d, False) for ix, d in zip(self.indices, self.thickness)]
+        if inside:
+            return _Side(self.substrate, films[::-1], self.ambient, True, False, transmission)
+        return _Side(self.ambient, films, self.substrate, False, False, transmission)
+
+    def _eval_side(self, side: _Side | None, inside: bool, si, cos_theta, active,
+                   transmission: bool, thickness_scale):
+        mi = _mi()
+        wl = si.wavelengths
+        if side is None or self._differentiating():
+            side = self._full_side(inside, transmission)
+        n0 = side.n0.eval_real(si, active)
+        table = side.table
+        if table is not None and thickness_scale is None and (
+                not transmission or side.opaque or table.channels > 1):
+            n_exit = side.exit.eval_real(si, active) if table.kind == "tir" else None
+            res = table.lookup(cos_theta, n0, n_exit, wl, active)
+            if not transmission:
+                return res[0]
+            return res[0], (mi.Spectrum(0.0) if side.opaque else res[1])
+        exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
+            else side.exit.eval(si, active)
         films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
-                 for ix, d in zip(self.indices, self.thickness)]
-        return films[::-1] if reverse else films
+                 for ix, d, _ in side.films]
+        out = _rt(n0, cos_theta, films, exit_, wl, side.incoherent, transmission)
+        if transmission and side.opaque:
+            return out[0], mi.Spectrum(0.0)
+        return out
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
                     transmission: bool = False, thickness_scale=None):
@@ -236,22 +418,89 @@ class KernelStack:
         non-absorbing medium. Where ``inside`` is a mask both directions are
         evaluated and blended with ``dr.select``.
         """
-        wl = si.wavelengths
         if thickness_scale is None:
             thickness_scale = self.thickness_scale_at(si, active)
-        n_amb = self.ambient.eval_real(si, active)
-        n_sub = self.substrate.eval(si, active)
+
+        def side(flag: bool):
+            return self._eval_side(self.plan.get(flag), flag, si, cos_theta, active,
+                                   transmission, thickness_scale)
+
         if isinstance(inside, bool):
-            films = self.films_at(si, active, reverse=inside, thickness_scale=thickness_scale)
-            if inside:
-                return unpolarised_rt(n_sub.re, cos_theta, films, Cx(n_amb, 0.0), wl, transmission)
-            return unpolarised_rt(n_amb, cos_theta, films, n_sub, wl, transmission)
-        films = self.films_at(si, active, thickness_scale=thickness_scale)
-        out_r = unpolarised_rt(n_amb, cos_theta, films, n_sub, wl, transmission)
-        in_r = unpolarised_rt(n_sub.re, cos_theta, films[::-1], Cx(n_amb, 0.0), wl, transmission)
+            return side(inside)
+        out_r, in_r = side(False), side(True)
         if transmission:
             return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
         return dr.select(inside, in_r, out_r)
+
+
+def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
+    """Coherent :func:`unpolarised_rt`, or the incoherent-aware evaluator when
+    some film is beyond the coherence thickness."""
+    if any(incoherent):
+        from .incoherent import incoherent_rt
+        return incoherent_rt(n0, cos0, films, n_exit, wl, incoherent, transmission=transmission)
+    return unpolarised_rt(n0, cos0, films, n_exit, wl, transmission)
+
+
+_TABLE_CACHE: dict = {}
+
+
+def _tables_cache(stack: KernelStack, side: _Side, start=None):
+    """The table of ``side``, shared between stacks with identical optics.
+
+    The key is the stack's numbers (every index on the 1 nm grid, thicknesses,
+    incoherent flags, what is tabulated, the target), so two BSDFs with the
+    same films share one texture. Tables are never modified in place.
+    """
+    import hashlib
+
+    mi = _mi()
+    h = hashlib.sha1()
+    media = [side.n0] + [f[0] for f in side.films] + [side.exit]
+    values = {}
+    for ix in media:
+        if id(ix) not in values:
+            if ix.eta.is_spatially_varying() or ix.k.is_spatially_varying():
+                return None   # an index that varies over the surface: not tabulable
+            values[id(ix)] = (texture_on_grid(ix.eta), texture_on_grid(ix.k))
+        for v in values[id(ix)]:
+            h.update(v.tobytes())
+    h.update(repr([(_scalar(d), inc) for _, d, inc in side.films]).encode())
+    h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
+                   stack.table_error, start)).encode())
+    key = h.hexdigest()
+    if key in _TABLE_CACHE:
+        return _TABLE_CACHE[key]
+
+    def on(ix, real=False):
+        memo = {}
+
+        def f(wl):   # the build asks for the same wavelengths several times
+            wl = np.asarray(wl, np.float64)
+            key = wl.tobytes()
+            if key not in memo:
+                eta = texture_on_grid(ix.eta, wl)
+                memo.clear()
+                memo[key] = eta if real else eta + 1j * texture_on_grid(ix.k, wl)
+            return memo[key]
+        return f
+
+    n0 = on(side.n0, real=True)
+    exit_ = on(side.exit, real=True) if side.exit_real else on(side.exit)
+    incoherent = side.incoherent
+
+    def rt(n0_, cos0, films, n_exit, wl, transmission):
+        return _rt(n0_, cos0, films, n_exit, wl, incoherent, transmission)
+
+    data = _tables.SideData(
+        n0=n0, films=[(on(ix), _scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
+        transmission=side.transmission and not side.opaque, rt=rt,
+        fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
+    table = _tables.build_table(data, stack.table_error, _GRID, start=start)
+    if len(_TABLE_CACHE) > 256:
+        _TABLE_CACHE.clear()
+    _TABLE_CACHE[key] = table
+    return table
 
 
 def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
@@ -311,26 +560,124 @@ def thickness_texture_from_props(props, plugin: str):
             raise ThinFilmError(f"{plugin}: 'thickness' (a scale on every film's thickness) "
                                 f"must be a finite number >= 0 or a texture, got {value!r}")
     try:
-        return props.get_texture("thickness")
+        tex = props.get_texture("thickness")
     except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
         raise ThinFilmError(f"{plugin}: 'thickness' must be a number or a texture, "
                             f"got {value!r} ({e})") from None
+    check_texture_at_least(tex, 0.0, f"{plugin}: 'thickness' (a scale on every film's "
+                           "thickness)", mono=True)
+    return tex
+
+
+def texture_minimum(tex, mono: bool = False):
+    """The smallest value of a texture at load time, or ``None`` if it cannot be evaluated
+    without a shape (e.g. ``mesh_attribute``).
+
+    Evaluated on Mitsuba's spectral grid (360-830 nm, 1 nm) and, for a spatially
+    varying texture, at every texel centre of its resolution (at least a 64 x 64
+    UV grid; 16 x 16 and a 10 nm grid in scalar variants): exact for bitmaps
+    (bilinear interpolation is a convex combination of texels) and uniform or
+    tabulated spectra, a dense sample for procedural textures. ``mono``:
+    evaluate ``eval_1`` (as the thickness scale is read) instead of ``eval``.
+    """
+    mi = _mi()
+    jit = dr.is_jit_v(mi.Float)
+    wl = _GRID if jit else _GRID[::10]
+    if tex.is_spatially_varying():
+        res = [int(r) for r in tex.resolution()]
+        nu, nv = (max(res[0], 64), max(res[1], 64)) if jit else (16, 16)
+        nu, nv = min(nu, 4096), min(nv, 4096)
+        u, v = np.meshgrid((np.arange(nu) + 0.5) / nu, (np.arange(nv) + 0.5) / nv)
+        u, v = u.ravel(), v.ravel()
+    else:
+        u = v = np.full(1, 0.5)
+    n = max(u.size, -(-wl.size // 4))
+    i = np.arange(n)
+    uu, vv = u[i % u.size], v[i % v.size]
+    lam = [wl[(4 * i + c) % wl.size] for c in range(4)]
+    try:
+        if jit:
+            si = dr.zeros(mi.SurfaceInteraction3f, n)
+            si.uv = mi.Point2f(mi.Float(uu), mi.Float(vv))
+            si.wavelengths = mi.Spectrum(*[mi.Float(x) for x in lam])
+            val = tex.eval_1(si) if mono else tex.eval(si)
+            arr = np.array(val, dtype=np.float64)
+            return float(np.min(arr)) if arr.size else None
+        lo = math.inf
+        for j in range(n):
+            si = dr.zeros(mi.SurfaceInteraction3f)
+            si.uv = mi.Point2f(float(uu[j]), float(vv[j]))
+            si.wavelengths = mi.Spectrum(*[float(x[j]) for x in lam])
+            val = tex.eval_1(si) if mono else tex.eval(si)
+            lo = min(lo, float(val) if mono else min(float(val[c]) for c in range(4)))
+        return lo
+    except Exception:  # noqa: BLE001 - textures that need a shape cannot be checked here
+        return None
+
+
+def check_texture_at_least(tex, bound: float, what: str, mono: bool = False,
+                           strict: bool = False) -> None:
+    """Raise :class:`ThinFilmError` naming ``what`` if the texture goes below ``bound``
+    (or reaches it, with ``strict``) anywhere :func:`texture_minimum` looks."""
+    lo = texture_minimum(tex, mono)
+    if lo is None:
+        return
+    if not math.isfinite(lo) or lo < bound or (strict and lo <= bound):
+        raise ThinFilmError(f"{what} must be {'>' if strict else '>='} {bound:g} everywhere, "
+                            f"got a texture with minimum {lo!r}")
+
+
+def tabulate_from_props(props, plugin: str) -> bool | str:
+    """``tabulate``: ``"auto"`` (default), ``true`` or ``false`` (bool or string)."""
+    value = props.get("tabulate", "auto")
+    if isinstance(value, str) and value.strip().lower() in ("auto", "true", "false"):
+        value = value.strip().lower()
+        return "auto" if value == "auto" else value == "true"
+    if isinstance(value, bool):
+        return value
+    raise ThinFilmError(f"{plugin}: 'tabulate' must be \"auto\", true or false, got {value!r}")
+
+
+def _positive_float(props, name: str, default: float, plugin: str, upper: float = math.inf) -> float:
+    value = props.get(name, default)
+    if (isinstance(value, bool) or not isinstance(value, (int, float))
+            or not math.isfinite(value) or not 0 < value <= upper):
+        bound = f" and <= {upper:g}" if math.isfinite(upper) else ""
+        raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0{bound}, got {value!r}")
+    return float(value)
 
 
 def stack_from_props(props, plugin: str, substrate: SpectralIndex,
-                     ambient: SpectralIndex | None = None) -> KernelStack:
+                     ambient: SpectralIndex | None = None, *,
+                     sides: dict | None = None) -> KernelStack:
     """The :class:`KernelStack` of a thin-film BSDF from its properties.
 
     Reads ``layers`` (or ``thin_film_ior`` + ``thin_film_thickness``),
-    ``ext_ior`` (unless ``ambient`` is given) and the optional ``thickness``
-    texture. Every thin-film BSDF builds its stack here, so the stack options
-    are the same for all of them.
+    ``ext_ior`` (unless ``ambient`` is given), the optional ``thickness``
+    texture, ``tabulate``, ``table_error`` and ``coherence_thickness``.
+    ``sides`` (``{inside: needs_T}``) says what the BSDF evaluates, hence what
+    is tabulated (default: reflectance from the ambient side only). Every
+    thin-film BSDF builds its stack here, so the stack options are the same for
+    all of them.
     """
     films = films_from_props(props, plugin)
     if ambient is None:
         ambient = ext_ior_from_props(props)
-    return KernelStack(films, ambient, substrate,
-                       thickness_texture=thickness_texture_from_props(props, plugin))
+    return KernelStack(films, ambient, substrate, sides=sides,
+                       **stack_options_from_props(props, plugin))
+
+
+def stack_options_from_props(props, plugin: str, thickness_texture: bool = True) -> dict:
+    """The :class:`KernelStack` keyword options every thin-film BSDF accepts."""
+    options = dict(
+        tabulate=tabulate_from_props(props, plugin),
+        table_error=_positive_float(props, "table_error", DEFAULT_TABLE_ERROR, plugin, 0.5),
+        coherence_thickness=_positive_float(props, "coherence_thickness",
+                                            DEFAULT_COHERENCE_THICKNESS, plugin),
+        plugin=plugin)
+    if thickness_texture:
+        options["thickness_texture"] = thickness_texture_from_props(props, plugin)
+    return options
 
 
 def ext_ior_from_props(props) -> SpectralIndex:
@@ -341,8 +688,15 @@ def check_unqueried(props, plugin: str) -> None:
     """Report parameters the plugin did not read, as Mitsuba does for its own plugins."""
     left = [k for k in props.unqueried()]
     if left:
+        def shown(k):
+            try:
+                v = props.get(k)
+            except Exception:  # noqa: BLE001 - e.g. nested objects Python cannot read
+                return repr(k)
+            text = repr(v) if isinstance(v, (str, int, float, bool)) else type(v).__name__
+            return f"{k!r} = {text}"
         raise ThinFilmError(
             f"{plugin}: unreferenced propert{'y' if len(left) == 1 else 'ies'} "
-            + ", ".join(repr(k) for k in left)
+            + ", ".join(shown(k) for k in left)
             + " (misspelled? see the plugin's parameter table)"
         )

@@ -1,0 +1,224 @@
+"""Tabulation, the skips, and incoherent thick films, through the BSDFs.
+
+References are independent of the code under test: the float64 numpy API
+(``thinfilm_mi.Stack``) and tmm (coherent and incoherent).
+"""
+import numpy as np
+import pytest
+import tmm
+
+import drjit as dr
+import mitsuba as mi
+
+import thinfilm_mi as tf
+from thinfilm_mi import kernel as K
+
+# A float32 kernel value against float64: rounding below 3e-5 for these stacks
+# (tests/test_bsdf_specular.py). A table lookup adds its interpolation error,
+# which the build verified to be below ``table.error`` at the midpoints of its
+# cells; bilinear interpolation errs most near those midpoints, so a point
+# anywhere may exceed it only marginally: we allow 1.5x plus the float32 term.
+F32 = 3e-5
+
+
+@pytest.fixture(autouse=True)
+def llvm():
+    mi.set_variant("llvm_ad_spectral")
+
+
+def interaction(wls):
+    si = dr.zeros(mi.SurfaceInteraction3f, len(wls[0]))
+    si.wavelengths = mi.Spectrum(*[mi.Float(np.asarray(w, np.float32)) for w in wls])
+    return si
+
+
+def random_points(n, seed=1):
+    """Directions outside the grazing sliver the table's verification leaves out
+    (tables.GRAZING_COS; benchmarks/speed_vs_error.py reports the error there)."""
+    rng = np.random.default_rng(seed)
+    cos = rng.uniform(tf.tables.GRAZING_COS, 1.0, n)
+    wls = [rng.uniform(360.0, 830.0, n) for _ in range(4)]
+    return cos, wls
+
+
+def ref_R(stack, cos, wl, T=False):
+    r = stack.rt(wl, np.arccos(np.clip(cos, 0, 1)))
+    return r.T if T else r.R
+
+
+STACK = "1.46 420; 2.3 95; 1.38 130"
+
+
+def test_table_matches_float64_within_its_verified_error():
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
+                         "tabulate": True})
+    assert bsdf.stack.mode() == "table"
+    table = bsdf.stack.plan[False].table
+    assert table.error <= 1e-3
+    cos, wls = random_points(20000)
+    R = bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)))
+    R = np.array(R)
+    ref = tf.Stack(STACK, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
+    assert err <= 1.5 * table.error + F32, err
+    assert err > 1e-6   # it really is the interpolated table, not the recursion
+
+
+@pytest.mark.parametrize("inside", [False, True])
+def test_dielectric_tables_both_sides_with_tir(inside):
+    """Inside glass the exit medium totally reflects: the split axis puts the
+    critical angle on a node, so the kink costs no accuracy."""
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": "1.38 110; 2.1 70",
+                         "int_ior": 1.6, "tabulate": True})
+    side = bsdf.stack.plan[inside]
+    assert side.table is not None and side.table.channels == 2
+    assert side.table.kind == ("tir" if inside else "plain")
+    cos, wls = random_points(20000, seed=2)
+    # Points straddling the critical angle (cos = sqrt(1 - 1/1.6^2) = 0.78).
+    cos[:2000] = 0.7806247 + np.linspace(-1e-3, 1e-3, 2000)
+    R, T = bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)),
+                                  inside=inside, transmission=True)
+    ref = tf.Stack("1.38 110; 2.1 70", substrate=1.6, ambient=K.DEFAULT_EXT_IOR)
+    if inside:
+        ref = ref.reversed()
+    tol = 1.5 * side.table.error + F32
+    for i in range(4):
+        assert np.max(np.abs(np.array(R)[i] - ref_R(ref, cos, wls[i]))) <= tol
+        assert np.max(np.abs(np.array(T)[i] - ref_R(ref, cos, wls[i], T=True))) <= tol
+
+
+def test_auto_mode_and_what_prevents_a_table():
+    one = mi.load_dict({"type": "thinfilm_conductor", "layers": "1.46 300"})
+    assert one.stack.mode() == "exact"          # one film: the recursion is as cheap
+    three = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu"})
+    assert three.stack.mode() == "table"
+    textured = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
+                             "thickness": {"type": "checkerboard"}})
+    assert textured.stack.mode() == "exact"     # a thickness texture cannot be tabulated
+    with pytest.raises(Exception, match="tabulate"):
+        mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "tabulate": True,
+                      "thickness": {"type": "checkerboard"}})
+    with pytest.raises(Exception, match="'tabulate' must be"):
+        mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "tabulate": "sometimes"})
+    with pytest.raises(Exception, match="'table_error' must be"):
+        mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "table_error": -1.0})
+    with pytest.raises(Exception, match="'coherence_thickness' must be"):
+        mi.load_dict({"type": "thinfilm_conductor", "layers": STACK,
+                      "coherence_thickness": float("nan")})
+
+
+def test_identical_stacks_share_one_table():
+    a = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu"})
+    b = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu"})
+    c = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Au"})
+    assert a.stack.plan[False].table is b.stack.plan[False].table
+    assert c.stack.plan[False].table is not a.stack.plan[False].table
+
+
+def test_zero_thickness_films_are_dropped():
+    a = mi.load_dict({"type": "thinfilm_dielectric", "layers": "2.0 0; 1.46 300; 0.2+3j 0",
+                      "tabulate": False})
+    b = mi.load_dict({"type": "thinfilm_dielectric", "layers": "1.46 300", "tabulate": False})
+    assert [len(s.films) for s in a.stack.plan.values()] == [1, 1]
+    cos, wls = random_points(1000)
+    si = interaction(wls)
+    for inside in (False, True):
+        ra = a.stack.reflectance(si, mi.Float(cos), inside=inside, transmission=True)
+        rb = b.stack.reflectance(si, mi.Float(cos), inside=inside, transmission=True)
+        assert np.array_equal(np.array(ra[0]), np.array(rb[0]))
+        assert np.array_equal(np.array(ra[1]), np.array(rb[1]))
+    # ... and come back when a parameter edit makes them non-zero.
+    params = mi.traverse(a)
+    params["layers.0.thickness"] = 50.0
+    params.update()
+    assert [len(s.films) for s in a.stack.plan.values()] == [2, 2]
+
+
+def test_layers_beneath_an_opaque_film_are_ignored():
+    """1 um of gold lets through exp(-2 pi k d / lambda) < 1e-9 of the amplitude
+    (worst near 400 nm, k = 1.83):
+    from outside, the films beneath and the substrate are not evaluated, and T = 0."""
+    layers = "1.46 200; Au 1000; 2.3 80; 1.38 100"
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": layers, "int_ior": 1.5,
+                         "tabulate": False})
+    out, inn = bsdf.stack.plan[False], bsdf.stack.plan[True]
+    assert len(out.films) == 1 and out.opaque and out.exit.label == "Au"
+    assert len(inn.films) == 2 and inn.opaque
+    cos, wls = random_points(2000)
+    R, T = bsdf.stack.reflectance(interaction(wls), mi.Float(cos), transmission=True)
+    ref = tf.Stack(layers, substrate=1.5, ambient=K.DEFAULT_EXT_IOR)
+    for i in range(4):
+        assert np.max(np.abs(np.array(R)[i] - ref_R(ref, cos, wls[i]))) < F32
+        assert np.max(np.array(T)[i]) == 0.0 and np.max(ref_R(ref, cos, wls[i], T=True)) < 1e-12
+
+
+def test_thick_films_are_incoherent_like_tmm_inc_tmm():
+    """A 20 um film (beyond the 5 um coherence thickness) on glass: the kernel
+    gives tmm's incoherent R and T, free of the ~1 nm fringes of the coherent one."""
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": "1.38 100; 1.9 20000",
+                         "int_ior": 1.5, "ext_ior": 1.0, "tabulate": False})
+    assert bsdf.stack.plan[False].incoherent == [False, True]
+    wl = np.linspace(500.0, 510.0, 41)
+    theta = 0.4
+    cos = np.full(wl.size, np.cos(theta))
+    R, T = bsdf.stack.reflectance(interaction([wl] * 4), mi.Float(cos), transmission=True)
+    R, T = np.array(R)[0], np.array(T)[0]
+    for j, w in enumerate(wl):
+        res = [tmm.inc_tmm(p, [1.0, 1.38, 1.9, 1.5], [np.inf, 100.0, 20000.0, np.inf],
+                           ["i", "c", "i", "i"], theta, w) for p in "sp"]
+        # tmm is float64; the kernel float32 (the incoherent core holds 1e-5,
+        # tests/test_incoherent.py).
+        assert abs(R[j] - 0.5 * (res[0]["R"] + res[1]["R"])) < 1e-5
+        assert abs(T[j] - 0.5 * (res[0]["T"] + res[1]["T"])) < 1e-5
+    coherent = mi.load_dict({"type": "thinfilm_dielectric", "layers": "1.38 100; 1.9 20000",
+                             "int_ior": 1.5, "ext_ior": 1.0, "tabulate": False,
+                             "coherence_thickness": 1e6})
+    Rc = np.array(coherent.stack.reflectance(interaction([wl] * 4), mi.Float(cos)))[0]
+    # The coherent R swings through several fringes (~0.014 peak to peak) in
+    # these 10 nm; the incoherent one is smooth.
+    assert np.ptp(Rc) > 0.005 and np.ptp(R) < 0.05 * np.ptp(Rc)
+
+
+def test_table_sweep_keeps_its_shape():
+    """A thickness edit rebuilds the table but never shrinks it, so the render
+    kernel (which sees the texture's shape) is reused while the shape holds."""
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
+                         "tabulate": True})
+    params = mi.traverse(bsdf)
+    shape = (bsdf.stack.plan[False].table.nu, bsdf.stack.plan[False].table.nv)
+    params["layers.0.thickness"] = 400.0
+    params.update()
+    table = bsdf.stack.plan[False].table
+    assert (table.nu, table.nv) >= shape and table.nu >= shape[0] and table.nv >= shape[1]
+    cos, wls = random_points(4000, seed=5)
+    R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
+    ref = tf.Stack(STACK.replace("420", "400"), substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    assert max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i])))
+               for i in range(4)) <= 1.5 * table.error + F32
+
+
+def test_gradients_bypass_the_table():
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
+                         "tabulate": True})
+    d = bsdf.stack.thickness[0]
+    dr.enable_grad(d)
+    cos, wls = random_points(64)
+    R = bsdf.stack.reflectance(interaction(wls), mi.Float(cos))
+    dr.backward(dr.sum(R[0]))
+    assert np.abs(np.array(dr.grad(d))).max() > 0
+    dr.disable_grad(d)
+
+
+def test_scalar_variant_uses_tables_too():
+    mi.set_variant("scalar_spectral")
+    auto = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu"})
+    assert auto.stack.mode() == "exact"   # "auto" does not tabulate in scalar variants
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
+                         "tabulate": True})
+    assert bsdf.stack.mode() == "table"
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.wavelengths = mi.Spectrum(400.0, 500.0, 600.0, 700.0)
+    R = np.array(bsdf.stack.reflectance(si, 0.6))
+    ref = tf.Stack(STACK, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    exact = ref.rt(np.array([400.0, 500, 600, 700]), np.arccos(0.6)).R
+    assert np.max(np.abs(R - exact)) <= 1.5 * bsdf.stack.plan[False].table.error + F32
