@@ -31,6 +31,27 @@ Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
  * - specular_reflectance
    - |spectrum| or |texture|
    - Optional factor on the reflectance; physically it should stay 1 (default: 1.0).
+ * - thickness
+   - |float| or |texture|
+   - Optional scale on every film's thickness, evaluated at the hit (e.g. a
+     ``bitmap`` with ``raw="true"``): soap-film and oil-slick looks. Forces
+     exact evaluation.
+ * - tabulate
+   - |string| or |bool|
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R``
+     (and ``T`` where needed) is read from a verified bilinear table over
+     (angle, wavelength) instead of the recursion: its cost does not grow with
+     the number of films. ``auto`` tabulates stacks of 2 films or more in
+     vectorised variants, unless a ``thickness`` texture is given, gradients
+     are tracked, or the target cannot be met (then: exact).
+ * - table_error
+   - |float|
+   - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - coherence_thickness
+   - |float|
+   - Films thicker than this (nm) are averaged incoherently, as tmm's
+     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
+     shows (default: 5000).
 
 A perfectly smooth conductor (metal or semiconductor substrate) under a stack of
 thin films, each of which may be dielectric, metallic or semiconducting (complex
@@ -41,7 +62,9 @@ unpolarised variants are supported.
 
 The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
 (``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``
-as differentiable, opaque parameters: changing them does not recompile.
+as differentiable, opaque parameters: in exact mode changing them does not
+recompile; a table is rebuilt on a change and keeps its shape when it can (a
+new shape recompiles the render kernel once).
 
 .. tabs::
     .. code-tab:: xml

@@ -27,6 +27,22 @@ Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
    - ``"multiple"`` (default): the paper's model plus the interreflection
      between the base and the coating; ``"single"``: the paper's first-order
      model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10).
+ * - tabulate
+   - |string| or |bool|
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R``
+     (and ``T`` where needed) is read from a verified bilinear table over
+     (angle, wavelength) instead of the recursion: its cost does not grow with
+     the number of films. ``auto`` tabulates stacks of 2 films or more in
+     vectorised variants, unless a ``thickness`` texture is given, gradients
+     are tracked, or the target cannot be met (then: exact).
+ * - table_error
+   - |float|
+   - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - coherence_thickness
+   - |float|
+   - Films thicker than this (nm) are averaged incoherently, as tmm's
+     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
+     shows (default: 5000).
 
 A perfectly diffuse (Lambertian) base under a stack of thin films, after
 Hirayama et al. section 2.4. Component 0 is the delta reflection of the

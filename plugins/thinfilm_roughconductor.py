@@ -47,6 +47,22 @@ Thin-film coated rough conductor (:monosp:`thinfilm_roughconductor`)
  * - specular_reflectance
    - |spectrum| or |texture|
    - Optional factor on the reflectance; physically it should stay 1 (default: 1.0).
+ * - tabulate
+   - |string| or |bool|
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R``
+     (and ``T`` where needed) is read from a verified bilinear table over
+     (angle, wavelength) instead of the recursion: its cost does not grow with
+     the number of films. ``auto`` tabulates stacks of 2 films or more in
+     vectorised variants, unless a ``thickness`` texture is given, gradients
+     are tracked, or the target cannot be met (then: exact).
+ * - table_error
+   - |float|
+   - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - coherence_thickness
+   - |float|
+   - Films thicker than this (nm) are averaged incoherently, as tmm's
+     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
+     shows (default: 5000).
 
 A rough conductor (metal or semiconductor substrate) under a stack of thin films,
 with the microfacet model of Mitsuba's ``roughconductor`` (Walter et al. 2007;

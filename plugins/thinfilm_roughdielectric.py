@@ -46,6 +46,22 @@ Thin-film coated rough dielectric (:monosp:`thinfilm_roughdielectric`)
    - |spectrum| or |texture|
    - Optional factors on reflection and transmission; physically they should
      stay 1 (default: 1.0).
+ * - tabulate
+   - |string| or |bool|
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R``
+     (and ``T`` where needed) is read from a verified bilinear table over
+     (angle, wavelength) instead of the recursion: its cost does not grow with
+     the number of films. ``auto`` tabulates stacks of 2 films or more in
+     vectorised variants, unless a ``thickness`` texture is given, gradients
+     are tracked, or the target cannot be met (then: exact).
+ * - table_error
+   - |float|
+   - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - coherence_thickness
+   - |float|
+   - Films thicker than this (nm) are averaged incoherently, as tmm's
+     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
+     shows (default: 5000).
 
 A rough interface between two dielectrics coated with a stack of thin films
 that may absorb, with the microfacet model of Mitsuba's ``roughdielectric``
