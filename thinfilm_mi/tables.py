@@ -62,6 +62,10 @@ MAX_U, MAX_V = 4096, 8192
 #: contribution to an image is a sliver at silhouettes. Tables interpolate
 #: there too; benchmarks/speed_vs_error.py reports the error including it.
 GRAZING_COS = 0.02
+#: Exact evaluations a build may spend (all rounds, nodes and checks), about
+#: 0.3 s on one core: a stack that needs more (sharp resonances, such as the
+#: surface plasmon of a metal film seen from inside glass) is evaluated exactly.
+MAX_BUILD_POINTS = 3_000_000
 #: Refinement rounds after the first estimate.
 MAX_ROUNDS = 6
 
@@ -278,10 +282,12 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     nu, nv = table_resolution(side, error, wavelengths)
     if start is not None:
         nu, nv = max(nu, start[0]), max(nv, start[1])
+    spent = 0
     for _ in range(MAX_ROUNDS + 1):
         if kind == "tir":
             nu += nu % 2
-        if nu > MAX_U or nv > MAX_V or nu * nv > max_texels:
+        spent += 2 * nu * nv   # the nodes, and half as many points along each axis
+        if nu > MAX_U or nv > MAX_V or nu * nv > max_texels or spent > MAX_BUILD_POINTS:
             return None
         su = np.arange(nu, dtype=np.float64)
         tv = np.arange(nv, dtype=np.float64)
