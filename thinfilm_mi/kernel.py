@@ -279,6 +279,7 @@ class KernelStack:
         self.sides = dict(sides) if sides is not None else {False: False}
         self.plugin = plugin
         self._resolution = {}   # inside -> (nu, nv) of the last table: never shrinks
+        self._gave_up = set()   # sides whose table could not be built
         if tabulate is True and thickness_texture is not None:
             raise ThinFilmError(f"{plugin}: 'tabulate' is true but a 'thickness' texture is "
                                 "given: a table over (angle, wavelength) cannot follow a "
@@ -326,10 +327,13 @@ class KernelStack:
         if not want:
             return
         for inside, side in self.plan.items():
-            if side.films:
+            if side.films and not (self.tabulate == "auto" and inside in self._gave_up):
                 side.table = _tables_cache(self, side, self._resolution.get(inside))
                 if side.table is None:
                     self.table_failed.append(inside)
+                    # "auto" does not retry after every parameter edit: a failed
+                    # build costs up to a few seconds (tables.MAX_BUILD_POINTS).
+                    self._gave_up.add(inside)
                 else:
                     self._resolution[inside] = (side.table.nu, side.table.nv)
         if self.tabulate is True and self.table_failed:
