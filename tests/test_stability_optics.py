@@ -24,6 +24,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from thinfilm_mi import optics
+from thinfilm_mi.kernel import unpolarised_rt
 
 FILM_COUNTS = (1, 2, 7, 30)
 
@@ -148,3 +149,106 @@ def test_adjacent_layers_both_at_q_zero(Arr):
     tol = 1e-12 if Arr is Float64 else TOL_CRITICAL[Float]
     np.testing.assert_allclose(Rs, Rs2, atol=tol)
     np.testing.assert_allclose(Tp, Tp2, atol=tol)
+
+
+# ---------------------------------------------------------------------------
+# float32 against float64, per point, within a documented conditioning bound
+# (benchmarks/stability.py and benchmarks/STABILITY.md measure the same bound on
+# 10^6 points per regime)
+# ---------------------------------------------------------------------------
+U32 = 2.0 ** -24
+
+
+def _unpolarised(Arr, n0, films, n_exit, wl, cos0):
+    size = cos0.size
+
+    def arr(v):
+        a = Arr(np.ascontiguousarray(np.broadcast_to(v, (size,)), dtype=np.float64))
+        dr.make_opaque(a)
+        return a
+
+    f = [(optics.Cx(arr(np.real(n)), arr(np.imag(n))), arr(d)) for n, d in films]
+    R, T = unpolarised_rt(arr(n0), arr(cos0), f,
+                          optics.Cx(arr(np.real(n_exit)), arr(np.imag(n_exit))), arr(wl), True)
+    dr.eval(R, T)
+    return np.array(R, np.float64), np.array(T, np.float64)
+
+
+def _r32(x):
+    """Round to float32 (complex: both parts), back as float64 / complex128."""
+    x = np.asarray(x)
+    if np.iscomplexobj(x):
+        return x.real.astype(np.float32).astype(np.float64) + 1j * x.imag.astype(np.float32)
+    return x.astype(np.float32).astype(np.float64)
+
+
+def float32_bound(n0, films, n_exit, wl, cos0, R64, T64):
+    """Documented bound on max(|R32 - R64|, |T32 - T64|) per point.
+
+    * 2e-5: ~31 interface steps of a few ulp each;
+    * 16 u sum_j 2 pi |Re q_j| d_j / lambda: the phase of film j is formed with a
+      relative error of a few u, i.e. an absolute error ~ u * phase, and
+      |dR/d delta| <~ 4 (test_float32_thick_films_bound in tests/test_optics.py);
+    * 4x the float64 change of R, T when every medium gets an absorption k = 4u|n|
+      (rounding in the recursion acts like a loss of relative size u, amplified
+      by resonances: guided modes, Fabry-Perot), when cos0 moves by 4u
+      relative, and when every n^2 moves by 8u (|n|^2 + beta^2) (the rounding of
+      q^2 = n^2 - beta^2 and the core's floor of q at 2 sqrt(u)(|n| + beta));
+    * within 1e-2 in cos of a critical angle (and below cos0 = 1e-3), where q of
+      a medium is known only to ~sqrt(u)|n| and none of the above is a small
+      perturbation: at least 0.2. Measured on 10^6 points per regime
+      (benchmarks/STABILITY.md): 9.2e-2 at a critical angle and 1.8e-1 at
+      cos0 = 3.9e-5, where the float64 result itself moves by 0.13 and 0.16
+      when the inputs move by their own float32 rounding (ill-conditioned, not
+      unstable).
+    """
+    beta2 = n0 * n0 * (1 - cos0) * (1 + cos0)
+    phase = np.zeros(cos0.size)
+    for n, d in films:
+        q = np.sqrt(complex(n) ** 2 - beta2 + 0j)
+        phase += 2 * np.pi * np.abs(q.real) * d / wl
+    # All perturbed stacks in one float64 call (one kernel): per-lane indices.
+    N = cos0.size
+
+    def shift(n, sg):
+        n = complex(n)
+        return np.sqrt(n * n + sg * 8 * U32 * (np.abs(n) ** 2 + beta2) + 0j)
+
+    variants = [  # (film indices, exit index, cos0), each per lane
+        ([np.full(N, complex(n) + 4j * U32 * abs(complex(n))) for n, _ in films],
+         np.full(N, complex(n_exit) + 4j * U32 * abs(complex(n_exit))), cos0)]
+    for sg in (-1.0, 1.0):
+        variants.append(([np.full(N, complex(n)) for n, _ in films], np.full(N, complex(n_exit)),
+                         np.clip(cos0 * (1 + sg * 4 * U32), 0, 1)))
+        variants.append(([shift(n, sg) for n, _ in films], shift(n_exit, sg), cos0))
+    V = len(variants)
+    fl = [(np.concatenate([v[0][j] for v in variants]), d) for j, (_, d) in enumerate(films)]
+    R, T = _unpolarised(Float64, n0, fl, np.concatenate([v[1] for v in variants]),
+                        np.tile(wl, V), np.concatenate([v[2] for v in variants]))
+    sens = np.max(np.maximum(np.abs(R.reshape(V, N) - R64), np.abs(T.reshape(V, N) - T64)),
+                  axis=0)
+    bound = 2e-5 + 16 * U32 * phase + 4 * sens
+    near = cos0 < 1e-3
+    for n in [complex(n) for n, _ in films] + [complex(n_exit)]:
+        if n.imag == 0 and n.real < n0:
+            s = n.real / n0
+            near |= np.abs(cos0 - math.sqrt((1 - s) * (1 + s))) < 1e-2
+    return np.where(near, np.maximum(bound, 0.2), bound)
+
+
+@SETTINGS
+@given(stack=stacks())
+def test_float32_error_within_documented_bound(stack):
+    n0, films, n_exit, wl = stack
+    cos0, _ = angles(n0, films, n_exit)
+    rng = np.random.default_rng(len(films))
+    cos0 = np.concatenate([cos0, rng.uniform(0, 1, 32)])
+    # float32-rounded inputs for both, so that the error is that of the arithmetic
+    n0, wl, n_exit = float(_r32(n0)), np.full(cos0.size, float(_r32(wl))), complex(_r32(n_exit))
+    films = [(complex(_r32(complex(n))), float(_r32(d))) for n, d in films]
+    cos0 = _r32(cos0)
+    R32, T32 = _unpolarised(Float, n0, films, n_exit, wl, cos0)
+    R64, T64 = _unpolarised(Float64, n0, films, n_exit, wl, cos0)
+    err = np.maximum(np.abs(R32 - R64), np.abs(T32 - T64))
+    bound = float32_bound(n0, films, n_exit, wl, cos0, R64, T64)
+    assert np.all(err <= bound), (err.max(), cos0[np.argmax(err - bound)])
