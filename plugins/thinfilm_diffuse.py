@@ -207,7 +207,7 @@ def _spectrum(tex, values):
     when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
     ``regular`` spectrum refuses a zero integral)."""
     values = np.asarray(values, dtype=np.float64)
-    if not np.any(values > 0):
+    if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
         return mi.load_dict({"type": "uniform", "value": 0.0})
     params = mi.traverse(tex) if tex is not None else None
     if params is not None and "values" in params:
