@@ -299,24 +299,27 @@ class KernelStack:
         k = texture_on_grid(index.k)
         return bool(np.max(np.exp(-2.0 * math.pi * k * d / _GRID)) < OPAQUE_AMPLITUDE)
 
-    def _side(self, inside: bool, transmission: bool) -> _Side:
-        films = [(ix, d, dv > self.coherence_thickness)
-                 for ix, d, dv in zip(self.indices, self.thickness, self._thickness_values())
-                 if dv > 0]
+    def _side(self, inside: bool, transmission: bool, films: list, opaque: list) -> _Side:
+        """The plan of one side from the non-zero ``films`` ``(index, thickness,
+        incoherent)`` and their ``opaque`` flags, both listed from the ambient."""
         if inside:
-            films = films[::-1]
+            films, opaque = films[::-1], opaque[::-1]
             n0, exit_, exit_real = self.substrate, self.ambient, True
         else:
             n0, exit_, exit_real = self.ambient, self.substrate, False
-        opaque = False
-        for j, (ix, d, _) in enumerate(films):
-            if self._opaque(ix, _scalar(d)):
-                films, exit_, exit_real, opaque = films[:j], ix, False, True
-                break
-        return _Side(n0, films, exit_, exit_real, opaque, transmission)
+        if any(opaque):
+            j = opaque.index(True)
+            return _Side(n0, films[:j], films[j][0], False, True, transmission)
+        return _Side(n0, films, exit_, exit_real, False, transmission)
 
     def _plan(self) -> None:
-        self.plan = {inside: self._side(inside, t) for inside, t in self.sides.items()}
+        # Zero-thickness films dropped; opacity decided once per film for all sides.
+        kept = [(ix, d, dv) for ix, d, dv in
+                zip(self.indices, self.thickness, self._thickness_values()) if dv > 0]
+        films = [(ix, d, dv > self.coherence_thickness) for ix, d, dv in kept]
+        opaque = [self._opaque(ix, dv) for ix, _, dv in kept]
+        self.plan = {inside: self._side(inside, t, films, opaque)
+                     for inside, t in self.sides.items()}
         # "auto" tabulates in vectorised variants only: in scalar variants every
         # call is Python anyway and the load-time build would dominate.
         want = self.tabulate is True or (

@@ -228,15 +228,18 @@ class Table:
 
 
 def _evaluate(side: SideData, cos0: np.ndarray, wl: np.ndarray) -> np.ndarray:
-    """Exact float64 R [, T] at flat arrays ``cos0``, ``wl``; shape (N, channels)."""
+    """Exact float64 R [, T] on a grid: ``cos0`` of shape (len wl, M), one row per
+    wavelength of ``wl``; returns shape (len wl, M, channels). The indices are
+    evaluated once per wavelength and repeated along the row."""
     from drjit.llvm import Float64
 
-    cos_d = Float64(np.ascontiguousarray(cos0, np.float64))
-    wl_d = Float64(np.ascontiguousarray(wl, np.float64))
-    n0 = Float64(np.ascontiguousarray(side.n0(wl), np.float64))
+    cols = cos0.shape[1]
+
+    def real(values):
+        return Float64(np.repeat(np.asarray(values, np.float64), cols))
 
     def cx(values):
-        values = np.asarray(values, np.complex128)
+        values = np.repeat(np.asarray(values, np.complex128), cols)
         return Cx(Float64(np.ascontiguousarray(values.real)), Float64(np.ascontiguousarray(values.imag)))
 
     films = []
@@ -244,10 +247,12 @@ def _evaluate(side: SideData, cos0: np.ndarray, wl: np.ndarray) -> np.ndarray:
         thickness = Float64(float(d))
         dr.make_opaque(thickness)
         films.append((cx(n(wl)), thickness))
-    res = side.rt(n0, cos_d, films, cx(side.n_exit(wl)), wl_d, side.transmission)
+    res = side.rt(real(side.n0(wl)), Float64(np.ascontiguousarray(cos0, np.float64).ravel()),
+                  films, cx(side.n_exit(wl)), real(wl), side.transmission)
     res = res if side.transmission else (res,)
     dr.eval(*res)
-    return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1)
+    return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1).reshape(
+        len(wl), cols, -1)
 
 
 def _grid(side: SideData, kind: str, s: np.ndarray, t: np.ndarray, nu: int, nv: int,
@@ -258,8 +263,7 @@ def _grid(side: SideData, kind: str, s: np.ndarray, t: np.ndarray, nu: int, nv: 
     n0 = side.n0(wl)[:, None]
     ne = side.n_exit(wl).real[:, None]
     cos0 = np.broadcast_to(_u_nodes_cos(s[None, :], n0, ne, kind, nu), (len(t), len(s)))
-    wl2 = np.broadcast_to(wl[:, None], cos0.shape)
-    vals = _evaluate(side, cos0.ravel(), wl2.ravel()).reshape(len(t), len(s), -1)
+    vals = _evaluate(side, cos0, wl)
     return (vals, cos0) if with_cos else vals
 
 
