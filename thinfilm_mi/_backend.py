@@ -32,9 +32,10 @@ def to_numpy(v) -> np.ndarray:
     return np.array(v, dtype=np.float64)
 
 
-def reference_rt(n0, cos0, films, thicknesses, n_exit, wavelength, size=None):
-    """Float64 amplitudes and powers; every argument a numpy array of the same
-    flat length (or broadcastable scalars). Returns a dict of Dr.Jit arrays."""
+def to_inputs(n0, cos0, films, thicknesses, n_exit, wavelength, size=None):
+    """The optics core's arguments as Dr.Jit float64 values, from numpy arrays of
+    one flat length (or broadcastable scalars): ``(n0, cos0, films, n_exit,
+    wavelength, size)``. Checks that the LLVM backend is usable first."""
     require_llvm()
     size = np.size(wavelength) if size is None else size
     cos0_d = Float64(np.broadcast_to(np.asarray(cos0, np.float64), (size,)).copy())
@@ -42,6 +43,14 @@ def reference_rt(n0, cos0, films, thicknesses, n_exit, wavelength, size=None):
     n0_d = to_drjit(np.broadcast_to(n0, (size,)))
     film_d = [(to_drjit(np.broadcast_to(n, (size,))), float(d)) for n, d in zip(films, thicknesses)]
     nex = to_drjit(np.broadcast_to(n_exit, (size,)).astype(np.complex128))
+    return n0_d, cos0_d, film_d, nex, wl, size
+
+
+def reference_rt(n0, cos0, films, thicknesses, n_exit, wavelength, size=None):
+    """Float64 amplitudes and powers; every argument a numpy array of the same
+    flat length (or broadcastable scalars). Returns a dict of Dr.Jit arrays."""
+    n0_d, cos0_d, film_d, nex, wl, size = to_inputs(n0, cos0, films, thicknesses, n_exit,
+                                                    wavelength, size)
     a = stack_amplitudes(n0_d, cos0_d, film_d, nex, wl)
     q0 = dr.select(a.grazing, 1.0, a.q0)
     fs = transmittance_factor_s(a.q_exit, q0)

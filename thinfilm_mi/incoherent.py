@@ -215,19 +215,12 @@ def reference_incoherent_rt(n0, cos0, films, thicknesses, n_exit, wavelength,
     and ``thicknesses`` (nm, scalars) of the films, ``incoherent`` one bool per
     film. Runs :func:`incoherent_rt_sp` once on Dr.Jit's LLVM backend.
     """
-    import numpy as np
     from drjit.llvm import Float64
 
-    from ._backend import to_drjit, to_numpy
-    from ._llvm import require_llvm
+    from ._backend import to_inputs, to_numpy
 
-    require_llvm()
-    size = np.size(wavelength) if size is None else size
-    cos0_d = Float64(np.broadcast_to(np.asarray(cos0, np.float64), (size,)).copy())
-    wl = to_drjit(np.broadcast_to(wavelength, (size,)))
-    n0_d = to_drjit(np.broadcast_to(n0, (size,)))
-    film_d = [(to_drjit(np.broadcast_to(n, (size,))), float(d)) for n, d in zip(films, thicknesses)]
-    nex = to_drjit(np.broadcast_to(n_exit, (size,)).astype(np.complex128))
+    n0_d, cos0_d, film_d, nex, wl, size = to_inputs(n0, cos0, films, thicknesses, n_exit,
+                                                    wavelength, size)
     Rs, Rp, Ts, Tp = incoherent_rt_sp(n0_d, cos0_d, film_d, nex, wl, incoherent)
     R = dr.minimum(0.5 * (Rs + Rp), 1.0)
     T = dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
