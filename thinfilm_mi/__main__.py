@@ -37,6 +37,18 @@ DEMO_SUBSTRATE = "1.6"
 DEMO_DESCRIPTION = "SiO2-like 1.46 500 nm; Au-like 0.42+2.47j 20 nm on glass 1.6"
 
 
+
+def _save_figure(fig, path) -> Path:
+    """Lay out ``fig``, write it to ``path`` (creating folders) and close it."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
 def _error(prog: str, message: str, code: int = 2, exc: BaseException | None = None,
            verbose: bool = False) -> int:
     if verbose and exc is not None:
@@ -150,12 +162,7 @@ def plot_spectrum(path: str | Path, stack, wavelengths, angles_deg, R, T) -> Pat
     ax.set_title(repr(stack), fontsize=9)
     ax.legend(fontsize=7, ncol=2)
     ax.grid(alpha=0.3)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save_figure(fig, path)
 
 
 def cmd_spectrum(args: argparse.Namespace) -> int:
@@ -239,12 +246,7 @@ def write_reflectance_image(path: str | Path) -> Path:
     ax_c.set_xticks([])
     ax_c.set_title("D65\nsRGB", fontsize=8)
     ax_c.yaxis.tick_right()
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save_figure(fig, path)
 
 
 def cmd_demo(args: argparse.Namespace) -> int:
