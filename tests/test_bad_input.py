@@ -16,7 +16,6 @@ tests/test_optics.py, and here only through scene loading in a subprocess.
 """
 from __future__ import annotations
 
-import importlib
 import os
 import subprocess
 import sys
@@ -31,6 +30,8 @@ import mitsuba as mi
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.registry import PLUGINS
 
+from _plugin_modules import import_error
+
 VARIANT = "llvm_ad_spectral"
 HOW = ["dict", "xml"]
 
@@ -40,17 +41,6 @@ def _variant():
     mi.set_variant(VARIANT)
     yield
     mi.set_variant(VARIANT)
-
-
-def _importable(plugin: str) -> str | None:
-    """None if the plugin's module imports, else why not."""
-    module = PLUGINS[plugin][0]
-    mi.set_variant(VARIANT)
-    try:
-        importlib.import_module(f"thinfilm_mi.plugins.{module}")
-    except Exception as e:  # noqa: BLE001 - a plugin being written may not import yet
-        return f"{plugin}: module thinfilm_mi.plugins.{module} does not import yet ({e!r})"
-    return None
 
 
 # ---------------------------------------------------------------------------
@@ -225,7 +215,7 @@ def _params(cases):
     mi.set_variant(VARIANT)
     out = []
     for plugin in PLUGINS:
-        why = _importable(plugin)
+        why = import_error(plugin, VARIANT)
         if why:
             out.append(pytest.param(plugin, {}, [], {}, "dict", id=f"{plugin}-not-importable",
                                     marks=pytest.mark.skip(reason=why)))
@@ -239,7 +229,7 @@ def _params(cases):
 
 
 def _skip_unless_takes(plugin: str, valid: dict) -> None:
-    why = _importable(plugin)
+    why = import_error(plugin, VARIANT)
     if why:
         pytest.skip(why)
     if valid and not takes(plugin, valid):
@@ -322,7 +312,7 @@ UNSUPPORTED = [v for v in ("scalar_rgb", "llvm_ad_rgb", "llvm_ad_mono", "llvm_ad
 def test_unsupported_variant_is_refused_at_load(variant):
     """Every plugin, through both front ends (one variant switch per variant: a switch
     re-registers every plugin and costs ~0.5 s)."""
-    plugins = [p for p in PLUGINS if _importable(p) is None]
+    plugins = [p for p in PLUGINS if import_error(p, VARIANT) is None]
     assert plugins
     mi.set_variant(variant)
     try:

@@ -35,7 +35,6 @@ tests); the fixed cases use the default path (tables where chosen).
 """
 from __future__ import annotations
 
-import importlib
 import math
 
 import numpy as np
@@ -52,6 +51,8 @@ from thinfilm_mi.kernel import unpolarised_rt
 from thinfilm_mi.optics import Cx
 from thinfilm_mi.registry import PLUGINS
 
+from _plugin_modules import import_error
+
 VARIANT = "llvm_ad_spectral"
 # Few distinct kernel shapes, so that compiled kernels are reused across examples.
 # 30 films are in FIXED below (one kernel per plugin): an LLVM compile of a
@@ -67,17 +68,8 @@ def _variant():
     mi.set_variant(VARIANT)
 
 
-def _module_error(plugin: str) -> str | None:
-    mi.set_variant(VARIANT)
-    try:
-        importlib.import_module(f"thinfilm_mi.plugins.{PLUGINS[plugin][0]}")
-    except Exception as e:  # noqa: BLE001 - a plugin being written may not import yet
-        return f"{plugin}: its module does not import yet ({e!r})"
-    return None
-
-
 def _skip_if_missing(plugin: str) -> None:
-    why = _module_error(plugin)
+    why = import_error(plugin, VARIANT)
     if why:
         pytest.skip(why)
 

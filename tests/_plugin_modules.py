@@ -1,0 +1,20 @@
+"""Test helper shared by the files that parametrise over every registered plugin."""
+from __future__ import annotations
+
+import importlib
+
+import mitsuba as mi
+
+from thinfilm_mi.registry import PLUGINS
+
+
+def import_error(plugin: str, variant: str) -> str | None:
+    """``None`` if the plugin's module imports in ``variant``, else why not (a plugin
+    being written may not import yet; such a plugin is skipped, with this reason)."""
+    module = PLUGINS[plugin][0]
+    mi.set_variant(variant)
+    try:
+        importlib.import_module(f"thinfilm_mi.plugins.{module}")
+    except Exception as e:  # noqa: BLE001 - report any import failure as the reason
+        return f"{plugin}: module thinfilm_mi.plugins.{module} does not import yet ({e!r})"
+    return None
