@@ -14,6 +14,26 @@ from ._llvm import require_llvm
 from .optics import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
 
 
+#: Alignment (bytes) of the buffers handed to Dr.Jit, see :func:`float64_array`.
+_ALIGN = 128
+
+
+def float64_array(a) -> Float64:
+    """A numpy array (flattened) as a Float64 whose memory is 128-byte aligned.
+
+    Dr.Jit's LLVM backend takes a numpy buffer's memory as it is and compiles
+    the kernel for the alignment it finds (``align 128`` or ``align 1`` vector
+    loads): equal inputs at other addresses give another kernel, hence a new
+    compilation (~0.1 s) on most calls. An aligned copy keeps one kernel.
+    """
+    a = np.asarray(a, np.float64).ravel()
+    buf = np.empty(a.size + _ALIGN // 8, np.float64)
+    start = (-buf.ctypes.data % _ALIGN) // 8
+    out = buf[start:start + a.size]
+    out[...] = a
+    return Float64(out)
+
+
 def to_drjit(a: np.ndarray):
     """A real numpy array as a Float64, a complex one as :class:`Cx` of Float64;
     arrays whose values are all equal become Python scalars (kernel literals)."""
@@ -23,7 +43,7 @@ def to_drjit(a: np.ndarray):
     a = np.ascontiguousarray(a, dtype=np.float64).ravel()
     if a.size and np.all(a == a[0]):
         return float(a[0])
-    return Float64(a)
+    return float64_array(a)
 
 
 def to_numpy(v) -> np.ndarray:
@@ -38,7 +58,7 @@ def to_inputs(n0, cos0, films, thicknesses, n_exit, wavelength, size=None):
     wavelength, size)``. Checks that the LLVM backend is usable first."""
     require_llvm()
     size = np.size(wavelength) if size is None else size
-    cos0_d = Float64(np.broadcast_to(np.asarray(cos0, np.float64), (size,)).copy())
+    cos0_d = float64_array(np.broadcast_to(np.asarray(cos0, np.float64), (size,)))
     wl = to_drjit(np.broadcast_to(wavelength, (size,)))
     n0_d = to_drjit(np.broadcast_to(n0, (size,)))
     film_d = [(to_drjit(np.broadcast_to(n, (size,))), float(d)) for n, d in zip(films, thicknesses)]

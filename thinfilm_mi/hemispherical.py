@@ -26,6 +26,7 @@ import drjit as dr
 import numpy as np
 from drjit.llvm import Float64
 
+from ._backend import float64_array
 from ._llvm import require_llvm
 from .optics import Cx, film_attenuation
 from .kernel import texture_on_grid, unpolarised_rt
@@ -45,7 +46,7 @@ DEFAULT_NODES = 128
 
 def _cx(a: np.ndarray, reps: int) -> Cx:
     a = np.repeat(np.asarray(a, dtype=np.complex128), reps)
-    return Cx(Float64(a.real.copy()), Float64(a.imag.copy()))
+    return Cx(float64_array(a.real), float64_array(a.imag))
 
 
 def hemispherical_factors(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
@@ -70,17 +71,18 @@ def hemispherical_factors(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray,
     mu = 0.5 * (x + 1.0)          # nodes on (0, 1)
     wmu = 0.5 * w                 # weights for ∫_0^1
     nw, nm = len(wavelengths), len(mu)
-    wl = Float64(np.repeat(np.asarray(wavelengths, np.float64), nm))
-    cos0 = Float64(np.tile(mu, nw))
-    n0 = Float64(np.repeat(np.asarray(n_amb, np.float64), nm))
-    films = [(_cx(n, nm), float(d)) for n, d in coating]
+    wl = float64_array(np.repeat(np.asarray(wavelengths, np.float64), nm))
+    cos0 = float64_array(np.tile(mu, nw))
+    n0 = float64_array(np.repeat(np.asarray(n_amb, np.float64), nm))
+    # opaque thicknesses: a thickness edit reuses the kernel
+    films = [(_cx(n, nm), dr.opaque(Float64, float(d))) for n, d in coating]
     exit_ = _cx(n_exit, nm)
     R, T = unpolarised_rt(n0, cos0, films, exit_, wl)
     if film_n is None:
         t = T
         R_up = unpolarised_rt(exit_.re, cos0, films[::-1], Cx(n0, 0.0), wl, transmission=False)
     else:
-        k_a = film_attenuation(n0, cos0, _cx(film_n[0], nm), float(film_n[1]), wl)
+        k_a = film_attenuation(n0, cos0, _cx(film_n[0], nm), dr.opaque(Float64, float(film_n[1])), wl)
         t = T * k_a
         R_up = R * k_a * k_a
     dr.eval(t, R_up)
