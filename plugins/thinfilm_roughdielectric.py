@@ -49,9 +49,10 @@ Thin-film coated rough dielectric (:monosp:`thinfilm_roughdielectric`)
  * - tabulate
    - |string| or |bool|
    - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R``
-     (and ``T`` where needed) is read from a verified bilinear table over
-     (angle, wavelength) instead of the recursion: its cost does not grow with
-     the number of films. ``auto`` tabulates stacks of 2 films or more in
+     (and ``T`` where needed) is read from a verified table over (angle,
+     wavelength) instead of the recursion (a cubic B-spline; bilinear
+     where the exit medium can totally reflect): its cost does not grow
+     with the number of films. ``auto`` tabulates stacks of 2 films or more in
      vectorised variants, unless a ``thickness`` texture is given, gradients
      are tracked, or the target cannot be met (then: exact).
  * - table_error

@@ -179,20 +179,38 @@ def test_thick_films_are_incoherent_like_tmm_inc_tmm():
     assert np.ptp(Rc) > 0.005 and np.ptp(R) < 0.05 * np.ptp(Rc)
 
 
-def test_table_sweep_keeps_its_shape():
-    """A thickness edit rebuilds the table but never shrinks it, so the render
-    kernel (which sees the texture's shape) is reused while the shape holds."""
+def _compiled(history):
+    """JIT kernels in a ``dr.kernel_history()`` that were compiled (not cache hits)."""
+    return [k for k in history if k["type"] == dr.KernelType.JIT
+            and not k.get("cache_hit", False) and not k.get("cache_disk", False)]
+
+
+def test_table_sweep_reuses_the_kernels():
+    """A thickness edit rebuilds the table, whose shape changes, but neither the
+    lookup kernel (its shape constants are opaque) nor the float64 build
+    kernels (thicknesses opaque, inputs in aligned buffers) are compiled again."""
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
     params = mi.traverse(bsdf)
-    shape = (bsdf.stack.plan[False].table.nu, bsdf.stack.plan[False].table.nv)
-    params["layers.0.thickness"] = 400.0
-    params.update()
-    table = bsdf.stack.plan[False].table
-    assert (table.nu, table.nv) >= shape and table.nu >= shape[0] and table.nv >= shape[1]
     cos, wls = random_points(4000, seed=5)
-    R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
-    ref = tf.Stack(STACK.replace("420", "400"), substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    si, c = interaction(wls), mi.Float(cos)
+    np.array(bsdf.stack.reflectance(si, c))       # compiles the lookup once
+    shapes = {(bsdf.stack.plan[False].table.nu, bsdf.stack.plan[False].table.nv)}
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()   # clear
+        for d in (400.0, 300.0, 700.0):
+            params["layers.0.thickness"] = d
+            params.update()
+            table = bsdf.stack.plan[False].table
+            shapes.add((table.nu, table.nv))
+            R = np.array(bsdf.stack.reflectance(si, c))
+        compiled = _compiled(dr.kernel_history())
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert len(shapes) >= 3, shapes        # the tables did change shape
+    assert compiled == [], [k.get("size") for k in compiled]
+    ref = tf.Stack(STACK.replace("420", "700"), substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
     assert max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i])))
                for i in range(4)) <= 1.5 * table.error + F32
 

@@ -278,7 +278,6 @@ class KernelStack:
         self.coherence_thickness = coherence_thickness
         self.sides = dict(sides) if sides is not None else {False: False}
         self.plugin = plugin
-        self._resolution = {}   # inside -> (nu, nv) of the last table: never shrinks
         self._gave_up = set()   # sides whose table could not be built
         if tabulate is True and thickness_texture is not None:
             raise ThinFilmError(f"{plugin}: 'tabulate' is true but a 'thickness' texture is "
@@ -331,14 +330,12 @@ class KernelStack:
             return
         for inside, side in self.plan.items():
             if side.films and not (self.tabulate == "auto" and inside in self._gave_up):
-                side.table = _tables_cache(self, side, self._resolution.get(inside))
+                side.table = _tables_cache(self, side)
                 if side.table is None:
                     self.table_failed.append(inside)
                     # "auto" does not retry after every parameter edit: a failed
-                    # build costs up to a few seconds (tables.MAX_BUILD_POINTS).
+                    # build costs up to ~1 s (tables.MAX_BUILD_POINTS).
                     self._gave_up.add(inside)
-                else:
-                    self._resolution[inside] = (side.table.nu, side.table.nv)
         if self.tabulate is True and self.table_failed:
             import warnings
             warnings.warn(f"{self.plugin}: the stack {self.describe()} cannot be tabulated "
@@ -452,7 +449,7 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
 _TABLE_CACHE: dict = {}
 
 
-def _tables_cache(stack: KernelStack, side: _Side, start=None):
+def _tables_cache(stack: KernelStack, side: _Side):
     """The table of ``side``, shared between stacks with identical optics.
 
     The key is the stack's numbers (every index on the 1 nm grid, thicknesses,
@@ -474,7 +471,7 @@ def _tables_cache(stack: KernelStack, side: _Side, start=None):
             h.update(v.tobytes())
     h.update(repr([(_scalar(d), inc) for _, d, inc in side.films]).encode())
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
-                   stack.table_error, start)).encode())
+                   stack.table_error)).encode())
     key = h.hexdigest()
     if key in _TABLE_CACHE:
         return _TABLE_CACHE[key]
@@ -503,7 +500,7 @@ def _tables_cache(stack: KernelStack, side: _Side, start=None):
         n0=n0, films=[(on(ix), _scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
         transmission=side.transmission and not side.opaque, rt=rt,
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
-    table = _tables.build_table(data, stack.table_error, _GRID, start=start)
+    table = _tables.build_table(data, stack.table_error, _GRID)
     if len(_TABLE_CACHE) > 256:
         _TABLE_CACHE.clear()
     _TABLE_CACHE[key] = table

@@ -2,15 +2,25 @@
 
 Hirayama et al. (sec. 4) precompute ``k_r`` and ``k_t`` at sampled incidence
 angles and wavelengths and interpolate linearly, which they found 6x faster than
-the recursion at every hit. Here a table is a ``Texture2f`` (Dr.Jit's bilinear
-texture, float32) whose channels are the unpolarised ``R`` and, where a BSDF
-needs it, ``T`` of one lighting side of the stack. It is built in float64 with
-the optics core (:func:`thinfilm_mi.kernel.unpolarised_rt` on
-``drjit.llvm.Float64``) and looked up in the render kernel, where its cost does
-not depend on the number of films.
+the recursion at every hit. Here a table is a ``Texture2f`` (Dr.Jit's texture,
+float32) whose channels are the unpolarised ``R`` and, where a BSDF needs it,
+``T`` of one lighting side of the stack. It is built in float64 with the optics
+core (:func:`thinfilm_mi.kernel.unpolarised_rt` on ``drjit.llvm.Float64``) and
+looked up in the render kernel, where its cost does not depend on the number of
+films.
 
-Axes (chosen so that the tabulated functions are smooth, hence linear
-interpolation converges as h^2 everywhere):
+Interpolation: where ``R`` and ``T`` are analytic over the whole table (the
+exit medium cannot totally reflect) the texture holds the coefficients of the
+interpolating cubic B-spline (``Texture2f.eval_cubic``, 16 texels a lookup):
+its error falls as h^4, so a fringe needs ~7x fewer nodes per axis than with
+the paper's linear interpolation (h^2) for the same error, and a table ~50x
+fewer texels. The coefficients are solved for (a tridiagonal system per axis)
+on a grid extended by :data:`GHOST` nodes beyond each edge, at which the stack
+is evaluated too, so the spline's end conditions do not reach the tabulated
+range. Where the exit medium totally reflects, ``R`` has a square-root kink at
+the critical angle: that table is bilinear, with the kink on a node.
+
+Axes (chosen so that the tabulated functions are smooth):
 
 * wavelength: uniform in wavenumber ``1/lambda`` over 360-830 nm, in which an
   interference fringe has a constant period;
@@ -18,19 +28,22 @@ interpolation converges as h^2 everywhere):
   ``w = 1 - sqrt(1 - theta / (pi/2))`` (the films' responses are even in their
   ``q``, so ``R`` is analytic in ``theta``, and in ``w``; nodes crowd towards
   grazing incidence, where coated metals dip sharply and rise to ``R = 1``).
-  When it can (light inside glass, exit medium of lower index), ``R`` has a
-  square-root kink at the critical angle. The axis is then split at the
-  critical angle, which sits exactly on a node at every wavelength: below it
-  the axis is uniform in the refraction angle ``theta_t`` in the exit medium,
-  above it in the same ``w`` of ``phi = atan(|q_exit| / q_0)``; ``R`` and ``T``
-  are analytic in both.
+  When it can (light inside glass, exit medium of lower index), the axis is
+  split at the critical angle, which sits exactly on a node at every
+  wavelength: below it the axis is uniform in the refraction angle ``theta_t``
+  in the exit medium, above it in the same ``w`` of
+  ``phi = atan(|q_exit| / q_0)``; ``R`` and ``T`` are analytic in both.
 
 The resolution is chosen from the stack's optical thickness (fringes narrow as
 ``n d`` grows) and then *verified*: the exact values at the midpoints between
 nodes along each axis are compared with the interpolated ones, and the axis
 whose error is too large is refined until the sum of both axes' maximum errors
 is within the target (default 1e-3 in ``R`` and ``T``). A stack that would need
-more than :data:`MAX_TEXELS` texels is not tabulated.
+more than :data:`MAX_TEXELS` texels, or more than :data:`MAX_BUILD_POINTS`
+exact evaluations, is not tabulated.
+
+The lookup's scale and offset constants are opaque JIT variables, so a new
+table of another shape (a thickness sweep) reuses the compiled render kernel.
 """
 from __future__ import annotations
 
@@ -54,6 +67,10 @@ HALF_PI = 0.5 * math.pi
 MAX_TEXELS = 1 << 22
 MIN_U, MIN_V = 16, 16
 MAX_U, MAX_V = 4096, 8192
+#: Nodes beyond each edge of a cubic table (evaluated exactly, outside the
+#: tabulated range): the spline's end conditions perturb it by a factor
+#: (2 - sqrt 3) = 0.27 less per node inwards, 2 % at the first real node.
+GHOST = 3
 #: The verification ignores incidence within ~1.1 degrees of grazing
 #: (cos(theta) < GRAZING_COS). There, a dielectric film over a metal or a
 #: high-index film is a cavity whose inner walls reflect almost totally (the
@@ -63,9 +80,10 @@ MAX_U, MAX_V = 4096, 8192
 #: there too; benchmarks/speed_vs_error.py reports the error including it.
 GRAZING_COS = 0.02
 #: Exact evaluations a build may spend (all rounds, nodes and checks), about
-#: 0.3 s on one core: a stack that needs more (sharp resonances, such as the
-#: surface plasmon of a metal film seen from inside glass) is evaluated exactly.
-MAX_BUILD_POINTS = 3_000_000
+#: 0.1-0.3 s on one core: a stack that needs more (sharp resonances, such as the
+#: surface plasmon of a metal film seen from inside glass, or the high-Q cavity
+#: modes of a deep random stack on a metal) is evaluated exactly.
+MAX_BUILD_POINTS = 1_500_000
 #: Refinement rounds after the first estimate.
 MAX_ROUNDS = 6
 
@@ -103,10 +121,12 @@ def tir_kind(n0: np.ndarray, n_exit: np.ndarray) -> str | None:
 
 
 # -- axis mappings (generic over array types: numpy-free, Dr.Jit math) ---------
-def u_texel(cos_i, sin_i, n0, n_exit, kind: str, nu: int):
-    """The continuous texel coordinate (0 .. nu-1) of an incidence direction.
+def u_texel(cos_i, sin_i, n0, n_exit, kind: str, nu):
+    """The continuous node coordinate (0 .. nu-1) of an incidence direction.
 
-    ``n0`` and ``n_exit`` are the real indices at the lookup's wavelength. An
+    ``n0`` and ``n_exit`` are the real indices at the lookup's wavelength;
+    ``nu`` (the number of angle nodes) may be a Python number or an opaque
+    Float, so that the kernel does not depend on the table's shape. An
     angle ``a`` in [0, pi/2] that ends at grazing incidence is mapped through
     ``w = 1 - sqrt(x)`` with ``x = (pi/2 - a) / (pi/2)`` (computed as
     ``atan2(cos, sin)``, free of cancellation): ``w`` is analytic at both ends
@@ -117,7 +137,7 @@ def u_texel(cos_i, sin_i, n0, n_exit, kind: str, nu: int):
     if kind == "plain":
         x = (1.0 / HALF_PI) * dr.atan2(cos_i, sin_i)
         return (nu - 1) * (1.0 - dr.sqrt(x))
-    m = nu // 2
+    m = 0.5 * nu            # split tables have an even nu: nodes 0..m-1 | m..nu-1
     beta = n0 * sin_i
     d2 = (n_exit - beta) * (n_exit + beta)            # q_exit^2
     q_exit = dr.sqrt(dr.maximum(d2, 0.0))
@@ -129,10 +149,15 @@ def u_texel(cos_i, sin_i, n0, n_exit, kind: str, nu: int):
 
 
 def _u_nodes_cos(s: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str, nu: int):
-    """Inverse of :func:`u_texel` (float64 numpy): cos(theta_i) at texel
-    coordinates ``s`` (any shape broadcasting with the per-λ ``n0``, ``n_exit``)."""
+    """Inverse of :func:`u_texel` (float64 numpy): cos(theta_i) at node
+    coordinates ``s`` (any shape broadcasting with the per-λ ``n0``, ``n_exit``).
+
+    On a plain axis ``s`` may lie up to :data:`GHOST` nodes beyond either end:
+    ``w < 0`` continues to negative angles (``cos`` of ``|theta|``) and
+    ``w > 1`` mirrors about grazing incidence (``cos = sin((1 - w)^2 pi/2)``
+    is even about ``w = 1``), both the analytic continuation of ``R(w)``."""
     if kind == "plain":
-        w = np.clip(s / (nu - 1), 0.0, 1.0)
+        w = np.clip(s / (nu - 1), -GHOST / (nu - 1), 1.0 + GHOST / (nu - 1))
         return np.sin((1.0 - w) ** 2 * HALF_PI)
     m = nu // 2
     t = np.clip(s / (m - 1), 0.0, 1.0) * HALF_PI          # transmit segment: theta_t
@@ -144,29 +169,39 @@ def _u_nodes_cos(s: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str, n
     return np.where(s < m - 0.5, cos_t, cos_p)
 
 
-def v_texel(wavelength, nv: int):
-    """Texel coordinate (0 .. nv-1) of a wavelength: uniform in 1/λ, 360 nm at 0."""
-    return (SIGMA_MAX - 1.0 / wavelength) * ((nv - 1) / (SIGMA_MAX - SIGMA_MIN))
+def v_texel(wavelength, nv):
+    """Node coordinate (0 .. nv-1) of a wavelength: uniform in 1/λ, 360 nm at 0
+    (``nv`` a Python number or an opaque Float)."""
+    return (SIGMA_MAX - 1.0 / wavelength) * ((nv - 1) * (1.0 / (SIGMA_MAX - SIGMA_MIN)))
 
 
 def _v_nodes_wl(t: np.ndarray, nv: int) -> np.ndarray:
+    """Inverse of :func:`v_texel`; ``t`` beyond ``[0, nv-1]`` (ghost nodes) gives
+    wavelengths outside 360-830 nm."""
     sigma = SIGMA_MAX + (SIGMA_MIN - SIGMA_MAX) * (np.asarray(t, np.float64) / (nv - 1))
     return 1.0 / sigma
 
 
 # -- resolution ----------------------------------------------------------------
-def table_resolution(side: SideData, error: float, wavelengths: np.ndarray) -> tuple[int, int]:
+def _phase_step(error: float, cubic: bool) -> float:
+    """Largest node spacing ``h`` (in fringe phase) at which a fringe ``cos(phi)``
+    of unit amplitude interpolates within ``error / 2``: ``h^2 / 8`` for linear
+    interpolation, ``5 h^4 / 384`` for the cubic interpolating spline."""
+    return (38.4 * error) ** 0.25 if cubic else math.sqrt(4.0 * error)
+
+
+def table_resolution(side: SideData, error: float, wavelengths: np.ndarray,
+                     cubic: bool = True) -> tuple[int, int]:
     """First estimate of ``(nu, nv)`` for a target max error ``error``.
 
-    Linear interpolation of a fringe ``A cos(phi)`` sampled every ``h`` in
-    phase errs by at most ``A h^2 / 8``; with ``A = 1`` (a conservative
-    amplitude) and half the target for each axis, ``h = sqrt(4 error)``. The total phase over the wavenumber range
-    is ``4 pi sum_j n_j d_j (sigma_max - sigma_min)`` and over the angles
-    ``4 pi / lambda_min sum_j d_j (Re q_j(0) - Re q_j(grazing))``; each axis gets
-    enough nodes for its phase range at that step (plus a floor for the Fresnel
-    terms). The estimate is then verified and refined by :func:`build_table`.
+    Each axis gets half the target and enough nodes for the fringe phase it
+    spans at the step of :func:`_phase_step` (a conservative unit amplitude),
+    plus a floor for the Fresnel terms. The total phase over the wavenumber
+    range is ``4 pi sum_j n_j d_j (sigma_max - sigma_min)`` and over the angles
+    ``4 pi / lambda_min sum_j d_j (Re q_j(0) - Re q_j(grazing))``. The estimate
+    is then verified and refined by :func:`build_table`.
     """
-    h = math.sqrt(4.0 * error)
+    h = _phase_step(error, cubic)
     n0 = side.n0(wavelengths)
     ot_v, ot_u = 0.0, 0.0
     for j in side.fringe_films:
@@ -182,14 +217,49 @@ def table_resolution(side: SideData, error: float, wavelengths: np.ndarray) -> t
     return nu, nv
 
 
+# -- cubic B-spline coefficients ---------------------------------------------------
+def bspline_coefficients(values: np.ndarray, axis: int) -> np.ndarray:
+    """Coefficients ``c`` of the clamped cubic B-spline that interpolates
+    ``values`` along ``axis``: ``(c[i-1] + 4 c[i] + c[i+1]) / 6 = f[i]`` with
+    ``c[-1] = c[0]`` and ``c[N] = c[N-1]`` (the clamping of
+    ``Texture2f.eval_cubic`` with ``WrapMode.Clamp``): one tridiagonal solve
+    (LAPACK, through ``scipy.linalg.solve_banded``) for all the other axes."""
+    from scipy.linalg import solve_banded
+
+    f = np.moveaxis(np.asarray(values, np.float64), axis, 0)
+    n = f.shape[0]
+    ab = np.empty((3, n))
+    ab[0], ab[1], ab[2] = 1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0
+    ab[1, 0] = ab[1, -1] = 5.0 / 6.0
+    c = solve_banded((1, 1), ab, f.reshape(n, -1), overwrite_b=False, check_finite=False)
+    return np.moveaxis(c.reshape(f.shape), 0, axis)
+
+
+def _bspline_midpoints(coeffs: np.ndarray, axis: int, g: int, n: int) -> np.ndarray:
+    """The spline at the midpoints ``i + 1/2`` (``i`` = 0 .. n-2) of the ``n``
+    real nodes along ``axis`` (stored after ``g`` ghost nodes)."""
+    c = np.moveaxis(coeffs, axis, 0)
+    k = np.arange(n - 1) + g
+    mid = (c[k - 1] + 23.0 * (c[k] + c[k + 1]) + c[k + 2]) * (1.0 / 48.0)
+    return np.moveaxis(mid, 0, axis)
+
+
 # -- building -------------------------------------------------------------------
 class Table:
-    """A built table: a float32 ``Texture2f`` (channels ``R`` [, ``T``]) with its axes."""
+    """A built table: a float32 ``Texture2f`` (channels ``R`` [, ``T``]) with its axes.
 
-    def __init__(self, values: np.ndarray, kind: str, error: float, channels: int):
+    ``values`` has shape ``(nv + 2g, nu + 2g, channels)``: the cubic spline's
+    coefficients with ``g`` = :data:`GHOST` ghost nodes (``cubic``), or the
+    node values (``g = 0``) of a bilinear table.
+    """
+
+    def __init__(self, values: np.ndarray, kind: str, error: float, channels: int,
+                 cubic: bool = False):
         import mitsuba as mi
 
-        self.nv, self.nu = values.shape[:2]
+        g = GHOST if cubic else 0
+        self.cubic = cubic
+        self.nv, self.nu = values.shape[0] - 2 * g, values.shape[1] - 2 * g
         self.kind = kind
         self.channels = channels
         #: the verified max abs interpolation error (sum of both axes' maxima)
@@ -199,15 +269,26 @@ class Table:
                                     filter_mode=dr.FilterMode.Linear,
                                     wrap_mode=dr.WrapMode.Clamp)
 
+        # Shape-dependent constants of the lookup, opaque so that a table of
+        # another shape reuses the render kernel.
+        def constant(value):
+            return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else mi.Float(value)
+        self._nu = constant(self.nu)
+        self._nv = constant(self.nv)
+        self._inv_u = constant(1.0 / (self.nu + 2 * g))
+        self._inv_v = constant(1.0 / (self.nv + 2 * g))
+        self._offset = g + 0.5   # node 0 sits at texel centre g
+
     @property
     def texels(self) -> int:
         return self.nu * self.nv
 
     def lookup(self, cos_i, n0, n_exit, wavelengths, active=True):
-        """``[R]`` or ``[R, T]`` as spectra: one bilinear lookup per wavelength.
+        """``[R]`` or ``[R, T]`` as spectra: one lookup per wavelength.
 
         ``cos_i`` (>= 0) is a Float; ``n0``, ``n_exit`` (real parts) and
-        ``wavelengths`` are ``mi.Spectrum``.
+        ``wavelengths`` are ``mi.Spectrum``. A cubic lookup may overshoot
+        between nodes: ``R`` is clamped to ``[0, 1]`` and ``T`` to ``[0, 1 - R]``.
         """
         import mitsuba as mi
 
@@ -215,40 +296,60 @@ class Table:
         sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
         out = [[] for _ in range(self.channels)]
         if self.kind == "plain":
-            u = (u_texel(cos_i, sin_i, 1.0, 1.0, "plain", self.nu) + 0.5) * (1.0 / self.nu)
+            u = (u_texel(cos_i, sin_i, 1.0, 1.0, "plain", self._nu) + self._offset) * self._inv_u
         for i in range(len(wavelengths)):
             if self.kind != "plain":
-                u = (u_texel(cos_i, sin_i, n0[i], n_exit[i], self.kind, self.nu) + 0.5) \
-                    * (1.0 / self.nu)
-            v = (v_texel(wavelengths[i], self.nv) + 0.5) * (1.0 / self.nv)
-            res = self.texture.eval(mi.Point2f(u, v), active)
+                u = (u_texel(cos_i, sin_i, n0[i], n_exit[i], self.kind, self._nu)
+                     + self._offset) * self._inv_u
+            v = (v_texel(wavelengths[i], self._nv) + self._offset) * self._inv_v
+            p = mi.Point2f(u, v)
+            res = self.texture.eval_cubic(p, active) if self.cubic \
+                else self.texture.eval(p, active)
             for c in range(self.channels):
                 out[c].append(res[c])
-        return [mi.Spectrum(*vals) for vals in out]
+        res = [mi.Spectrum(*vals) for vals in out]
+        if self.cubic:
+            res[0] = dr.clip(res[0], 0.0, 1.0)
+            if self.channels > 1:
+                res[1] = dr.clip(res[1], 0.0, 1.0 - res[0])
+        return res
 
 
-def _evaluate(side: SideData, cos0: np.ndarray, wl: np.ndarray) -> np.ndarray:
+def _indices(side: SideData, wl: np.ndarray):
+    """``(n0, [film indices], n_exit)`` at the wavelengths ``wl``, each an array
+    over ``wl``; beyond 360-830 nm (ghost nodes) held at the edge's value."""
+    wl_ix = np.clip(wl, SPECTRAL_RANGE[0], SPECTRAL_RANGE[1])
+    return side.n0(wl_ix), [n(wl_ix) for n, _ in side.films], side.n_exit(wl_ix)
+
+
+def _rows(indices, rows):
+    """The indices of :func:`_indices` on a subset of its wavelengths."""
+    n0, films, n_exit = indices
+    return n0[rows], [n[rows] for n in films], n_exit[rows]
+
+
+def _evaluate(side: SideData, cos0: np.ndarray, wl: np.ndarray, indices) -> np.ndarray:
     """Exact float64 R [, T] on a grid: ``cos0`` of shape (len wl, M), one row per
-    wavelength of ``wl``; returns shape (len wl, M, channels). The indices are
-    evaluated once per wavelength and repeated along the row."""
+    wavelength of ``wl`` with its ``indices`` (:func:`_indices`); returns shape
+    (len wl, M, channels). The indices are repeated along the row; the phase
+    follows the wavelength also beyond 360-830 nm."""
     from drjit.llvm import Float64
 
+    from ._backend import float64_array
+
     cols = cos0.shape[1]
+    n0, film_n, n_exit = indices
 
     def real(values):
-        return Float64(np.repeat(np.asarray(values, np.float64), cols))
+        return float64_array(np.repeat(np.asarray(values, np.float64), cols))
 
     def cx(values):
         values = np.repeat(np.asarray(values, np.complex128), cols)
-        return Cx(Float64(np.ascontiguousarray(values.real)), Float64(np.ascontiguousarray(values.imag)))
+        return Cx(float64_array(values.real), float64_array(values.imag))
 
-    films = []
-    for n, d in side.films:
-        thickness = Float64(float(d))
-        dr.make_opaque(thickness)
-        films.append((cx(n(wl)), thickness))
-    res = side.rt(real(side.n0(wl)), Float64(np.ascontiguousarray(cos0, np.float64).ravel()),
-                  films, cx(side.n_exit(wl)), real(wl), side.transmission)
+    films = [(cx(n), dr.opaque(Float64, float(d))) for n, (_, d) in zip(film_n, side.films)]
+    res = side.rt(real(n0), float64_array(cos0), films, cx(n_exit), real(wl),
+                  side.transmission)
     res = res if side.transmission else (res,)
     dr.eval(*res)
     return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1).reshape(
@@ -256,65 +357,82 @@ def _evaluate(side: SideData, cos0: np.ndarray, wl: np.ndarray) -> np.ndarray:
 
 
 def _grid(side: SideData, kind: str, s: np.ndarray, t: np.ndarray, nu: int, nv: int,
-          with_cos: bool = False):
-    """Exact values at texel coordinates ``s`` (u, 1-D) x ``t`` (v, 1-D): (len t, len s, C)
-    (and the cosines of incidence, (len t, len s), if ``with_cos``)."""
+          indices=None, with_cos: bool = False):
+    """Exact values at node coordinates ``s`` (u, 1-D) x ``t`` (v, 1-D): (len t, len s, C)
+    (and the cosines of incidence, (len t, len s), if ``with_cos``). ``indices``:
+    :func:`_indices` at the wavelengths of ``t``, if already known."""
     wl = _v_nodes_wl(t, nv)
-    n0 = side.n0(wl)[:, None]
-    ne = side.n_exit(wl).real[:, None]
+    indices = _indices(side, wl) if indices is None else indices
+    n0 = np.asarray(indices[0], np.float64)[:, None]
+    ne = np.asarray(indices[2]).real[:, None]
     cos0 = np.broadcast_to(_u_nodes_cos(s[None, :], n0, ne, kind, nu), (len(t), len(s)))
-    vals = _evaluate(side, cos0, wl)
+    vals = _evaluate(side, cos0, wl, indices)
     return (vals, cos0) if with_cos else vals
 
 
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
-                max_texels: int = MAX_TEXELS, start: tuple[int, int] | None = None) -> Table | None:
+                max_texels: int = MAX_TEXELS) -> Table | None:
     """Build and verify a table for one side, or ``None`` if the target cannot be
-    met within ``max_texels`` (or the exit medium's critical angle depends on λ).
+    met within ``max_texels`` texels and :data:`MAX_BUILD_POINTS` evaluations
+    (or the exit medium's critical angle depends on λ).
 
-    Verification: the exact values midway between neighbouring nodes along u
-    (on every other v row) and along v (on every other u column) are compared
-    with the interpolated ones; the sum of the two maxima (for incidence
-    outside the grazing sliver, :data:`GRAZING_COS`) must be within ``error``. The cell across the critical angle of a split axis has zero
-    width in angle and is skipped. ``start`` (the resolution of the previous
-    table of the same stack) is used instead of the estimate when it is finer:
-    a table whose shape does not change reuses the render kernel.
+    A plain axis gives a cubic table, a split one (total internal reflection)
+    a bilinear one. Verification: the exact values midway between neighbouring
+    nodes along u (on every other v row) and along v (on every other u column)
+    are compared with the interpolated ones; the sum of the two maxima (for
+    incidence outside the grazing sliver, :data:`GRAZING_COS`) must be within
+    ``error``. The cell across the critical angle of a split axis has zero
+    width in angle and is skipped.
     """
     kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
     if kind is None:
         return None
-    nu, nv = table_resolution(side, error, wavelengths)
-    if start is not None:
-        nu, nv = max(nu, start[0]), max(nv, start[1])
+    cubic = kind == "plain"
+    g = GHOST if cubic else 0
+    order = 4 if cubic else 2
+    nu, nv = table_resolution(side, error, wavelengths, cubic)
     spent = 0
     for _ in range(MAX_ROUNDS + 1):
         if kind == "tir":
             nu += nu % 2
-        spent += 2 * nu * nv   # the nodes, and half as many points along each axis
+        spent += (nu + 2 * g) * (nv + 2 * g) + nu * nv   # the nodes, and the checks
         if nu > MAX_U or nv > MAX_V or nu * nv > max_texels or spent > MAX_BUILD_POINTS:
             return None
-        su = np.arange(nu, dtype=np.float64)
-        tv = np.arange(nv, dtype=np.float64)
-        nodes = _grid(side, kind, su, tv, nu, nv)
-        mu = su[:-1] + 0.5
+        su = np.arange(-g, nu + g, dtype=np.float64)
+        tv = np.arange(-g, nv + g, dtype=np.float64)
+        at_nodes = _indices(side, _v_nodes_wl(tv, nv))
+        nodes = _grid(side, kind, su, tv, nu, nv, at_nodes)
+        mu = np.arange(nu - 1) + 0.5
+        cols_u = np.arange(nu - 1)
         if kind == "tir":
-            mu = mu[mu != nu // 2 - 0.5]
-        lo = np.floor(mu).astype(int)
-        rows = nodes[::2]
-        mid_u, cos_u = _grid(side, kind, mu, tv[::2], nu, nv, with_cos=True)
-        dev = np.abs(mid_u - 0.5 * (rows[:, lo] + rows[:, lo + 1])).max(axis=-1)
+            keep = mu != nu // 2 - 0.5
+            mu, cols_u = mu[keep], cols_u[keep]
+        rows = np.arange(0, nv, 2) + g      # every other real v row
+        cols = np.arange(0, nu, 2) + g      # every other real u column
+        mid_u, cos_u = _grid(side, kind, mu, tv[rows], nu, nv, _rows(at_nodes, rows),
+                             with_cos=True)
+        mid_v, cos_v = _grid(side, kind, su[cols], np.arange(nv - 1) + 0.5, nu, nv,
+                             with_cos=True)
+        if cubic:
+            cu = bspline_coefficients(nodes, axis=1)
+            cv = bspline_coefficients(nodes, axis=0)
+            approx_u = _bspline_midpoints(cu[rows], 1, g, nu)
+            approx_v = _bspline_midpoints(cv[:, cols], 0, g, nv)
+        else:
+            approx_u = 0.5 * (nodes[rows][:, cols_u] + nodes[rows][:, cols_u + 1])
+            approx_v = 0.5 * (nodes[:-1, cols] + nodes[1:, cols])
+        dev = np.abs(mid_u - approx_u).max(axis=-1)
         err_u = float(np.max(np.where(cos_u >= GRAZING_COS, dev, 0.0)))
-        cols = nodes[:, ::2]
-        mid_v, cos_v = _grid(side, kind, su[::2], tv[:-1] + 0.5, nu, nv, with_cos=True)
-        dev = np.abs(mid_v - 0.5 * (cols[:-1] + cols[1:])).max(axis=-1)
+        dev = np.abs(mid_v - approx_v).max(axis=-1)
         err_v = float(np.max(np.where(cos_v >= GRAZING_COS, dev, 0.0)))
         if err_u + err_v <= error:
-            return Table(nodes, kind, err_u + err_v, nodes.shape[-1])
-        # Interpolation error goes as h^2 once fringes are resolved: refine the
-        # offending axis (10% margin, at most 3x a round: far from convergence
-        # the h^2 law overshoots).
-        fu = 1.1 * math.sqrt(err_u / (0.5 * error)) if err_u > 0.5 * error else 1.0
-        fv = 1.1 * math.sqrt(err_v / (0.5 * error)) if err_v > 0.5 * error else 1.0
+            values = bspline_coefficients(cu, axis=0) if cubic else nodes
+            return Table(values, kind, err_u + err_v, nodes.shape[-1], cubic)
+        # Interpolation error goes as h^order once fringes are resolved: refine
+        # the offending axis (10% margin, at most 3x a round: far from
+        # convergence the power law overshoots).
+        fu = 1.1 * (err_u / (0.5 * error)) ** (1 / order) if err_u > 0.5 * error else 1.0
+        fv = 1.1 * (err_v / (0.5 * error)) ** (1 / order) if err_v > 0.5 * error else 1.0
         if nu * nv * fu * fv > 4 * max_texels:
             return None   # hopeless within the budget: do not spend the time
         nu = int(math.ceil((nu - 1) * min(3.0, fu))) + 1
