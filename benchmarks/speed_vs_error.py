@@ -21,9 +21,10 @@ the grazing sliver (cos theta >= ``tables.GRAZING_COS``) that table builds verif
   axis), the table's nu x nv, its build time (first build, which includes
   compiling the float64 build kernels, and a second build of the same stack
   with the table cache cleared), the verified error the build reports, and the
-  measured errors. A stack whose resonances (sharp dips at grazing incidence)
-  cannot be met within ``tables.MAX_TEXELS`` gets no table: the row says so.
-  Every target is tried (a failing build takes 5-60 s); with --stop-at-failure
+  measured errors. A stack whose sharp resonances cannot be resolved within
+  ``tables.MAX_TEXELS`` texels and ``tables.MAX_BUILD_POINTS`` evaluations gets
+  no table: the row says so. Every target is tried (a failing build takes
+  0.1-1.5 s); with --stop-at-failure
   the smaller targets of a stack are skipped once one has failed;
 * tmm: ``coh_tmm`` s + p on the first --tmm-points points, time per point.
 
@@ -182,7 +183,7 @@ def main():
             if tab is None:
                 failed = True
                 print(f"| {L} | table | {e:g} | **no table** (target not met within "
-                      f"MAX_TEXELS; evaluated exactly) | {t_first:.2f} / – | – | – | – | – | – |",
+                      f"the texel and build budgets; evaluated exactly) | {t_first:.2f} / – | – | – | – | – | – |",
                       flush=True)
                 continue
             t_b = time.perf_counter()

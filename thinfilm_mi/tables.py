@@ -12,8 +12,8 @@ films.
 Interpolation: where ``R`` and ``T`` are analytic over the whole table (the
 exit medium cannot totally reflect) the texture holds the coefficients of the
 interpolating cubic B-spline (``Texture2f.eval_cubic``, 16 texels a lookup):
-its error falls as h^4, so a fringe needs ~7x fewer nodes per axis than with
-the paper's linear interpolation (h^2) for the same error, and a table ~50x
+its error falls as h^4, so a fringe needs 4-5x fewer nodes per axis than with
+the paper's linear interpolation (h^2) for the same error, and a table ~20x
 fewer texels. The coefficients are solved for (a tridiagonal system per axis)
 on a grid extended by :data:`GHOST` nodes beyond each edge, at which the stack
 is evaluated too, so the spline's end conditions do not reach the tabulated
@@ -79,11 +79,12 @@ GHOST = 3
 #: contribution to an image is a sliver at silhouettes. Tables interpolate
 #: there too; benchmarks/speed_vs_error.py reports the error including it.
 GRAZING_COS = 0.02
-#: Exact evaluations a build may spend (all rounds, nodes and checks), about
-#: 0.1-0.3 s on one core: a stack that needs more (sharp resonances, such as the
-#: surface plasmon of a metal film seen from inside glass, or the high-Q cavity
-#: modes of a deep random stack on a metal) is evaluated exactly.
-MAX_BUILD_POINTS = 1_500_000
+#: Exact evaluations a build may spend (all rounds, nodes and checks), up to
+#: ~1 s for 30 films on two cores: a stack that needs more (sharp resonances,
+#: such as the surface plasmon of a metal film seen from inside glass, or the
+#: high-Q cavity modes of a deep random stack on a metal) is evaluated exactly.
+#: (A bilinear table lit from inside glass, fig8b's, needs ~2.4e6.)
+MAX_BUILD_POINTS = 3_000_000
 #: Refinement rounds after the first estimate.
 MAX_ROUNDS = 6
 
