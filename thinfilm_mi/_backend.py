@@ -34,6 +34,16 @@ def float64_array(a) -> Float64:
     return Float64(out)
 
 
+def repeated(values, reps: int, complex_: bool = False):
+    """Each value of a 1-D numpy array repeated ``reps`` times, in aligned buffers
+    (:func:`float64_array`): a Float64, or with ``complex_`` a :class:`Cx` of
+    Float64 (one index per wavelength spread over a row of angles)."""
+    values = np.repeat(np.asarray(values, np.complex128 if complex_ else np.float64), reps)
+    if complex_:
+        return Cx(float64_array(values.real), float64_array(values.imag))
+    return float64_array(values)
+
+
 def to_drjit(a: np.ndarray):
     """A real numpy array as a Float64, a complex one as :class:`Cx` of Float64;
     arrays whose values are all equal become Python scalars (kernel literals)."""

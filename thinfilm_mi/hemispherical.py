@@ -26,7 +26,7 @@ import drjit as dr
 import numpy as np
 from drjit.llvm import Float64
 
-from ._backend import float64_array
+from ._backend import float64_array, repeated
 from ._llvm import require_llvm
 from .optics import Cx, film_attenuation
 from .kernel import texture_on_grid, unpolarised_rt
@@ -42,11 +42,6 @@ GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
 #: about one wave over the hemisphere; 128 nodes integrate such oscillations
 #: (and those of films ten times thicker) to well below 1e-6.
 DEFAULT_NODES = 128
-
-
-def _cx(a: np.ndarray, reps: int) -> Cx:
-    a = np.repeat(np.asarray(a, dtype=np.complex128), reps)
-    return Cx(float64_array(a.real), float64_array(a.imag))
 
 
 def hemispherical_factors(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
@@ -71,18 +66,19 @@ def hemispherical_factors(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray,
     mu = 0.5 * (x + 1.0)          # nodes on (0, 1)
     wmu = 0.5 * w                 # weights for ∫_0^1
     nw, nm = len(wavelengths), len(mu)
-    wl = float64_array(np.repeat(np.asarray(wavelengths, np.float64), nm))
+    wl = repeated(wavelengths, nm)
     cos0 = float64_array(np.tile(mu, nw))
-    n0 = float64_array(np.repeat(np.asarray(n_amb, np.float64), nm))
+    n0 = repeated(n_amb, nm)
     # opaque thicknesses: a thickness edit reuses the kernel
-    films = [(_cx(n, nm), dr.opaque(Float64, float(d))) for n, d in coating]
-    exit_ = _cx(n_exit, nm)
+    films = [(repeated(n, nm, complex_=True), dr.opaque(Float64, float(d))) for n, d in coating]
+    exit_ = repeated(n_exit, nm, complex_=True)
     R, T = unpolarised_rt(n0, cos0, films, exit_, wl)
     if film_n is None:
         t = T
         R_up = unpolarised_rt(exit_.re, cos0, films[::-1], Cx(n0, 0.0), wl, transmission=False)
     else:
-        k_a = film_attenuation(n0, cos0, _cx(film_n[0], nm), dr.opaque(Float64, float(film_n[1])), wl)
+        k_a = film_attenuation(n0, cos0, repeated(film_n[0], nm, complex_=True),
+                               dr.opaque(Float64, float(film_n[1])), wl)
         t = T * k_a
         R_up = R * k_a * k_a
     dr.eval(t, R_up)

@@ -54,7 +54,6 @@ from typing import Sequence
 import drjit as dr
 import numpy as np
 
-from .optics import Cx
 from .stack import SPECTRAL_RANGE
 
 __all__ = ["SideData", "Table", "build_table", "table_resolution", "MAX_TEXELS"]
@@ -336,21 +335,14 @@ def _evaluate(side: SideData, cos0: np.ndarray, wl: np.ndarray, indices) -> np.n
     follows the wavelength also beyond 360-830 nm."""
     from drjit.llvm import Float64
 
-    from ._backend import float64_array
+    from ._backend import float64_array, repeated
 
     cols = cos0.shape[1]
     n0, film_n, n_exit = indices
-
-    def real(values):
-        return float64_array(np.repeat(np.asarray(values, np.float64), cols))
-
-    def cx(values):
-        values = np.repeat(np.asarray(values, np.complex128), cols)
-        return Cx(float64_array(values.real), float64_array(values.imag))
-
-    films = [(cx(n), dr.opaque(Float64, float(d))) for n, (_, d) in zip(film_n, side.films)]
-    res = side.rt(real(n0), float64_array(cos0), films, cx(n_exit), real(wl),
-                  side.transmission)
+    films = [(repeated(n, cols, complex_=True), dr.opaque(Float64, float(d)))
+             for n, (_, d) in zip(film_n, side.films)]
+    res = side.rt(repeated(n0, cols), float64_array(cos0), films,
+                  repeated(n_exit, cols, complex_=True), repeated(wl, cols), side.transmission)
     res = res if side.transmission else (res,)
     dr.eval(*res)
     return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1).reshape(
