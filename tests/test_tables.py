@@ -13,6 +13,8 @@ import mitsuba as mi
 import thinfilm_mi as tf
 from thinfilm_mi import kernel as K
 
+from _kernels import compiled, interaction
+
 # A float32 kernel value against float64: rounding below 3e-5 for these stacks
 # (tests/test_bsdf_specular.py). A table lookup adds its interpolation error,
 # which the build verified to be below ``table.error`` at the midpoints of its
@@ -24,12 +26,6 @@ F32 = 3e-5
 @pytest.fixture(autouse=True)
 def llvm():
     mi.set_variant("llvm_ad_spectral")
-
-
-def interaction(wls):
-    si = dr.zeros(mi.SurfaceInteraction3f, len(wls[0]))
-    si.wavelengths = mi.Spectrum(*[mi.Float(np.asarray(w, np.float32)) for w in wls])
-    return si
 
 
 def random_points(n, seed=1):
@@ -179,12 +175,6 @@ def test_thick_films_are_incoherent_like_tmm_inc_tmm():
     assert np.ptp(Rc) > 0.005 and np.ptp(R) < 0.05 * np.ptp(Rc)
 
 
-def _compiled(history):
-    """JIT kernels in a ``dr.kernel_history()`` that were compiled (not cache hits)."""
-    return [k for k in history if k["type"] == dr.KernelType.JIT
-            and not k.get("cache_hit", False) and not k.get("cache_disk", False)]
-
-
 def test_table_sweep_reuses_the_kernels():
     """A thickness edit rebuilds the table, whose shape changes, but neither the
     lookup kernel (its shape constants are opaque) nor the float64 build
@@ -205,11 +195,11 @@ def test_table_sweep_reuses_the_kernels():
             table = bsdf.stack.plan[False].table
             shapes.add((table.nu, table.nv))
             R = np.array(bsdf.stack.reflectance(si, c))
-        compiled = _compiled(dr.kernel_history())
+        fresh = compiled(dr.kernel_history())
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert len(shapes) >= 3, shapes        # the tables did change shape
-    assert compiled == [], [k.get("size") for k in compiled]
+    assert fresh == [], [k.get("size") for k in fresh]
     ref = tf.Stack(STACK.replace("420", "700"), substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
     assert max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i])))
                for i in range(4)) <= 1.5 * table.error + F32

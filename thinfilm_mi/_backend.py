@@ -18,20 +18,27 @@ from .optics import Cx, stack_amplitudes, transmittance_factor_p, transmittance_
 _ALIGN = 128
 
 
-def float64_array(a) -> Float64:
-    """A numpy array (flattened) as a Float64 whose memory is 128-byte aligned.
+def aligned_array(a, dtype, array_type):
+    """A numpy array (flattened, converted to ``dtype``) as a Dr.Jit ``array_type``
+    whose memory is 128-byte aligned.
 
     Dr.Jit's LLVM backend takes a numpy buffer's memory as it is and compiles
     the kernel for the alignment it finds (``align 128`` or ``align 1`` vector
     loads): equal inputs at other addresses give another kernel, hence a new
     compilation (~0.1 s) on most calls. An aligned copy keeps one kernel.
     """
-    a = np.asarray(a, np.float64).ravel()
-    buf = np.empty(a.size + _ALIGN // 8, np.float64)
-    start = (-buf.ctypes.data % _ALIGN) // 8
+    a = np.asarray(a, dtype).ravel()
+    size = np.dtype(dtype).itemsize
+    buf = np.empty(a.size + _ALIGN // size, dtype)
+    start = (-buf.ctypes.data % _ALIGN) // size
     out = buf[start:start + a.size]
     out[...] = a
-    return Float64(out)
+    return array_type(out)
+
+
+def float64_array(a) -> Float64:
+    """A numpy array as an aligned Float64 (:func:`aligned_array`)."""
+    return aligned_array(a, np.float64, Float64)
 
 
 def repeated(values, reps: int, complex_: bool = False):

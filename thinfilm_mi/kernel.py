@@ -74,12 +74,16 @@ class SpectralIndex:
     """A complex refractive index as textures ``eta(λ)`` and ``k(λ)``."""
 
     def __init__(self, eta_tex, k_tex, label: str, constant: complex | None = None,
-                 material=None):
+                 material=None, knots: np.ndarray | None = None):
         self.eta = eta_tex
         self.k = k_tex
         self.label = label
         self.constant = constant
         self.material = material
+        #: Wavelengths (nm) on which the textures are piecewise linear: empty for
+        #: a constant, the 1 nm grid plus the dataset's knots for a dataset,
+        #: ``None`` for textures given by the user (unknown).
+        self.knots = knots
 
     @classmethod
     def from_material(cls, spec: Any, name: str) -> "SpectralIndex":
@@ -103,7 +107,7 @@ class SpectralIndex:
             c = mat.constant
             return cls(mi.load_dict({"type": "uniform", "value": float(c.real)}),
                        mi.load_dict({"type": "uniform", "value": float(c.imag)}),
-                       mat.name, c, mat)
+                       mat.name, c, mat, np.empty(0))
         # A 1 nm grid (enough for formulas: error ~ h^2 n''/8 < 1e-7) plus the
         # dataset's own knots, so tabulated data are reproduced exactly.
         knots = getattr(mat, "knots", lambda: np.empty(0))()
@@ -124,7 +128,7 @@ class SpectralIndex:
                                  "wavelengths": ", ".join(f"{x:.12g}" for x in grid),
                                  "values": ", ".join(f"{x:.9g}" for x in v)})
 
-        return cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat)
+        return cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat, grid)
 
     @classmethod
     def from_textures(cls, eta_tex, k_tex, label: str) -> "SpectralIndex":
@@ -219,6 +223,95 @@ def _scalar(d) -> float:
     return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
 
 
+#: Exact evaluation of a side with at least this many films runs the recursion
+#: as a symbolic Dr.Jit loop over buffers of the films (:class:`_LoopFilms`):
+#: one loop body in the kernel whatever the depth, so the kernel compiles as fast
+#: for 30 films as for 3 (see benchmarks/render_bench.py). Below it the films are
+#: unrolled, which lets literal indices specialise the code.
+LOOP_MIN_FILMS = 4
+
+
+class _LoopFilms:
+    """The films of one side as kernel buffers for :func:`optics.stack_rt_loop`.
+
+    Every film's ``eta`` and ``k`` are evaluated through its textures on the
+    union of the films' knots (:attr:`SpectralIndex.knots`: the 1 nm grid and
+    the datasets' own knots), where each texture is piecewise linear, so linear
+    interpolation on that grid reproduces the texture up to float32 rounding.
+    One buffer holds, per film and grid cell, ``(eta_i, eta_i+1)`` or, where
+    some film absorbs, ``(eta_i, k_i, eta_i+1, k_i+1)``: one gather per film and
+    wavelength. The cell and weight of each wavelength are found once, before
+    the loop. Thicknesses are a buffer and the film count an opaque integer, so
+    neither a thickness sweep nor another depth of stack recompiles the kernel;
+    the grid size and whether the films absorb are baked in.
+    """
+
+    def __init__(self, films: list, n0: SpectralIndex):
+        mi = _mi()
+        from ._backend import aligned_array
+        grid = np.unique(np.concatenate([_GRID[[0, -1]]] + [ix.knots for ix, _, _ in films]))
+        self.g0 = float(grid[0])
+        self.cells = grid.size - 1
+        self.uniform = bool(np.array_equal(grid, _GRID))
+        eta = np.stack([texture_on_grid(ix.eta, grid) for ix, _, _ in films])
+        k = np.stack([texture_on_grid(ix.k, grid) for ix, _, _ in films])
+        self.real = bool(np.all(k == 0))
+        #: Trace-time bounds (see optics.stack_rt_loop): films' smallest real
+        #: index (where none absorbs) and the ambient's largest index.
+        self.film_n_min = float(eta.min()) if self.real else None
+        self.n0_max = float(np.max(texture_on_grid(n0.eta)))
+        cols = [eta[:, :-1], eta[:, 1:]] if self.real else \
+            [eta[:, :-1], k[:, :-1], eta[:, 1:], k[:, 1:]]
+        self.width = len(cols)
+        self.buffer = aligned_array(np.stack(cols, axis=-1), np.float32, mi.Float)
+        self.grid = aligned_array(grid, np.float32, mi.Float)
+        self.thickness = aligned_array([_scalar(d) for _, d, _ in films], np.float32, mi.Float)
+        self.count = mi.UInt32(len(films))
+        for v in (self.buffer, self.grid, self.thickness, self.count):
+            dr.make_opaque(v)
+
+    def _cell(self, w):
+        """The grid cell holding wavelength ``w`` (an ``mi.Float``) and the weight of its
+        upper knot."""
+        mi = _mi()
+        if self.uniform:   # knots 1 nm apart from an integer start: exact arithmetic
+            i = mi.UInt32(dr.clip(dr.floor(w - self.g0), 0.0, float(self.cells - 1)))
+            return i, dr.clip(w - (self.g0 + mi.Float(i)), 0.0, 1.0)
+        i = dr.binary_search(0, self.cells - 1,
+                             lambda c: dr.gather(mi.Float, self.grid, c + 1) <= w)
+        lo = dr.gather(mi.Float, self.grid, i)
+        hi = dr.gather(mi.Float, self.grid, i + 1)
+        return i, dr.clip((w - lo) / (hi - lo), 0.0, 1.0)
+
+    def rt(self, n0, cos_theta, exit_: Cx, wl, transmission: bool, thickness_scale):
+        mi = _mi()
+        from .optics import stack_rt_loop
+        cells = [self._cell(wl[c]) for c in range(len(wl))]
+        vec = mi.Vector2f if self.real else mi.Vector4f
+
+        def film(j):
+            base = j * self.cells
+            eta, k = [], []
+            for i, t in cells:
+                v = dr.gather(vec, self.buffer, base + i)
+                if self.real:
+                    eta.append(dr.lerp(v[0], v[1], t))
+                else:
+                    eta.append(dr.lerp(v[0], v[2], t))
+                    k.append(dr.lerp(v[1], v[3], t))
+            index = Cx(mi.Spectrum(*eta), 0.0 if self.real else mi.Spectrum(*k))
+            d = dr.gather(mi.Float, self.thickness, j)
+            return index, (d if thickness_scale is None else d * thickness_scale)
+
+        Rs, Rp, Ts, Tp = stack_rt_loop(n0, cos_theta, self.count, film, exit_, wl,
+                                       transmission=transmission, n0_max=self.n0_max,
+                                       film_n_min=self.film_n_min)
+        R = 0.5 * (Rs + Rp)
+        if not transmission:
+            return R
+        return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+
+
 class _Side:
     """How one lighting side of a stack is evaluated, after the skips.
 
@@ -237,6 +330,7 @@ class _Side:
         self.opaque = opaque
         self.transmission = transmission
         self.table = None
+        self.loop = None   # a _LoopFilms where the films are evaluated in a loop
 
     @property
     def incoherent(self) -> list[bool]:
@@ -319,6 +413,11 @@ class KernelStack:
         opaque = [self._opaque(ix, dv) for ix, _, dv in kept]
         self.plan = {inside: self._side(inside, t, films, opaque)
                      for inside, t in self.sides.items()}
+        if dr.is_jit_v(_mi().Float):
+            for side in self.plan.values():
+                if (len(side.films) >= LOOP_MIN_FILMS and not any(side.incoherent)
+                        and all(ix.knots is not None for ix, _, _ in side.films)):
+                    side.loop = _LoopFilms(side.films, side.n0)
         # "auto" tabulates in vectorised variants only: in scalar variants every
         # call is Python anyway and the load-time build would dominate.
         want = self.tabulate is True or (
@@ -405,9 +504,12 @@ class KernelStack:
             return res[0], (mi.Spectrum(0.0) if side.opaque else res[1])
         exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
             else side.exit.eval(si, active)
-        films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
-                 for ix, d, _ in side.films]
-        out = _rt(n0, cos_theta, films, exit_, wl, side.incoherent, transmission)
+        if side.loop is not None and not _index_grads(side, si, active):
+            out = side.loop.rt(n0, cos_theta, exit_, wl, transmission, thickness_scale)
+        else:
+            films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
+                     for ix, d, _ in side.films]
+            out = _rt(n0, cos_theta, films, exit_, wl, side.incoherent, transmission)
         if transmission and side.opaque:
             return out[0], mi.Spectrum(0.0)
         return out
@@ -435,6 +537,16 @@ class KernelStack:
         if transmission:
             return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
         return dr.select(inside, in_r, out_r)
+
+
+def _index_grads(side: _Side, si, active) -> bool:
+    """True if some film index of ``side`` carries gradients (AD variants): the loop
+    buffers are plain data, so such a side is evaluated unrolled through its
+    textures. Traces one texture evaluation per film (dropped unless used)."""
+    if not dr.is_diff_v(_mi().Float):
+        return False
+    return any(dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
+               for ix, _, _ in side.films)
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):

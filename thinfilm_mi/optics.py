@@ -55,6 +55,7 @@ __all__ = [
     "StackAmplitudes",
     "stack_amplitudes",
     "stack_rt",
+    "stack_rt_loop",
     "film_attenuation",
     "transmittance_factor_s",
     "transmittance_factor_p",
@@ -299,17 +300,20 @@ def _phase_factor(q: Cx, u, twice: bool) -> Cx:
     return Cx(mag * c, mag * s)
 
 
-def _normal_index(n: Cx, beta2, beta2_max) -> Cx:
+def _normal_index(n: Cx, beta2, beta2_max, n2_min=None) -> Cx:
     """:func:`normal_index`, specialised at trace time where the index is known.
 
-    For a literal real index ``n`` with ``n^2 >= beta2_max`` (a literal bound on
-    ``beta^2``, i.e. ``n >= n0``) the root is real for every angle and only one
-    square root is traced; for any other literal real index the decaying root of
-    the real number ``n^2 - beta^2`` is ``sqrt(x)`` or ``i sqrt(-x)``.
+    For a real index ``n`` (a literal, or an array with a literal zero
+    imaginary part and a literal lower bound ``n2_min`` on ``n^2``) with ``n^2
+    >= beta2_max`` (a literal bound on ``beta^2``, i.e. ``n >= n0``) the root is
+    real for every angle and only one square root is traced; for any other real
+    index (literal, or an array with a literal zero imaginary part) the decaying
+    root of the real number ``n^2 - beta^2`` is ``sqrt(x)`` or ``i sqrt(-x)``.
     """
-    if _is_literal(n.re) and _is_zero(n.im):
+    if _is_zero(n.im) and (_is_literal(n.re) or n2_min is not None):
         x = n.re * n.re - beta2
-        if _is_literal(beta2_max) and n.re * n.re >= beta2_max:
+        lower = n.re * n.re if _is_literal(n.re) else n2_min
+        if _is_literal(beta2_max) and lower >= beta2_max:
             return Cx(dr.sqrt(dr.maximum(x, 0.0)), 0.0)
         r = dr.sqrt(dr.abs(x))
         pos = x >= 0
@@ -332,6 +336,29 @@ def _inv(z: Cx) -> Cx:
 #: gamma E| (>= ~1e-7 even at cos = 1e-7), so three films stay far inside
 #: float32's range (1e-38 .. 3e38).
 _RESCALE = 3
+
+
+def _rouard_step(a: Cx, b: Cx, E_b: Cx, N: Cx, D: Cx):
+    """One Rouard step of :func:`_recursion` in projective form: ``(N, D)`` of the
+    stack seen from medium ``b`` (``gamma_b = N / D``) to those seen from the
+    medium ``a`` above it; ``E_b = exp(2 i delta_b)`` is ``b``'s phase factor.
+
+    ``N' = a P - b M``, ``D' = a P + b M`` with ``X = E_b N``, ``P = D + X``,
+    ``M = D - X``: the paper's ``gamma <- (r + gamma E) / (1 + r gamma E)`` with
+    ``r = (a - b)/(a + b)``, multiplied through by ``(a + b) D``.
+    """
+    X = _cmul(E_b, N)
+    P = D + X
+    M = D - X
+    aP = _cmul(a, P)
+    bM = _cmul(b, M)
+    return aP - bM, aP + bM
+
+
+def _rescale_factor(D: Cx):
+    """``1 / (|Re D| + |Im D|)`` (1 where ``D = 0``): the projective rescaling."""
+    l1 = dr.abs(D.re) + dr.abs(D.im)
+    return 1.0 / dr.select(l1 > 0, l1, 1.0)
 
 
 def _recursion(a: list, E: list, e1: list | None, t_power: list | None, zero_pairs: list):
@@ -388,26 +415,29 @@ def _recursion(a: list, E: list, e1: list | None, t_power: list | None, zero_pai
     steps = 0
     for j in range(last - 1, -1, -1):
         aj, bj = pair(j)
-        X = _cmul(E[j + 1], N)
-        P = D + X
-        M = D - X
-        aP = _cmul(aj, P)
-        bM = _cmul(bj, M)
-        N = aP - bM
-        D = aP + bM
+        N, D = _rouard_step(aj, bj, E[j + 1], N, D)
         if e1 is not None:
             T = _cmul(_cmul(aj, e1[j + 1]), T)
         elif t_power is not None:
             T = T * t_power[j]
         steps += 1
         if steps % _RESCALE == 0 and j > 0:
-            l1 = dr.abs(D.re) + dr.abs(D.im)
-            scale = 1.0 / dr.select(l1 > 0, l1, 1.0)
+            scale = _rescale_factor(D)
             N = N * scale
             D = D * scale
             if T is not None:
                 T = T * (scale if e1 is not None else scale * scale)
     return N, D, T
+
+
+def _guard_zero_q(m: Cx, q: Cx, beta, like) -> Cx:
+    """A film's ``q`` moved off 0 where it is within rounding of 0 (see :func:`_prepare`);
+    ``like`` is any array of the working precision (float32 or wider)."""
+    eps = 2.0 ** -24 if _is_float32(like) else 2.0 ** -53
+    size = dr.abs(m.re) + dr.abs(m.im) + beta
+    eps_q = (2.0 * math.sqrt(eps)) * size
+    small = q.abs2() < eps_q * eps_q
+    return Cx(dr.select(small, eps_q, q.re), q.im if _is_zero(q.im) else dr.select(small, 0.0, q.im))
 
 
 def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission):
@@ -428,14 +458,9 @@ def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission
     # replacing such a q by the real eps_q = 2 sqrt(eps) (|n| + beta) changes q^2
     # only by the amount its own rounding already leaves open. Two neighbours
     # at q = 0 (the same medium) then get r = 0 as they should.
-    eps = 2.0 ** -24 if _is_float32(cos0) else 2.0 ** -53
     beta = dr.sqrt(beta2)
     for j in range(1, len(media) - 1):
-        m, q = media[j], qs[j]
-        size = dr.abs(m.re) + dr.abs(m.im) + beta
-        eps_q = (2.0 * math.sqrt(eps)) * size
-        small = q.abs2() < eps_q * eps_q
-        qs[j] = Cx(dr.select(small, eps_q, q.re), q.im if _is_zero(q.im) else dr.select(small, 0.0, q.im))
+        qs[j] = _guard_zero_q(media[j], qs[j], beta, cos0)
     inv_wl = 1.0 / wavelength
     E = [None] * len(media)
     e1 = [None] * len(media) if (amplitudes and transmission) else None
@@ -546,30 +571,145 @@ def stack_rt(n0, cos0, films, n_exit, wavelength, *, transmission: bool = True):
     cos0, q0, media, qs, E, _, tpow, zero_pairs, adm = _prepare(
         n0, cos0, films, n_exit, wavelength, True, True, False, transmission)
     grazing = cos0 <= 0.0
+    fac = None
     if transmission:
-        inv_q0 = (4.0 ** (len(films) + 1)) / dr.select(grazing, 1.0, q0)
-        n_ex, q_ex = media[-1], qs[-1]
-        # p: |t_p|^2 carries |n0 / n_exit|^2 (telescoped), and the power factor
-        # Re(n_ex^2 conj(q_ex)) / |n_ex|^2 of transmittance_factor_p.
-        n2 = n_ex.square()
-        re_n2q = n2.re * q_ex.re if _is_zero(q_ex.im) else n2.re * q_ex.re + n2.im * q_ex.im
-        abs2_nex = n_ex.abs2()
-        if _is_literal(abs2_nex):
-            fp_const = (n0 * n0) / (abs2_nex * abs2_nex)
-        else:
-            fp_const = (n0 * n0) * dr.square(1.0 / abs2_nex)
-        fac = {"s": q_ex.re * inv_q0, "p": re_n2q * fp_const * inv_q0}
+        fac = _power_factors(n0, q0, media[-1], qs[-1], grazing, 4.0 ** (len(films) + 1))
+    results = {pol: _recursion(adm[pol], E, None, tpow.get(pol), zero_pairs)
+               for pol in ("s", "p")}
+    return _powers(results, fac, grazing)
+
+
+def _power_factors(n0, q0, n_ex: Cx, q_ex: Cx, grazing, scale):
+    """``{pol: factor}`` that turn the projective ``|T|^2 / |D|^2`` into
+    transmittance: ``scale`` (the ``4^(L+1)`` of the interface ``t``'s, where
+    the recursion leaves them out) over ``q0``, times the power factor of
+    :func:`transmittance_factor_s` / :func:`transmittance_factor_p` and, for p,
+    the telescoped ``|n0 / n_exit|^2`` of ``|t_p|^2``."""
+    inv_q0 = scale / dr.select(grazing, 1.0, q0)
+    n2 = n_ex.square()
+    re_n2q = n2.re * q_ex.re if _is_zero(q_ex.im) else n2.re * q_ex.re + n2.im * q_ex.im
+    abs2_nex = n_ex.abs2()
+    if _is_literal(abs2_nex):
+        fp_const = (n0 * n0) / (abs2_nex * abs2_nex)
+    else:
+        fp_const = (n0 * n0) * dr.square(1.0 / abs2_nex)
+    return {"s": q_ex.re * inv_q0, "p": re_n2q * fp_const * inv_q0}
+
+
+def _powers(results: dict, fac: dict | None, grazing):
+    """``(Rs, Rp, Ts, Tp)`` from the projective ``{pol: (N, D, |T|^2)}``."""
     out = []
     for pol in ("s", "p"):
-        N, D, T = _recursion(adm[pol], E, None, tpow.get(pol), zero_pairs)
+        N, D, T = results[pol]
         inv = 1.0 / D.abs2()
         R = dr.select(grazing, 1.0, dr.minimum(N.abs2() * inv, 1.0))
         Tr = None
-        if transmission:
+        if fac is not None:
             Tr = dr.select(grazing, 0.0, dr.clip(T * inv * fac[pol], 0.0, 1.0))
         out.append((R, Tr))
     (Rs, Ts), (Rp, Tp) = out
     return Rs, Rp, Ts, Tp
+
+
+def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool = True,
+                  n0_max: float | None = None, film_n_min: float | None = None,
+                  label: str = "thinfilm_rouard"):
+    """:func:`stack_rt` with the films visited by a Dr.Jit loop instead of unrolled.
+
+    ``count`` is the number of films, as an unsigned integer array of the
+    Dr.Jit backend (``drjit.llvm.UInt32``; a Python ``int`` runs the loop in
+    Python); ``film(j)`` returns ``(index, thickness)`` of film ``j``
+    (``0`` next to the ambient) for an index array ``j`` of that type — in a
+    render kernel a gather from a buffer. With Dr.Jit arrays the loop is
+    *symbolic*: its body is traced once and becomes a loop in the kernel, so
+    the kernel's size and compile time do not grow with the number of films.
+
+    The body is the same step as :func:`_recursion` (:func:`_rouard_step`,
+    the same root choice, the same guard of ``q = 0``), from the innermost film
+    outwards, starting from ``gamma = 0`` inside the exit medium; it rescales
+    after every film. ``(N, D)`` start at ``(0, 1)`` so the first step yields
+    the innermost interface; the factor 4 of each interface's ``|t|^2`` is
+    applied per film. No trace-time specialisation on literal indices is made
+    for the films (their indices are arrays), so ``R`` and ``T`` agree with
+    :func:`stack_rt` to rounding. Returns ``(Rs, Rp, Ts, Tp)`` (``Ts = Tp =
+    None`` without ``transmission``).
+
+    Trace-time hints, for the caller that knows its films: ``n0_max``, an
+    upper bound of the ambient index, and ``film_n_min``, a lower bound of the
+    films' real index when ``film`` returns indices with a literal ``0``
+    imaginary part. With both and ``film_n_min >= n0_max`` every film's ``q`` is
+    real at every angle and the loop body traces one real square root and no
+    exponential per film (what :func:`stack_rt` does for literal indices).
+    """
+    cos0 = dr.clip(cos0, 0.0, 1.0)
+    sin2 = (1.0 - cos0) * (1.0 + cos0)
+    beta2 = n0 * n0 * sin2
+    if _is_literal(n0):
+        n0_max = n0
+    beta2_max = n0_max * n0_max if n0_max is not None else None
+    film_n2_min = film_n_min * film_n_min if film_n_min is not None else None
+    beta = dr.sqrt(beta2)
+    q0 = n0 * cos0
+    grazing = cos0 <= 0.0
+    n_ex = Cx.of(n_exit)
+    q_ex = _normal_index(n_ex, beta2, beta2_max)
+    zero = 0.0 * wavelength * cos0
+    one = zero + 1.0
+
+    def full(z: Cx) -> tuple:
+        return (zero + z.re, zero + z.im)
+
+    a_ex = {"s": q_ex, "p": _cmul(q_ex, _inv(n_ex.square()))}
+    inv_wl = 1.0 / wavelength
+
+    def film_terms(j):
+        m, d = film(j)
+        m = Cx.of(m)
+        q = _guard_zero_q(m, _normal_index(m, beta2, beta2_max, film_n2_min), beta, zero)
+        u = d * inv_wl
+        E = _phase_factor(q, u, True)
+        mag2 = 1.0 if _is_zero(q.im) else dr.exp((-4.0 * math.pi) * (q.im * u))
+        inv_m2 = 1.0 / (m.re * m.re) if _is_zero(m.im) else _inv(m.square())
+        return {"s": q, "p": _cmul(q, Cx.of(inv_m2))}, E, mag2
+
+    # State: j, then per polarisation N, D (complex), |T|^2, the admittance of
+    # the medium below, and that medium's phase factor (shared by s and p).
+    state = (count,
+             *full(Cx(0.0)), *full(Cx(1.0)), one,
+             *full(Cx(0.0)), *full(Cx(1.0)), one,
+             *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
+
+    def cond(j, *_):
+        return j > 0
+
+    def body(*st):
+        # Some products mix types (mi.Spectrum with Dr.Jit's Array4f): cast back,
+        # as a loop's state may not change type.
+        return tuple(type(old)(new) if dr.is_array_v(old) else new
+                     for old, new in zip(st, step(*st)))
+
+    def step(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, bsr, bsi, bpr, bpi, Er, Ei):
+        j = j - 1
+        a, E, mag2 = film_terms(j)
+        out = []
+        for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
+                                  ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
+            N, D = _rouard_step(a[pol], b, Cx(Er, Ei), N, D)
+            scale = _rescale_factor(D)
+            T = T * (4.0 * a[pol].abs2() * mag2) * (scale * scale)
+            out += [N.re * scale, N.im * scale, D.re * scale, D.im * scale, T]
+        return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
+
+    (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp,
+     bsr, bsi, bpr, bpi, Er, Ei) = dr.while_loop(state, cond, body, label=label)
+    a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
+    results = {}
+    for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
+                              ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
+        N, D = _rouard_step(a0[pol], b, Cx(Er, Ei), N, D)
+        results[pol] = (N, D, T * 4.0 * a0[pol].abs2())
+    fac = _power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
+    return _powers(results, fac, grazing)
 
 
 def film_attenuation(n0, cos0, n_film, thickness, wavelength):

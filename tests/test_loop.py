@@ -1,0 +1,210 @@
+"""The recursion as a symbolic loop over the films (``optics.stack_rt_loop``, used by
+the kernels for stacks of ``kernel.LOOP_MIN_FILMS`` films or more).
+
+References: the unrolled core (``optics.stack_rt``, itself checked against tmm
+and closed forms in tests/test_optics.py), tmm directly, and the float64 numpy
+API (``thinfilm_mi.Stack``).
+"""
+import numpy as np
+import pytest
+import tmm
+
+import drjit as dr
+import mitsuba as mi
+from drjit.llvm import Float64, UInt32
+
+import thinfilm_mi as tf
+from thinfilm_mi import kernel as K
+from thinfilm_mi import optics
+from thinfilm_mi.optics import Cx
+
+from _kernels import compiled, interaction
+
+
+def random_stack(rng, count):
+    """Films with n in [1, 6], k in [0, 20] (half of them absorbing), d in [0, 2000] nm."""
+    n = rng.uniform(1.0, 6.0, count)
+    k = rng.uniform(0.0, 20.0, count) * (rng.random(count) < 0.5)
+    d = rng.uniform(0.0, 2000.0, count)
+    return n, k, d
+
+
+def loop_rt(n0, cos, n, k, d, n_exit, wl):
+    """stack_rt_loop on Float64 buffers (padded: a gather needs a non-empty source)."""
+    eta, kk, thk = (Float64(np.r_[a, 0.0]) for a in (n, k, d))
+
+    def film(j):
+        return Cx(dr.gather(Float64, eta, j), dr.gather(Float64, kk, j)), dr.gather(Float64, thk, j)
+
+    return optics.stack_rt_loop(n0, Float64(cos), UInt32(len(n)), film, n_exit, Float64(wl))
+
+
+@pytest.mark.parametrize("count", [0, 1, 2, 5, 13, 30])
+def test_loop_is_the_unrolled_recursion(count):
+    """Same algebra, other rescaling cadence (every film instead of every third)
+    and the factor 4 of each |t|^2 applied per film: the results differ by
+    float64 rounding, amplified at most by the conditioning of |N|^2 / |D|^2 near
+    a resonance (~1e6 for these stacks), hence 1e-9."""
+    rng = np.random.default_rng(count)
+    n, k, d = random_stack(rng, count)
+    m = 20000
+    cos = rng.uniform(0.0, 1.0, m)
+    cos[:4] = [0.0, 1e-7, 1.0, 0.5]
+    wl = rng.uniform(360.0, 830.0, m)
+    n0, n_exit = 1.5, Cx(0.2, 3.4)
+    films = [(Cx(float(a), float(b)), float(c)) for a, b, c in zip(n, k, d)]
+    ref = optics.stack_rt(n0, Float64(cos), films, n_exit, Float64(wl))
+    out = loop_rt(n0, cos, n, k, d, n_exit, wl)
+    for name, a, b in zip(("Rs", "Rp", "Ts", "Tp"), ref, out):
+        a, b = np.array(a), np.array(b)
+        assert np.all(np.isfinite(b)), name
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-9, err_msg=name)
+
+
+def test_loop_matches_tmm_with_total_internal_reflection():
+    """Light from glass (n0 = 1.7) through low-index films beyond their critical
+    angle (evanescent q) and an absorbing film, on a dielectric exit: tmm's
+    coh_tmm in float64 (1e-9: the rounding of two float64 computations)."""
+    n = np.array([1.38, 2.3, 1.2, 0.5, 2.0, 1.46])
+    k = np.array([0.0, 0.0, 0.0, 2.9, 0.0, 0.0])
+    d = np.array([120.0, 80.0, 300.0, 15.0, 95.0, 60.0])
+    n0, n_exit = 1.7, 1.33
+    cases = [(c, wl) for c in (1.0, 0.8, 0.6, 0.3, 0.05) for wl in (380.0, 520.0, 700.0)]
+    cos = np.array([c for c, _ in cases])
+    wl = np.array([w for _, w in cases])
+    Rs, Rp, Ts, Tp = (np.array(v) for v in loop_rt(n0, cos, n, k, d, Cx(n_exit, 0.0), wl))
+    n_list = [n0] + list(n + 1j * k) + [n_exit]
+    d_list = [np.inf] + list(d) + [np.inf]
+    for i, (c, w) in enumerate(cases):
+        th = float(np.arccos(c))
+        s = tmm.coh_tmm("s", n_list, d_list, th, w)
+        p = tmm.coh_tmm("p", n_list, d_list, th, w)
+        assert abs(Rs[i] - s["R"]) < 1e-9 and abs(Rp[i] - p["R"]) < 1e-9, (c, w)
+        assert abs(Ts[i] - s["T"]) < 1e-9 and abs(Tp[i] - p["T"]) < 1e-9, (c, w)
+
+
+@pytest.fixture
+def llvm():
+    mi.set_variant("llvm_ad_spectral")
+
+
+def points(n, seed=3):
+    rng = np.random.default_rng(seed)
+    return rng.uniform(0.0, 1.0, n), [rng.uniform(360.0, 830.0, n) for _ in range(4)]
+
+
+# Dispersive datasets (TiO2's knots are off the 1 nm grid, so the loop's grid is
+# the union of knots), an absorbing metal film and constant indices.
+DISPERSIVE = "; ".join(["TiO2 61", "SiO2 95", "Cr 4", "TiO2 70", "1.38 120", "SiO2 82",
+                        "TiO2 55", "2.0+0.01j 40"])
+# Float32 kernel against float64: rounding ~1e-6 per operation, amplified in the
+# resonances of an 8-film stack with phases up to ~10 rad: the measured worst
+# case over these points is ~1e-5; 1e-4 leaves margin.
+F32_DEEP = 1e-4
+
+
+# Formula materials without absorption (Sellmeier): the loop's grid is the 1 nm
+# grid (cells found by arithmetic) and the buffer holds eta only.
+NON_ABSORBING = "SiO2 95; 2.3 60; MgF2 110; Si3N4 70; SiO2 95; 1.7 30"
+
+
+@pytest.mark.parametrize("layers, uniform, real", [(DISPERSIVE, False, False),
+                                                   (NON_ABSORBING, True, True)])
+def test_conductor_reads_the_loop_and_matches_float64(llvm, layers, uniform, real):
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
+                         "tabulate": False})
+    side = bsdf.stack.plan[False]
+    assert side.loop is not None
+    assert (side.loop.uniform, side.loop.real) == (uniform, real)
+    cos, wls = points(4000)
+    R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
+    ref = tf.Stack(layers, substrate="Al", ambient=K.DEFAULT_EXT_IOR)
+    for i in range(4):
+        exact = ref.rt(wls[i], np.arccos(cos)).R
+        assert np.max(np.abs(R[i] - exact)) < F32_DEEP
+
+
+def test_loop_and_unrolled_kernels_agree(llvm, monkeypatch):
+    """The same BSDF evaluated through the loop and through the unrolled films
+    (LOOP_MIN_FILMS raised): both float32, different operation order."""
+    spec = {"type": "thinfilm_conductor", "layers": DISPERSIVE, "material": "Au",
+            "tabulate": False}
+    cos, wls = points(3000, seed=4)
+    looped = mi.load_dict(spec)
+    monkeypatch.setattr(K, "LOOP_MIN_FILMS", 1000)
+    unrolled = mi.load_dict(spec)
+    assert looped.stack.plan[False].loop is not None
+    assert unrolled.stack.plan[False].loop is None
+    si, c = interaction(wls), mi.Float(cos)
+    a = np.array(looped.stack.reflectance(si, c))
+    b = np.array(unrolled.stack.reflectance(si, c))
+    assert np.max(np.abs(a - b)) < F32_DEEP
+
+
+def test_dielectric_inside_with_loop_matches_float64(llvm):
+    """thinfilm_dielectric lit from the glass: R and T of the reversed stack, with
+    total internal reflection beyond the critical angle (T = 0 there)."""
+    layers = "1.38 110; 2.3 70; 1.38 110; 2.3 70; 1.46 200"
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": layers, "int_ior": 1.52,
+                         "ext_ior": 1.0, "tabulate": False})
+    inside = bsdf.stack.plan[True]
+    assert inside.loop is not None
+    cos, wls = points(2000, seed=6)
+    R, T = bsdf.stack.reflectance(interaction(wls), mi.Float(cos), inside=True, transmission=True)
+    R, T = np.array(R), np.array(T)
+    rev = list(reversed(tf.stack.parse_layers(layers)))
+    ref = tf.Stack(rev, substrate=1.0, ambient=1.52)
+    for i in range(4):
+        r = ref.rt(wls[i], np.arccos(cos))
+        assert np.max(np.abs(R[i] - r.R)) < F32_DEEP
+        assert np.max(np.abs(T[i] - r.T)) < F32_DEEP
+    assert np.all(T[:, cos < 0.7] == 0) or np.max(T[:, cos < 0.7]) < 1e-6  # beyond 41 deg: TIR
+
+
+def test_other_depths_and_thicknesses_reuse_the_loop_kernel(llvm):
+    """The film count, thicknesses and indices are kernel inputs: a 6-film and a
+    13-film stack of the same materials, and a thickness edit, share one kernel."""
+    def make(count):
+        layers = "; ".join(f"{'TiO2' if i % 2 == 0 else 'SiO2'} {50 + 9 * i}" for i in range(count))
+        return mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Ag",
+                             "tabulate": False})
+
+    cos, wls = points(500, seed=8)
+    si, c = interaction(wls), mi.Float(cos)
+    first = make(6)
+    np.array(first.stack.reflectance(si, c))          # compiles once
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()   # clear
+        deeper = make(13)
+        R13 = np.array(deeper.stack.reflectance(si, c))
+        params = mi.traverse(first)
+        params["layers.2.thickness"] = 140.0
+        params.update()
+        R6 = np.array(first.stack.reflectance(si, c))
+        fresh = compiled(dr.kernel_history())
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    assert fresh == [], [k.get("size") for k in fresh]
+    for bsdf, R in ((deeper, R13), (first, R6)):
+        layers = [(ix.material.name, float(d[0] if dr.is_array_v(d) else d))
+                  for ix, d in zip(bsdf.stack.indices, bsdf.stack.thickness)]
+        ref = tf.Stack(layers, substrate="Ag", ambient=K.DEFAULT_EXT_IOR)
+        assert np.max(np.abs(R[0] - ref.rt(wls[0], np.arccos(cos)).R)) < F32_DEEP
+
+
+def test_gradients_through_a_film_index_bypass_the_loop(llvm):
+    """The loop's buffers are plain data: with a gradient on a film's index the
+    side is evaluated through the textures, and the gradient arrives."""
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "tabulate": False,
+                         "layers": "1.46 100; 2.3 60; 1.46 100; 2.3 60; 1.46 100"})
+    assert bsdf.stack.plan[False].loop is not None
+    params = mi.traverse(bsdf)
+    key = "layers.1.eta.value"
+    value = params[key]
+    dr.enable_grad(value)
+    params.update()
+    cos, wls = points(64)
+    R = bsdf.stack.reflectance(interaction(wls), mi.Float(cos))
+    dr.backward(dr.sum(R[0]))
+    assert np.abs(np.array(dr.grad(params[key]))).max() > 0
