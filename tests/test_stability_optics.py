@@ -5,7 +5,9 @@ Stacks of 1-30 films with n in [1, 6], k in [0, 20], d in [0, 100 um] (exactly
 critical angles of the stack +- a tiny offset, light coming from inside a dense
 dielectric (TIR), wavelengths 360-830 nm; float32 (drjit.llvm.Float) and
 float64 (drjit.llvm.Float64). Properties: every output finite, 0 <= R, T <= 1,
-R + T <= 1 + 1e-5, and R + T = 1 for lossless stacks.
+R + T <= 1 + 1e-5, and R + T = 1 for lossless stacks. Both forms of the
+recursion are checked: unrolled (``optics.stack_rt``) and the loop over films of
+the render kernels (``optics.stack_rt_loop``).
 
 To keep the number of compiled kernels small (hypothesis draws many stacks),
 every example is evaluated with opaque array inputs and the film count is drawn
@@ -19,7 +21,7 @@ import numpy as np
 import pytest
 
 import drjit as dr
-from drjit.llvm import Float, Float64
+from drjit.llvm import Float, Float64, UInt32
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
@@ -76,10 +78,21 @@ def evaluate(Arr, n0, films, n_exit, wl, cos0):
     dr.make_opaque(c)
     out = optics.stack_rt(arr(n0), c, f, ne, arr(wl))
     amp = optics.stack_amplitudes(arr(n0), c, f, ne, arr(wl))
+    # The loop over films of the render kernels (kernel.LOOP_MIN_FILMS), its
+    # films gathered from buffers (padded: a gather needs a non-empty source).
+    bufs = [Arr(np.array([v(film) for film in films] + [0.0], np.float64))
+            for v in (lambda x: complex(x[0]).real, lambda x: complex(x[0]).imag,
+                      lambda x: x[1])]
+
+    def film(j):
+        eta, k, d = (dr.gather(Arr, b, j) for b in bufs)
+        return optics.Cx(eta, k), d
+
+    looped = optics.stack_rt_loop(arr(n0), c, UInt32(len(films)), film, ne, arr(wl))
     leaves = [np.array(x, np.float64) for x in out]
     for z in (amp.rs, amp.rp, amp.ts, amp.tp):
         leaves += [np.array(z.re, np.float64), np.array(z.im, np.float64)]
-    return leaves[:4], leaves[4:]
+    return [leaves[:4], [np.array(x, np.float64) for x in looped]], leaves[4:]
 
 
 # Tolerances. Away from critical angles every Rouard step conserves flux to a
@@ -101,12 +114,17 @@ SETTINGS = settings(max_examples=8, deadline=None, derandomize=True,
 def check(Arr, stack, lossless):
     n0, films, n_exit, wl = stack
     cos0, near = angles(n0, films, n_exit)
-    (Rs, Rp, Ts, Tp), amps = evaluate(Arr, n0, films, n_exit, wl, cos0)
+    powers, amps = evaluate(Arr, n0, films, n_exit, wl, cos0)
+    for v in amps:
+        assert np.all(np.isfinite(v))
+    for Rs, Rp, Ts, Tp in powers:   # unrolled, then the loop over films
+        check_powers(Arr, Rs, Rp, Ts, Tp, cos0, near, lossless)
+
+
+def check_powers(Arr, Rs, Rp, Ts, Tp, cos0, near, lossless):
     for name, v in zip(("Rs", "Rp", "Ts", "Tp"), (Rs, Rp, Ts, Tp)):
         assert np.all(np.isfinite(v)), (name, v)
         assert np.all((v >= 0) & (v <= 1)), (name, v)
-    for v in amps:
-        assert np.all(np.isfinite(v))
     # R + T <= 1 + tol: the clamps keep each of R, T in [0, 1], the sum is only
     # as exact as the arithmetic (see TOL above).
     tol = np.where(near, TOL_CRITICAL[Arr], TOL[Arr])
@@ -139,16 +157,19 @@ def test_adjacent_layers_both_at_q_zero(Arr):
     n0 = 2.0
     cos0 = np.array([math.sqrt(0.75), 0.1, 1.0])  # sin = 1/2: beta = 1 = n of both films
     films = [(1.0, 50.0), (1.0, 80.0), (1.5, 100.0)]
-    (Rs, Rp, Ts, Tp), amps = evaluate(Arr, n0, films, 1.5 + 0j, 500.0, cos0)
-    for v in (Rs, Rp, Ts, Tp, *amps):
-        assert np.all(np.isfinite(v))
+    powers, amps = evaluate(Arr, n0, films, 1.5 + 0j, 500.0, cos0)
     # the same stack with the two films merged into one 130 nm film
-    (Rs2, Rp2, Ts2, Tp2), _ = evaluate(Arr, n0, [(1.0, 130.0), (1.5, 100.0)], 1.5 + 0j, 500.0, cos0)
+    merged, _ = evaluate(Arr, n0, [(1.0, 130.0), (1.5, 100.0)], 1.5 + 0j, 500.0, cos0)
+    for v in amps:
+        assert np.all(np.isfinite(v))
     # at q = 0 the core floors q at eps_q (see TOL_CRITICAL above): float32
     # agrees to ~sqrt(eps) there.
     tol = 1e-12 if Arr is Float64 else TOL_CRITICAL[Float]
-    np.testing.assert_allclose(Rs, Rs2, atol=tol)
-    np.testing.assert_allclose(Tp, Tp2, atol=tol)
+    for (Rs, Rp, Ts, Tp), (Rs2, _, _, Tp2) in zip(powers, merged):  # unrolled, loop
+        for v in (Rs, Rp, Ts, Tp):
+            assert np.all(np.isfinite(v))
+        np.testing.assert_allclose(Rs, Rs2, atol=tol)
+        np.testing.assert_allclose(Tp, Tp2, atol=tol)
 
 
 # ---------------------------------------------------------------------------
