@@ -33,11 +33,11 @@ from typing import Callable
 
 import numpy as np
 import drjit as dr
-from drjit.llvm import Float, Float64
+from drjit.llvm import Float, Float64, UInt32
 
 from thinfilm_mi._llvm import require_llvm
 from thinfilm_mi.kernel import unpolarised_rt
-from thinfilm_mi.optics import Cx
+from thinfilm_mi.optics import Cx, stack_rt_loop
 
 F32 = np.float32
 
@@ -263,8 +263,14 @@ REGIMES: dict[str, Callable] = {
 # ---------------------------------------------------------------------------
 # Evaluation
 # ---------------------------------------------------------------------------
-def run_core(c: Case, Arr):
-    """unpolarised_rt on Dr.Jit arrays of type Arr (Float or Float64): (R, T) as numpy."""
+def run_core(c: Case, Arr, loop: bool = False):
+    """unpolarised_rt on Dr.Jit arrays of type Arr (Float or Float64): (R, T) as numpy.
+
+    ``loop``: the form render kernels use for stacks of ``kernel.LOOP_MIN_FILMS``
+    films or more, ``optics.stack_rt_loop``, with each lane's films gathered
+    from film-major buffers (as ``kernel._LoopFilms`` gathers a film's index),
+    ``R = (Rs + Rp) / 2`` and ``T`` clipped to ``[0, 1 - R]`` as in the kernel.
+    """
     def real(a):
         x = Arr(np.ascontiguousarray(a, dtype=np.float64))
         dr.make_opaque(x)
@@ -274,8 +280,27 @@ def run_core(c: Case, Arr):
         a = np.asarray(a, dtype=np.complex128)
         return Cx(real(a.real), real(a.imag))
 
-    films = [(cx(n), real(d)) for n, d in c.films]
-    R, T = unpolarised_rt(real(c.n0), real(c.cos0), films, cx(c.n_exit), real(c.wl), True)
+    if loop:
+        N = c.cos0.size
+        pad = [np.zeros(N)]   # a gather needs a non-empty source, also for 0 films
+        eta = real(np.concatenate([np.real(n) for n, _ in c.films] + pad))
+        k = real(np.concatenate([np.imag(n) for n, _ in c.films] + pad))
+        thk = real(np.concatenate([np.asarray(d, np.float64) for _, d in c.films] + pad))
+        lane = dr.arange(UInt32, N)
+
+        def film(j):
+            i = j * N + lane
+            return Cx(dr.gather(Arr, eta, i), dr.gather(Arr, k, i)), dr.gather(Arr, thk, i)
+
+        count = UInt32(len(c.films))
+        dr.make_opaque(count)
+        Rs, Rp, Ts, Tp = stack_rt_loop(real(c.n0), real(c.cos0), count, film, cx(c.n_exit),
+                                       real(c.wl))
+        R = 0.5 * (Rs + Rp)
+        T = dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+    else:
+        films = [(cx(n), real(d)) for n, d in c.films]
+        R, T = unpolarised_rt(real(c.n0), real(c.cos0), films, cx(c.n_exit), real(c.wl), True)
     dr.eval(R, T)
     return np.array(R, dtype=np.float64), np.array(T, dtype=np.float64)
 
@@ -325,6 +350,14 @@ def measure(name, make, rng, N, n_tmm):
         [np.asarray(n).imag == 0 for n, _ in case.films], axis=0)
     dev32 = np.abs(R32 + T32 - 1)[lossless]
     dev64 = np.abs(R64 + T64 - 1)[lossless]
+    # The loop form (float32) against the same float64 reference.
+    RL, TL = run_core(case, Float, loop=True)
+    errL = np.maximum(np.abs(RL - R64), np.abs(TL - T64))
+    loop = {"nonfinite": int(np.sum(~np.isfinite(RL)) + np.sum(~np.isfinite(TL))),
+            "out": int(np.sum((RL < 0) | (RL > 1) | (TL < 0) | (TL > 1) | (RL + TL > 1 + 1e-5))),
+            "max": float(np.max(errL)), "p999": float(np.quantile(errL, 0.999)),
+            "unexplained": int(np.sum(errL > 4.0 * sens + 1e-5)),
+            "lossless": float(np.abs(RL + TL - 1)[lossless].max()) if lossless.any() else None}
     idx = rng.choice(N, size=min(n_tmm, N), replace=False)
     Rt, Tt = run_tmm(case, idx)
     ok = np.isfinite(Rt)
@@ -341,6 +374,7 @@ def measure(name, make, rng, N, n_tmm):
         "tmm64": float(e64.max()) if ok.any() else None,
         "worst": {"cos0": case.cos0[worst], "wl": case.wl[worst], "n0": case.n0[worst],
                   "R32": R32[worst], "R64": R64[worst], "T32": T32[worst], "T64": T64[worst]},
+        "loop": loop,
         "seconds": time.perf_counter() - t0,
         "lossless_dev": None,
     }
@@ -388,6 +422,17 @@ def main(argv=None):
               f"{lossless_cell(r['lossless'])} | "
               f"{r['tmm_n']} | {fmt(r['tmm32'])} | {fmt(r['tmm64'])} |",
               flush=True)
+    print()
+    print("The loop over films (optics.stack_rt_loop: render kernels for stacks of "
+          "kernel.LOOP_MIN_FILMS films or more), float32, against the same float64 reference:")
+    print()
+    print("| regime | non-finite | out of range | max err vs f64 | 99.9% err vs f64 "
+          "| err > 4 sens + 1e-5 | lossless: max abs(1 - R - T) f32 |")
+    print("|" + "---|" * 7)
+    for r in rows:
+        L = r["loop"]
+        print(f"| {r['regime']} | {L['nonfinite']} | {L['out']} | {L['max']:.1e} | "
+              f"{L['p999']:.1e} | {L['unexplained']} | {fmt(L['lossless'])} |")
     print()
     print(f"total {time.perf_counter() - t0:.0f} s")
     if args.worst:

@@ -356,9 +356,27 @@ def _rouard_step(a: Cx, b: Cx, E_b: Cx, N: Cx, D: Cx):
 
 
 def _rescale_factor(D: Cx):
-    """``1 / (|Re D| + |Im D|)`` (1 where ``D = 0``): the projective rescaling."""
-    l1 = dr.abs(D.re) + dr.abs(D.im)
-    return 1.0 / dr.select(l1 > 0, l1, 1.0)
+    """The projective rescaling: the power of two nearest ``1 / (|Re D| + |Im D|)``
+    (within a factor 2), so that multiplying ``(N, D, T)`` by it is exact and
+    adds no rounding to the recursion. It is a constant of the ratios (no
+    gradient flows through it)."""
+    return _inverse_power_of_two(dr.abs(D.re) + dr.abs(D.im))
+
+
+def _inverse_power_of_two(x):
+    """``2^-e`` for ``x = m 2^e``, ``1 <= m < 2`` (``x >= 0``; 2^127 or 2^1023 for 0),
+    from the exponent bits: exact and cheap, no division."""
+    if not dr.is_array_v(x):
+        return 2.0 ** (1 - math.frexp(x)[1]) if x > 0 else 1.0
+    if dr.depth_v(x) > 1:   # e.g. mi.Spectrum: per component
+        return type(x)(*[_inverse_power_of_two(x[i]) for i in range(len(x))])
+    x = dr.detach(x)
+    U = dr.uint_array_t(type(x))
+    bits = dr.reinterpret_array(U, x)
+    if dr.type_v(x) == dr.VarType.Float32:
+        # exponent field E (x >= 2^(E - 127)) -> 254 - E: 2^(127 - E), for E <= 253
+        return dr.reinterpret_array(type(x), U(0x7F000000) - (bits & U(0x7F800000)))
+    return dr.reinterpret_array(type(x), U(0x7FE0000000000000) - (bits & U(0x7FF0000000000000)))
 
 
 def _recursion(a: list, E: list, e1: list | None, t_power: list | None, zero_pairs: list):
