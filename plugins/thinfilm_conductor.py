@@ -63,9 +63,11 @@ unpolarised variants are supported.
 
 The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
 (``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``
-as differentiable, opaque parameters: in exact mode changing them does not
-recompile; a table is rebuilt on a change and keeps its shape when it can (a
-new shape recompiles the render kernel once).
+as differentiable, opaque parameters: changing them does not recompile the
+render kernel (a table is rebuilt, ~10-30 ms, and its shape is a kernel input
+too). In exact mode a stack of 4 films or more is evaluated by a loop over the
+films inside the kernel, so the kernel and its compile time do not grow with
+the number of films.
 
 .. tabs::
     .. code-tab:: xml

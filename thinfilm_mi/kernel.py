@@ -8,7 +8,9 @@
   kernel inputs, so editing them through ``mi.traverse`` does not recompile.
 * :class:`KernelStack` — films (index and opaque thickness) between an ambient
   index and a substrate index, evaluated with the optics core on ``mi.Spectrum``
-  (all wavelengths of a path at once) in float32 inside the render kernel.
+  (all wavelengths of a path at once) in float32 inside the render kernel:
+  from a table, unrolled film by film (fewer than :data:`LOOP_MIN_FILMS`), or
+  as a loop over buffers of the films (:class:`_LoopFilms`).
 * :func:`stack_from_props` — reads ``layers`` / ``thin_film_ior`` +
   ``thin_film_thickness`` / ``ext_ior`` from a plugin's ``mi.Properties`` and
   validates them at scene load time.
@@ -352,7 +354,9 @@ class KernelStack:
     ``T = 0``; films thicker than ``coherence_thickness`` are averaged
     incoherently; with ``tabulate`` (``"auto"``, ``True``, ``False``) the
     needed sides are read from a verified table (:mod:`thinfilm_mi.tables`)
-    within ``table_error``; identical stacks share one table.
+    within ``table_error``; identical stacks share one table. Sides evaluated
+    exactly with :data:`LOOP_MIN_FILMS` films or more run the recursion as a
+    loop over the films in JIT variants (:class:`_LoopFilms`).
     """
 
     def __init__(self, films: Sequence[tuple[SpectralIndex, float]], ambient: SpectralIndex,

@@ -690,11 +690,13 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
         inv_m2 = 1.0 / (m.re * m.re) if _is_zero(m.im) else _inv(m.square())
         return {"s": q, "p": _cmul(q, Cx.of(inv_m2))}, E, mag2
 
-    # State: j, then per polarisation N, D (complex), |T|^2, the admittance of
-    # the medium below, and that medium's phase factor (shared by s and p).
+    # State: j, then per polarisation N, D (complex), |T|^2 (a constant 1, not
+    # traced, without transmission), the admittance of the medium below, and that
+    # medium's phase factor (shared by s and p).
+    t0 = one if transmission else 1.0
     state = (count,
-             *full(Cx(0.0)), *full(Cx(1.0)), one,
-             *full(Cx(0.0)), *full(Cx(1.0)), one,
+             *full(Cx(0.0)), *full(Cx(1.0)), t0,
+             *full(Cx(0.0)), *full(Cx(1.0)), t0,
              *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
 
     def cond(j, *_):
@@ -714,7 +716,8 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
                                   ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
             N, D = _rouard_step(a[pol], b, Cx(Er, Ei), N, D)
             scale = _rescale_factor(D)
-            T = T * (4.0 * a[pol].abs2() * mag2) * (scale * scale)
+            if transmission:
+                T = T * (4.0 * a[pol].abs2() * mag2) * (scale * scale)
             out += [N.re * scale, N.im * scale, D.re * scale, D.im * scale, T]
         return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
 
