@@ -1,7 +1,8 @@
 """Render-time cost of the thin-film BSDFs (exact and table modes), image error of
 the tables, and kernel compilations in a thickness sweep.
 
-    python benchmarks/render_bench.py [--repeats 5] [--skip-first] [--skip-de] [--skip-sweep]
+    python benchmarks/render_bench.py [--repeats 5] [--first-repeats 3] [--skip-first]
+                                      [--skip-de] [--skip-sweep]
 
 Variant llvm_ad_spectral, one process (first-image runs in subprocesses):
 
@@ -12,12 +13,15 @@ Variant llvm_ad_spectral, one process (first-image runs in subprocesses):
    ``numpy.random.default_rng(6)``, as in speed_vs_error.py), with ``tabulate``
    false (exact) and true (table; the mode actually obtained is printed: a stack
    that cannot be tabulated within ``table_error`` is rendered exactly). One
-   warm-up render, then the median of --repeats renders (``dr.eval`` +
-   ``dr.sync_thread``), different seeds.
+   warm-up render each, then --repeats rounds in which every configuration
+   renders once (round-robin, so a slow spell of the shared machine hits all
+   alike); the median per configuration (``dr.eval`` + ``dr.sync_thread``),
+   different seeds.
 2. First image with an empty kernel cache: for each configuration a subprocess
    with ``DRJIT_CACHE_DIR`` set to a fresh temporary folder times ``mi.load_dict``
-   + the first ``mi.render`` (imports not timed); ratio to ``conductor`` measured
-   the same way.
+   + the first ``mi.render`` (imports not timed); --first-repeats rounds,
+   round-robin, the run with the median total is reported; ratio to
+   ``conductor`` measured the same way.
 3. Image error of table mode against exact mode on the paper's Fig. 8 scenes
    (scenes/fig8*.xml, which do not expose ``tabulate`` as a $parameter: the
    BSDF gets ``<string name="tabulate" value="..."/>`` in a modified copy of the
@@ -110,19 +114,24 @@ def mode_of(scene) -> str:
 def steady(repeats: int):
     import mitsuba as mi
     configs = ["conductor"] + [f"{L}:{m}" for L in FILMS for m in ("exact", "table")]
-    out = {}
+    scenes, loads = {}, {}
     for c in configs:
         t0 = time.perf_counter()
-        scene = mi.load_dict(scene_dict(c))
-        t_load = time.perf_counter() - t0
-        render_sync(scene, seed=0)   # warm-up: compiles
-        ts = []
-        for i in range(repeats):
+        scenes[c] = mi.load_dict(scene_dict(c))
+        loads[c] = time.perf_counter() - t0
+        render_sync(scenes[c], seed=0)   # warm-up: compiles
+    # Round-robin: every configuration once per round, so that a slow spell of the
+    # (shared) machine hits all of them alike instead of one configuration.
+    ts = {c: [] for c in configs}
+    for i in range(repeats):
+        for c in configs:
             t = time.perf_counter()
-            render_sync(scene, seed=i + 1)
-            ts.append(time.perf_counter() - t)
-        out[c] = (float(np.median(ts)), float(np.min(ts)), mode_of(scene), t_load)
-        print(f"  {c}: median {out[c][0]:.3f} s, mode {out[c][2]}, load {t_load:.2f} s",
+            render_sync(scenes[c], seed=i + 1)
+            ts[c].append(time.perf_counter() - t)
+    out = {}
+    for c in configs:
+        out[c] = (float(np.median(ts[c])), float(np.min(ts[c])), mode_of(scenes[c]), loads[c])
+        print(f"  {c}: median {out[c][0]:.3f} s, mode {out[c][2]}, load {loads[c]:.2f} s",
               file=sys.stderr, flush=True)
     base = out["conductor"][0]
     print("\n### Steady render time (256x256, 16 spp, median of "
@@ -155,20 +164,25 @@ def first_image_child(config: str):
     print(json.dumps({"load": t1 - t0, "render": t2 - t1, "mode": mode_of(scene)}))
 
 
-def first_image():
+def first_image(repeats: int):
     configs = ["conductor"] + [f"{L}:{m}" for L in FILMS for m in ("exact", "table")]
+    runs = {c: [] for c in configs}
+    for _ in range(repeats):   # round-robin, as in steady()
+        for c in configs:
+            with tempfile.TemporaryDirectory(prefix="drjit_cache_") as cache:
+                env = dict(os.environ, DRJIT_CACHE_DIR=cache)
+                res = subprocess.run([sys.executable, os.path.abspath(__file__),
+                                      "--first-image-child", c], env=env, capture_output=True,
+                                     text=True, check=True)
+                runs[c].append(json.loads(res.stdout.strip().splitlines()[-1]))
+            print(f"  first image {c}: {runs[c][-1]}", file=sys.stderr, flush=True)
     out = {}
-    for c in configs:
-        with tempfile.TemporaryDirectory(prefix="drjit_cache_") as cache:
-            env = dict(os.environ, DRJIT_CACHE_DIR=cache)
-            res = subprocess.run([sys.executable, os.path.abspath(__file__),
-                                  "--first-image-child", c], env=env, capture_output=True,
-                                 text=True, check=True)
-            out[c] = json.loads(res.stdout.strip().splitlines()[-1])
-        print(f"  first image {c}: {out[c]}", file=sys.stderr, flush=True)
+    for c in configs:   # the run with the median total
+        ordered = sorted(runs[c], key=lambda r: r["load"] + r["render"])
+        out[c] = ordered[len(ordered) // 2]
     base = out["conductor"]["load"] + out["conductor"]["render"]
     print("\n### First image, empty kernel cache (fresh DRJIT_CACHE_DIR per "
-          "configuration; one run each)\n")
+          f"configuration and run; the run with the median total of {repeats})\n")
     print("| BSDF | films | mode asked | mode obtained | mi.load (s) | first mi.render (s) "
           "| total (s) | ratio to conductor |")
     print("|---|---:|---|---|---:|---:|---:|---:|")
@@ -296,6 +310,7 @@ def sweep(frames: int = 20):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--first-repeats", type=int, default=3)
     ap.add_argument("--de-res", type=int, default=200)
     ap.add_argument("--de-spp", type=int, default=64)
     ap.add_argument("--skip-steady", action="store_true")
@@ -318,7 +333,7 @@ def main():
     if not args.skip_steady:
         steady(args.repeats)
     if not args.skip_first:
-        first_image()
+        first_image(args.first_repeats)
     if not args.skip_de:
         image_error(args.de_res, args.de_spp)
     if not args.skip_sweep:
