@@ -208,3 +208,18 @@ def test_gradients_through_a_film_index_bypass_the_loop(llvm):
     R = bsdf.stack.reflectance(interaction(wls), mi.Float(cos))
     dr.backward(dr.sum(R[0]))
     assert np.abs(np.array(dr.grad(params[key]))).max() > 0
+
+
+def test_thickness_texture_scales_the_loop_films(llvm):
+    """A ``thickness`` texture multiplies every film's thickness at the hit: with a
+    constant 0.5 the looped stack equals the stack of half-thick films."""
+    layers = "SiO2 190; 2.3 120; MgF2 220; 2.3 140; SiO2 160"
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
+                         "thickness": 0.5})
+    assert bsdf.stack.plan[False].loop is not None
+    cos, wls = points(2000, seed=9)
+    R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
+    half = [(m, d / 2) for m, d in tf.stack.parse_layers(layers)]
+    ref = tf.Stack(half, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    for i in range(4):
+        assert np.max(np.abs(R[i] - ref.rt(wls[i], np.arccos(cos)).R)) < F32_DEEP
