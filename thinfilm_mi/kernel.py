@@ -228,8 +228,9 @@ def _scalar(d) -> float:
 #: Exact evaluation of a side with at least this many films runs the recursion
 #: as a symbolic Dr.Jit loop over buffers of the films (:class:`_LoopFilms`):
 #: one loop body in the kernel whatever the depth, so the kernel compiles as fast
-#: for 30 films as for 3 (see benchmarks/render_bench.py). Below it the films are
-#: unrolled, which lets literal indices specialise the code.
+#: for 30 films as for 3, and each hit is cheaper from 4 films on (measurements in
+#: benchmarks/SPEED.md). Below it the films are unrolled, which lets literal
+#: indices specialise the code.
 LOOP_MIN_FILMS = 4
 
 
@@ -264,7 +265,6 @@ class _LoopFilms:
         self.n0_max = float(np.max(texture_on_grid(n0.eta)))
         cols = [eta[:, :-1], eta[:, 1:]] if self.real else \
             [eta[:, :-1], k[:, :-1], eta[:, 1:], k[:, 1:]]
-        self.width = len(cols)
         self.buffer = aligned_array(np.stack(cols, axis=-1), np.float32, mi.Float)
         self.grid = aligned_array(grid, np.float32, mi.Float)
         self.thickness = aligned_array([_scalar(d) for _, d, _ in films], np.float32, mi.Float)

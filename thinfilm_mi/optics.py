@@ -647,10 +647,10 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     outwards, starting from ``gamma = 0`` inside the exit medium; it rescales
     after every film. ``(N, D)`` start at ``(0, 1)`` so the first step yields
     the innermost interface; the factor 4 of each interface's ``|t|^2`` is
-    applied per film. No trace-time specialisation on literal indices is made
-    for the films (their indices are arrays), so ``R`` and ``T`` agree with
-    :func:`stack_rt` to rounding. Returns ``(Rs, Rp, Ts, Tp)`` (``Ts = Tp =
-    None`` without ``transmission``).
+    applied per film. ``R`` and ``T`` agree with :func:`stack_rt` to rounding.
+    The films' indices are arrays here, so :func:`stack_rt`'s specialisation on
+    literal indices is replaced by the hints below. Returns ``(Rs, Rp, Ts,
+    Tp)`` (``Ts = Tp = None`` without ``transmission``).
 
     Trace-time hints, for the caller that knows its films: ``n0_max``, an
     upper bound of the ambient index, and ``film_n_min``, a lower bound of the
