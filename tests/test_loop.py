@@ -223,3 +223,16 @@ def test_thickness_texture_scales_the_loop_films(llvm):
     ref = tf.Stack(half, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
     for i in range(4):
         assert np.max(np.abs(R[i] - ref.rt(wls[i], np.arccos(cos)).R)) < F32_DEEP
+
+
+def test_tabulated_sides_build_no_loop_buffers(llvm):
+    """A side read from its table never evaluates its films, so no loop buffers are
+    built for it; the same stack exact gets them."""
+    layers = "1.46 100; 1.38 80; 1.46 60; 1.38 90"
+    tabled = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
+                           "tabulate": True})
+    side = tabled.stack.plan[False]
+    assert side.table is not None and side.loop is None
+    exact = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
+                          "tabulate": False})
+    assert exact.stack.plan[False].loop is not None

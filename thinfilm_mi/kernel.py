@@ -417,11 +417,20 @@ class KernelStack:
         opaque = [self._opaque(ix, dv) for ix, _, dv in kept]
         self.plan = {inside: self._side(inside, t, films, opaque)
                      for inside, t in self.sides.items()}
+        self._plan_tables()
         if dr.is_jit_v(_mi().Float):
             for side in self.plan.values():
-                if (len(side.films) >= LOOP_MIN_FILMS and not any(side.incoherent)
+                # A side whose table serves the calls its plan is for (R, and T
+                # where the plan asks for it) does not evaluate its films: no
+                # buffers for it (other calls fall back to the unrolled films).
+                served = side.table is not None and (side.table.channels > 1 or side.opaque
+                                                     or not side.transmission)
+                if (not served and len(side.films) >= LOOP_MIN_FILMS
+                        and not any(side.incoherent)
                         and all(ix.knots is not None for ix, _, _ in side.films)):
                     side.loop = _LoopFilms(side.films, side.n0)
+
+    def _plan_tables(self) -> None:
         # "auto" tabulates in vectorised variants only: in scalar variants every
         # call is Python anyway and the load-time build would dominate.
         want = self.tabulate is True or (
