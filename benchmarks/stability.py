@@ -37,7 +37,7 @@ from drjit.llvm import Float, Float64, UInt32
 
 from thinfilm_mi._llvm import require_llvm
 from thinfilm_mi.kernel import unpolarised_rt
-from thinfilm_mi.optics import Cx, stack_rt_loop
+from thinfilm_mi.optics import REAL_LOOP_MARGIN, Cx, stack_rt_loop
 
 F32 = np.float32
 
@@ -245,6 +245,28 @@ def regime_random30_lossless(rng, N):
                 rng.uniform(0, 1, N), rng.uniform(360, 830, N))
 
 
+def regime_real_on_metal(rng, N):
+    """30 lossless films above the ambient (n in [1.3, 4], d in [0, 2 um]) on a metal
+    (n in [0.05, 3], k in [1, 20]), any angle including grazing: the render
+    kernels run such stacks through the real-amplitude loop."""
+    films = [(rng.uniform(1.3, 4.0, N) + 0j, rng.uniform(0.0, 2000.0, N)) for _ in range(30)]
+    cos0 = np.where(rng.random(N) < 0.1, logu(rng, 1e-7, 1e-2, N), rng.uniform(0, 1, N))
+    return Case(np.ones(N), films, rng.uniform(0.05, 3.0, N) + 1j * rng.uniform(1, 20, N),
+                cos0, rng.uniform(360, 830, N))
+
+
+def regime_real_from_glass(rng, N):
+    """Light from glass (n0 = 1.5) through 7 lossless films of n in [1.52, 4] onto
+    air: total internal reflection at the exit beyond 41.8 degrees, with cos
+    within 1e-8..1e-2 of that critical angle for a third of the points."""
+    films = [(rng.uniform(1.52, 4.0, N) + 0j, rng.uniform(0.0, 1000.0, N)) for _ in range(7)]
+    c_crit = cos_from_beta(1.5, 1.0)
+    near = c_crit + rng.choice([-1.0, 1.0], N) * logu(rng, 1e-8, 1e-2, N)
+    cos0 = np.where(rng.random(N) < 1 / 3, near, rng.uniform(0, 1, N))
+    return Case(np.full(N, 1.5), films, np.full(N, 1.0 + 0j), np.clip(cos0, 0.0, 1.0),
+                rng.uniform(360, 830, N))
+
+
 REGIMES: dict[str, Callable] = {
     "normal (cos = 1), 7 films": regime_normal,
     "grazing (cos 0, 1e-7..1e-3)": regime_grazing,
@@ -257,19 +279,36 @@ REGIMES: dict[str, Callable] = {
     "metals, k = 20": regime_metals,
     "random 30 films (n, k, d extreme)": regime_random30,
     "random 30 films, lossless, <= 1 um": regime_random30_lossless,
+    "real films above n0, 30, on metals": regime_real_on_metal,
+    "real films above n0, 7, from glass (exit TIR)": regime_real_from_glass,
 }
 
 
 # ---------------------------------------------------------------------------
 # Evaluation
 # ---------------------------------------------------------------------------
-def run_core(c: Case, Arr, loop: bool = False):
+def real_hints(c: Case):
+    """The trace-time hints with which the render kernels run a stack whose films
+    are all real and above the ambient (``optics._stack_rt_loop_real``), or None."""
+    if not c.films or any(np.any(np.imag(n) != 0) for n, _ in c.films):
+        return None
+    lo = min(float(np.min(np.real(n))) for n, _ in c.films)
+    hi = max(float(np.max(np.real(n))) for n, _ in c.films)
+    n0_max = float(np.max(c.n0))
+    if lo < REAL_LOOP_MARGIN * n0_max:
+        return None
+    return dict(n0_max=n0_max, film_n_min=lo, film_n_max=hi, films_max=len(c.films))
+
+
+def run_core(c: Case, Arr, loop: bool | str = False):
     """unpolarised_rt on Dr.Jit arrays of type Arr (Float or Float64): (R, T) as numpy.
 
     ``loop``: the form render kernels use for stacks of ``kernel.LOOP_MIN_FILMS``
     films or more, ``optics.stack_rt_loop``, with each lane's films gathered
     from film-major buffers (as ``kernel._LoopFilms`` gathers a film's index),
-    ``R = (Rs + Rp) / 2`` and ``T`` clipped to ``[0, 1 - R]`` as in the kernel.
+    ``R = (Rs + Rp) / 2`` and ``T`` clipped to ``[0, 1 - R]`` as in the kernel;
+    ``loop="real"``: the same with the hints of :func:`real_hints` (the
+    real-amplitude loop the kernels use for real films above the ambient).
     """
     def real(a):
         x = Arr(np.ascontiguousarray(a, dtype=np.float64))
@@ -294,8 +333,9 @@ def run_core(c: Case, Arr, loop: bool = False):
 
         count = UInt32(len(c.films))
         dr.make_opaque(count)
+        hints = real_hints(c) if loop == "real" else {}
         Rs, Rp, Ts, Tp = stack_rt_loop(real(c.n0), real(c.cos0), count, film, cx(c.n_exit),
-                                       real(c.wl))
+                                       real(c.wl), **hints)
         R = 0.5 * (Rs + Rp)
         T = dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
     else:
@@ -351,13 +391,19 @@ def measure(name, make, rng, N, n_tmm):
     dev32 = np.abs(R32 + T32 - 1)[lossless]
     dev64 = np.abs(R64 + T64 - 1)[lossless]
     # The loop form (float32) against the same float64 reference.
-    RL, TL = run_core(case, Float, loop=True)
-    errL = np.maximum(np.abs(RL - R64), np.abs(TL - T64))
-    loop = {"nonfinite": int(np.sum(~np.isfinite(RL)) + np.sum(~np.isfinite(TL))),
-            "out": int(np.sum((RL < 0) | (RL > 1) | (TL < 0) | (TL > 1) | (RL + TL > 1 + 1e-5))),
-            "max": float(np.max(errL)), "p999": float(np.quantile(errL, 0.999)),
-            "unexplained": int(np.sum(errL > 4.0 * sens + 1e-5)),
-            "lossless": float(np.abs(RL + TL - 1)[lossless].max()) if lossless.any() else None}
+    def loop_stats(form):
+        RL, TL = run_core(case, Float, loop=form)
+        errL = np.maximum(np.abs(RL - R64), np.abs(TL - T64))
+        return {"nonfinite": int(np.sum(~np.isfinite(RL)) + np.sum(~np.isfinite(TL))),
+                "out": int(np.sum((RL < 0) | (RL > 1) | (TL < 0) | (TL > 1)
+                                  | (RL + TL > 1 + 1e-5))),
+                "max": float(np.max(errL)), "p999": float(np.quantile(errL, 0.999)),
+                "unexplained": int(np.sum(errL > 4.0 * sens + 1e-5)),
+                "lossless": float(np.abs(RL + TL - 1)[lossless].max()) if lossless.any()
+                else None}
+    loop = loop_stats(True)
+    # ... and the real-amplitude loop, where the kernels would use it
+    loop_real = loop_stats("real") if real_hints(case) else None
     idx = rng.choice(N, size=min(n_tmm, N), replace=False)
     Rt, Tt = run_tmm(case, idx)
     ok = np.isfinite(Rt)
@@ -375,6 +421,7 @@ def measure(name, make, rng, N, n_tmm):
         "worst": {"cos0": case.cos0[worst], "wl": case.wl[worst], "n0": case.n0[worst],
                   "R32": R32[worst], "R64": R64[worst], "T32": T32[worst], "T64": T64[worst]},
         "loop": loop,
+        "loop_real": loop_real,
         "seconds": time.perf_counter() - t0,
         "lossless_dev": None,
     }
@@ -423,17 +470,24 @@ def main(argv=None):
               f"{r['tmm_n']} | {fmt(r['tmm32'])} | {fmt(r['tmm64'])} |",
               flush=True)
     print()
-    print("The loop over films (optics.stack_rt_loop: render kernels for stacks of "
-          "kernel.LOOP_MIN_FILMS films or more), float32, against the same float64 reference:")
-    print()
-    print("| regime | non-finite | out of range | max err vs f64 | 99.9% err vs f64 "
-          "| err > 4 sens + 1e-5 | lossless: max abs(1 - R - T) f32 |")
-    print("|" + "---|" * 7)
-    for r in rows:
-        L = r["loop"]
-        print(f"| {r['regime']} | {L['nonfinite']} | {L['out']} | {L['max']:.1e} | "
-              f"{L['p999']:.1e} | {L['unexplained']} | {fmt(L['lossless'])} |")
-    print()
+    for key, title in (
+            ("loop", "The loop over films (optics.stack_rt_loop: render kernels for stacks of "
+                     "kernel.LOOP_MIN_FILMS films or more), float32, against the same float64 "
+                     "reference:"),
+            ("loop_real", "The real-amplitude loop (optics._stack_rt_loop_real: render kernels "
+                          "whose films are all real and above the ambient, at any depth), on "
+                          "the regimes that qualify:")):
+        print(title)
+        print()
+        print("| regime | non-finite | out of range | max err vs f64 | 99.9% err vs f64 "
+              "| err > 4 sens + 1e-5 | lossless: max abs(1 - R - T) f32 |")
+        print("|" + "---|" * 7)
+        for r in rows:
+            L = r[key]
+            if L is not None:
+                print(f"| {r['regime']} | {L['nonfinite']} | {L['out']} | {L['max']:.1e} | "
+                      f"{L['p999']:.1e} | {L['unexplained']} | {fmt(L['lossless'])} |")
+        print()
     print(f"total {time.perf_counter() - t0:.0f} s")
     if args.worst:
         for r in rows:

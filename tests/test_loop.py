@@ -72,8 +72,15 @@ def test_loop_matches_tmm_with_total_internal_reflection():
     cases = [(c, wl) for c in (1.0, 0.8, 0.6, 0.3, 0.05) for wl in (380.0, 520.0, 700.0)]
     cos = np.array([c for c, _ in cases])
     wl = np.array([w for _, w in cases])
-    Rs, Rp, Ts, Tp = (np.array(v) for v in loop_rt(n0, cos, n, k, d, Cx(n_exit, 0.0), wl))
-    n_list = [n0] + list(n + 1j * k) + [n_exit]
+    out = loop_rt(n0, cos, n, k, d, Cx(n_exit, 0.0), wl)
+    assert_matches_tmm(out, n0, n + 1j * k, d, n_exit, cases)
+
+
+def assert_matches_tmm(out, n0, n, d, n_exit, cases):
+    """``(Rs, Rp, Ts, Tp)`` at the ``(cos, wavelength)`` ``cases`` against tmm's
+    coh_tmm (1e-9: the rounding of two float64 computations)."""
+    Rs, Rp, Ts, Tp = (np.array(v) for v in out)
+    n_list = [n0] + list(n) + [n_exit]
     d_list = [np.inf] + list(d) + [np.inf]
     for i, (c, w) in enumerate(cases):
         th = float(np.arccos(c))
@@ -236,3 +243,151 @@ def test_tabulated_sides_build_no_loop_buffers(llvm):
     exact = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
                           "tabulate": False})
     assert exact.stack.plan[False].loop is not None
+
+
+# --- the real-amplitude loop (optics._stack_rt_loop_real) ----------------------
+# Films of real index above the ambient's: the kernels' loop then divides each
+# Rouard step by a_j + a_j+1 and works with real Fresnel amplitudes.
+
+def real_loop_rt(n0, cos, n, d, n_exit, wl, Arr=Float64, films_max="count"):
+    """stack_rt_loop with the hints of a kernel whose films are real: the
+    real-amplitude loop (``films_max``: the count, or None to force rescaling)."""
+    eta, thk = (Arr(np.r_[a, 0.0]) for a in (n, d))
+
+    def film(j):
+        return Cx(dr.gather(Arr, eta, j), 0.0), dr.gather(Arr, thk, j)
+
+    return optics.stack_rt_loop(n0, Arr(cos), UInt32(len(n)), film, n_exit, Arr(wl),
+                                n0_max=n0, film_n_min=float(np.min(n, initial=2.0 * n0)),
+                                film_n_max=float(np.max(n, initial=2.0 * n0)),
+                                films_max=len(n) if films_max == "count" else films_max)
+
+
+@pytest.fixture
+def real_path_calls(monkeypatch):
+    """Counts the calls of the real-amplitude loop (so a test knows it ran)."""
+    calls = []
+    original = optics._stack_rt_loop_real
+
+    def spy(*args, **kw):
+        calls.append(kw.get("films_max"))
+        return original(*args, **kw)
+    monkeypatch.setattr(optics, "_stack_rt_loop_real", spy)
+    return calls
+
+
+@pytest.mark.parametrize("count", [0, 1, 2, 5, 13, 30])
+@pytest.mark.parametrize("n0, n_exit", [(1.0, Cx(0.2, 3.4)), (1.5, Cx(1.0, 0.0)),
+                                        (1.33, Cx(1.52, 0.0))],
+                         ids=["metal", "exit-tir", "glass"])
+def test_real_loop_is_the_unrolled_recursion(count, n0, n_exit, real_path_calls):
+    """Same Rouard step divided by a_j + a_j+1 instead of multiplied by it, so the
+    results differ by float64 rounding, amplified by the conditioning of
+    |N|^2 / |D|^2 near resonances (~1e6 here): 1e-9. Both with the rescaling and
+    without it (films_max within the bound of _real_loop_rescale). The exit-tir
+    case is lit from glass (n0 = 1.5) with air below: q of the exit is
+    imaginary beyond 41.8 degrees."""
+    rng = np.random.default_rng(100 + count)
+    n = rng.uniform(1.01 * n0, 4.0, count)
+    d = rng.uniform(0.0, 2000.0, count)
+    m = 20000
+    cos = rng.uniform(0.0, 1.0, m)
+    cos[:4] = [0.0, 1e-7, 1.0, 0.5]
+    wl = rng.uniform(360.0, 830.0, m)
+    films = [(Cx(float(a), 0.0), float(c)) for a, c in zip(n, d)]
+    ref = optics.stack_rt(n0, Float64(cos), films, n_exit, Float64(wl))
+    for films_max in ("count", None):
+        out = real_loop_rt(n0, cos, n, d, n_exit, wl, films_max=films_max)
+        for name, a, b in zip(("Rs", "Rp", "Ts", "Tp"), ref, out):
+            a, b = np.array(a), np.array(b)
+            assert np.all(np.isfinite(b)), name
+            np.testing.assert_allclose(b, a, rtol=0, atol=1e-9, err_msg=name)
+    assert len(real_path_calls) == 2
+
+
+def test_real_loop_matches_tmm():
+    """Light from glass (n0 = 1.5) through high-index films onto air (total
+    internal reflection at the exit beyond 41.8 degrees): tmm's coh_tmm."""
+    n = np.array([1.7, 2.3, 1.9, 2.1, 1.6])
+    d = np.array([120.0, 80.0, 300.0, 15.0, 95.0])
+    n0, n_exit = 1.5, 1.0
+    cases = [(c, wl) for c in (1.0, 0.8, 0.75, 0.7, 0.3, 0.05) for wl in (380.0, 520.0, 700.0)]
+    cos = np.array([c for c, _ in cases])
+    wl = np.array([w for _, w in cases])
+    assert_matches_tmm(real_loop_rt(n0, cos, n, d, Cx(n_exit, 0.0), wl), n0, n, d, n_exit, cases)
+
+
+def test_real_loop_without_rescaling_stays_in_float32_range():
+    """The largest contrast the bound allows (films of n = 1.0011 and 6 over an
+    ambient of 1): _real_loop_rescale(...) films without rescaling, in float32,
+    stay finite and agree with float64 (which has no range problem) to the
+    float32 conditioning of such a stack (measured ~1e-4; 1e-3 allowed). One
+    film more forces the rescaling back on (checked by the same call with
+    films_max = None, which must agree too)."""
+    from drjit.llvm import Float
+    every = optics._real_loop_rescale(1.0, 1.0011, 6.0)
+    assert 2 <= every < 30
+    n = np.array([1.0011 if i % 2 == 0 else 6.0 for i in range(every)])
+    d = np.full(every, 37.0)
+    rng = np.random.default_rng(7)
+    cos = np.r_[rng.uniform(0.0, 1.0, 5000), 1e-4, 1e-6]
+    wl = rng.uniform(360.0, 830.0, cos.size)
+    ref = [np.array(v) for v in real_loop_rt(1.0, cos, n, d, Cx(1.2, 7.0), wl)]
+    for films_max in ("count", None):
+        out = real_loop_rt(1.0, cos.astype(np.float32), n, d, Cx(1.2, 7.0),
+                           wl.astype(np.float32), Arr=Float, films_max=films_max)
+        for a, b in zip(ref[:2], out[:2]):
+            b = np.array(b, np.float64)
+            assert np.all(np.isfinite(b))
+            assert np.max(np.abs(a - b)) < 1e-3
+
+
+@pytest.mark.parametrize("layers, constant", [("1.46 100; 2.3 60; 1.46 100", True),
+                                              (NON_ABSORBING, False), ("2.3 150", True)])
+def test_real_films_run_the_real_loop_at_any_depth(llvm, layers, constant, real_path_calls):
+    """Real films above the ambient use the loop from one film on
+    (REAL_LOOP_MIN_FILMS); constant ones gather one index per lane, shared by the
+    four wavelengths. Float32 kernel against float64."""
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
+                         "tabulate": False})
+    loop = bsdf.stack.plan[False].loop
+    assert loop is not None and loop.real_steps and loop.constant == constant
+    cos, wls = points(4000, seed=11)
+    R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
+    assert real_path_calls
+    ref = tf.Stack(layers, substrate="Al", ambient=K.DEFAULT_EXT_IOR)
+    for i in range(4):
+        assert np.max(np.abs(R[i] - ref.rt(wls[i], np.arccos(cos)).R)) < F32_DEEP
+
+
+def test_films_below_the_ambient_index_keep_the_complex_loop(llvm, real_path_calls):
+    """A film of index below the ambient's (evanescent beyond its critical angle):
+    the general loop, not the real-amplitude one."""
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": "2.3 70; 1.38 110; 2.3 70",
+                         "ext_ior": 1.52, "int_ior": 1.6, "tabulate": False})
+    for inside in (False, True):
+        loop = bsdf.stack.plan[inside].loop
+        assert loop is None or not loop.real_steps
+    cos, wls = points(100)
+    bsdf.stack.reflectance(interaction(wls), mi.Float(cos))
+    assert real_path_calls == []
+
+
+@pytest.mark.parametrize("n0, lo, hi", [(1.0, 1.0011, 6.0), (1.000277, 1.38, 2.6),
+                                        (1.5, 1.52, 2.5), (1.0, 1.46, 2.3)])
+def test_rescale_bound_covers_every_interface(n0, lo, hi):
+    """_real_loop_rescale's film count keeps |D| and |T|^2 within 2^+-100: every
+    interface between two films of index in [lo, hi] at any angle has an
+    amplitude |r| (s and p) with 2 max(log2(1 + |r|), -log2(1 - |r|)) * count
+    <= 100 (sampled independently of the function's own grid)."""
+    every = optics._real_loop_rescale(n0, lo, hi)
+    rng = np.random.default_rng(5)
+    na, nb = rng.uniform(lo, hi, (2, 200_000))
+    na[:4], nb[:4] = [lo, lo, hi, hi], [hi, hi, lo, lo]
+    beta = n0 * np.sqrt(rng.uniform(0.0, 1.0, na.size))
+    beta[:2] = [0.0, n0]
+    qa, qb = np.sqrt(na * na - beta * beta), np.sqrt(nb * nb - beta * beta)
+    for a, b in ((qa, qb), (qa / na**2, qb / nb**2)):
+        r = np.abs(a - b) / (a + b)
+        bits = 2.0 * np.maximum(np.log2(1.0 + r), -np.log2(1.0 - r))
+        assert np.max(bits) * every <= 100.0

@@ -88,11 +88,27 @@ def evaluate(Arr, n0, films, n_exit, wl, cos0):
         eta, k, d = (dr.gather(Arr, b, j) for b in bufs)
         return optics.Cx(eta, k), d
 
-    looped = optics.stack_rt_loop(arr(n0), c, UInt32(len(films)), film, ne, arr(wl))
+    looped = [optics.stack_rt_loop(arr(n0), c, UInt32(len(films)), film, ne, arr(wl))]
+    hints = real_hints(n0, films)
+    if hints:   # the kernels' loop for real films above the ambient (real amplitudes)
+        looped.append(optics.stack_rt_loop(arr(n0), c, UInt32(len(films)), film, ne, arr(wl),
+                                           **hints))
     leaves = [np.array(x, np.float64) for x in out]
     for z in (amp.rs, amp.rp, amp.ts, amp.tp):
         leaves += [np.array(z.re, np.float64), np.array(z.im, np.float64)]
-    return [leaves[:4], [np.array(x, np.float64) for x in looped]], leaves[4:]
+    return [leaves[:4]] + [[np.array(x, np.float64) for x in lp] for lp in looped], leaves[4:]
+
+
+def real_hints(n0, films):
+    """The trace-time hints with which the kernels run their loop over real films
+    (``optics._stack_rt_loop_real``), or ``None`` where the films do not qualify."""
+    n = [complex(f[0]) for f in films]
+    if not n or any(x.imag != 0 for x in n):
+        return None
+    lo, hi = min(x.real for x in n), max(x.real for x in n)
+    if lo < optics.REAL_LOOP_MARGIN * n0:
+        return None
+    return dict(n0_max=n0, film_n_min=lo, film_n_max=hi, films_max=len(n))
 
 
 # Tolerances. Away from critical angles every Rouard step conserves flux to a
@@ -117,7 +133,7 @@ def check(Arr, stack, lossless):
     powers, amps = evaluate(Arr, n0, films, n_exit, wl, cos0)
     for v in amps:
         assert np.all(np.isfinite(v))
-    for Rs, Rp, Ts, Tp in powers:   # unrolled, then the loop over films
+    for Rs, Rp, Ts, Tp in powers:   # unrolled, the loop over films (and its real form)
         check_powers(Arr, Rs, Rp, Ts, Tp, cos0, near, lossless)
 
 
@@ -165,7 +181,7 @@ def test_adjacent_layers_both_at_q_zero(Arr):
     # at q = 0 the core floors q at eps_q (see TOL_CRITICAL above): float32
     # agrees to ~sqrt(eps) there.
     tol = 1e-12 if Arr is Float64 else TOL_CRITICAL[Float]
-    for (Rs, Rp, Ts, Tp), (Rs2, _, _, Tp2) in zip(powers, merged):  # unrolled, loop
+    for (Rs, Rp, Ts, Tp), (Rs2, _, _, Tp2) in zip(powers[:2], merged):  # unrolled, loop
         for v in (Rs, Rp, Ts, Tp):
             assert np.all(np.isfinite(v))
         np.testing.assert_allclose(Rs, Rs2, atol=tol)
@@ -183,7 +199,8 @@ U32 = 2.0 ** -24
 def _unpolarised(Arr, n0, films, n_exit, wl, cos0, loop=False):
     """Unpolarised R, T as the kernels form them: ``unpolarised_rt`` (films unrolled)
     or, with ``loop``, ``optics.stack_rt_loop`` over buffers of the (per-point
-    constant) films with R = (Rs + Rp) / 2 and T clipped to [0, 1 - R]."""
+    constant) films with R = (Rs + Rp) / 2 and T clipped to [0, 1 - R];
+    ``loop="real"`` passes the hints of real films (:func:`real_hints`)."""
     size = cos0.size
 
     def arr(v):
@@ -200,8 +217,9 @@ def _unpolarised(Arr, n0, films, n_exit, wl, cos0, loop=False):
             eta, k, d = (dr.gather(Arr, b, j) for b in bufs)
             return optics.Cx(eta, k), d
 
+        hints = real_hints(n0, films) if loop == "real" else {}
         Rs, Rp, Ts, Tp = optics.stack_rt_loop(arr(n0), arr(cos0), UInt32(len(films)), film, ne,
-                                              arr(wl))
+                                              arr(wl), **hints)
         R = 0.5 * (Rs + Rp)
         T = dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
     else:
@@ -273,6 +291,31 @@ def float32_bound(n0, films, n_exit, wl, cos0, R64, T64):
     return np.where(near, np.maximum(bound, 0.2), bound)
 
 
+@st.composite
+def real_stacks(draw):
+    """Stacks the kernels run through the real-amplitude loop: every film real and
+    above the ambient (REAL_LOOP_MARGIN), over any exit medium."""
+    L = draw(st.sampled_from(FILM_COUNTS))
+    n0 = draw(st.one_of(st.just(1.0), st.floats(1.0, 3.0)))
+    lo = optics.REAL_LOOP_MARGIN * n0 * (1.0 + 1e-6)
+    films = [(complex(draw(st.floats(lo, 6.0)), 0.0), draw(thickness)) for _ in range(L)]
+    ne, ke = draw(index)
+    return n0, films, complex(ne, ke), draw(st.floats(360.0, 830.0))
+
+
+@SETTINGS
+@given(stack=real_stacks())
+def test_real_films_stay_physical(stack):
+    """Every form, the real-amplitude loop included (lossless films over any exit)."""
+    check(Float, stack, lossless=stack[2].imag == 0)
+
+
+@SETTINGS
+@given(stack=real_stacks())
+def test_float32_error_within_documented_bound_real_films(stack):
+    test_float32_error_within_documented_bound.hypothesis.inner_test(stack)
+
+
 @SETTINGS
 @given(stack=stacks())
 def test_float32_error_within_documented_bound(stack):
@@ -286,7 +329,8 @@ def test_float32_error_within_documented_bound(stack):
     cos0 = _r32(cos0)
     R64, T64 = _unpolarised(Float64, n0, films, n_exit, wl, cos0)
     bound = float32_bound(n0, films, n_exit, wl, cos0, R64, T64)
-    for loop in (False, True):   # both forms the kernels use
+    forms = (False, True, "real") if real_hints(n0, films) else (False, True)
+    for loop in forms:   # every form the kernels use
         R32, T32 = _unpolarised(Float, n0, films, n_exit, wl, cos0, loop=loop)
         err = np.maximum(np.abs(R32 - R64), np.abs(T32 - T64))
         assert np.all(err <= bound), (loop, err.max(), cos0[np.argmax(err - bound)])

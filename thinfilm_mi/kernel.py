@@ -10,7 +10,8 @@
   index and a substrate index, evaluated with the optics core on ``mi.Spectrum``
   (all wavelengths of a path at once) in float32 inside the render kernel:
   from a table, unrolled film by film (fewer than :data:`LOOP_MIN_FILMS`), or
-  as a loop over buffers of the films (:class:`_LoopFilms`).
+  as a loop over buffers of the films (:class:`_LoopFilms`; at any depth when
+  every film has a real index above the ambient's, :data:`REAL_LOOP_MIN_FILMS`).
 * :func:`stack_from_props` — reads ``layers`` / ``thin_film_ior`` +
   ``thin_film_thickness`` / ``ext_ior`` from a plugin's ``mi.Properties`` and
   validates them at scene load time.
@@ -27,7 +28,8 @@ from . import materials as _materials
 from . import tables as _tables
 from ._llvm import require_llvm
 from .errors import ThinFilmError
-from .optics import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
+from .optics import (REAL_LOOP_MARGIN, Cx, stack_amplitudes, transmittance_factor_p,
+                     transmittance_factor_s)
 from .stack import AMBIENT_K_TOL, SPECTRAL_RANGE, check_thickness, parse_layers
 
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
@@ -232,6 +234,11 @@ def _scalar(d) -> float:
 #: benchmarks/SPEED.md). Below it the films are unrolled, which lets literal
 #: indices specialise the code.
 LOOP_MIN_FILMS = 4
+#: The same for sides whose films all have a real index above the ambient's
+#: (:data:`optics.REAL_LOOP_MARGIN`): their loop takes real Fresnel amplitudes
+#: (``optics._stack_rt_loop_real``) and is faster than the unrolled films from
+#: one film on (benchmarks/SPEED.md).
+REAL_LOOP_MIN_FILMS = 1
 
 
 class _LoopFilms:
@@ -262,12 +269,27 @@ class _LoopFilms:
         #: Trace-time bounds (see optics.stack_rt_loop): films' smallest real
         #: index (where none absorbs) and the ambient's largest index.
         self.film_n_min = float(eta.min()) if self.real else None
+        self.film_n_max = float(eta.max())
         self.n0_max = float(np.max(texture_on_grid(n0.eta)))
-        cols = [eta[:, :-1], eta[:, 1:]] if self.real else \
-            [eta[:, :-1], k[:, :-1], eta[:, 1:], k[:, 1:]]
+        #: The ambient's index does not depend on the wavelength: with constant
+        #: films, ``q`` and the Fresnel amplitudes are then one per lane.
+        self.n0_constant = n0.knots is not None and n0.knots.size == 0
+        #: The loop will run optics._stack_rt_loop_real (real amplitudes).
+        self.real_steps = self.real and self.film_n_min >= REAL_LOOP_MARGIN * self.n0_max
+        #: Every film's index is one constant (no knots): one real per film,
+        #: gathered once per lane for all the wavelengths.
+        self.constant = self.real and self.cells == 1 and all(
+            ix.knots is not None and ix.knots.size == 0 for ix, _, _ in films)
+        if self.constant:
+            cols = [eta[:, 0]]
+        elif self.real:
+            cols = [eta[:, :-1], eta[:, 1:]]
+        else:
+            cols = [eta[:, :-1], k[:, :-1], eta[:, 1:], k[:, 1:]]
         self.buffer = aligned_array(np.stack(cols, axis=-1), np.float32, mi.Float)
         self.grid = aligned_array(grid, np.float32, mi.Float)
         self.thickness = aligned_array([_scalar(d) for _, d, _ in films], np.float32, mi.Float)
+        self.n_films = len(films)
         self.count = mi.UInt32(len(films))
         for v in (self.buffer, self.grid, self.thickness, self.count):
             dr.make_opaque(v)
@@ -288,6 +310,16 @@ class _LoopFilms:
     def rt(self, n0, cos_theta, exit_: Cx, wl, transmission: bool, thickness_scale):
         mi = _mi()
         from .optics import stack_rt_loop
+        if self.constant:
+            if self.n0_constant:
+                n0 = n0[0]
+
+            def film(j):
+                d = dr.gather(mi.Float, self.thickness, j)
+                return (Cx(dr.gather(mi.Float, self.buffer, j), 0.0),
+                        d if thickness_scale is None else d * thickness_scale)
+            return self._rt(film, n0, cos_theta, exit_, wl, transmission)
+
         cells = [self._cell(wl[c]) for c in range(len(wl))]
         vec = mi.Vector2f if self.real else mi.Vector4f
 
@@ -305,9 +337,14 @@ class _LoopFilms:
             d = dr.gather(mi.Float, self.thickness, j)
             return index, (d if thickness_scale is None else d * thickness_scale)
 
+        return self._rt(film, n0, cos_theta, exit_, wl, transmission)
+
+    def _rt(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool):
+        from .optics import stack_rt_loop
         Rs, Rp, Ts, Tp = stack_rt_loop(n0, cos_theta, self.count, film, exit_, wl,
                                        transmission=transmission, n0_max=self.n0_max,
-                                       film_n_min=self.film_n_min)
+                                       film_n_min=self.film_n_min, film_n_max=self.film_n_max,
+                                       films_max=self.n_films)
         R = 0.5 * (Rs + Rp)
         if not transmission:
             return R
@@ -355,8 +392,9 @@ class KernelStack:
     incoherently; with ``tabulate`` (``"auto"``, ``True``, ``False``) the
     needed sides are read from a verified table (:mod:`thinfilm_mi.tables`)
     within ``table_error``; identical stacks share one table. Sides evaluated
-    exactly with :data:`LOOP_MIN_FILMS` films or more run the recursion as a
-    loop over the films in JIT variants (:class:`_LoopFilms`).
+    exactly with :data:`LOOP_MIN_FILMS` films or more (any number, for films
+    of real index above the ambient's: :data:`REAL_LOOP_MIN_FILMS`) run the
+    recursion as a loop over the films in JIT variants (:class:`_LoopFilms`).
     """
 
     def __init__(self, films: Sequence[tuple[SpectralIndex, float]], ambient: SpectralIndex,
@@ -425,10 +463,13 @@ class KernelStack:
                 # buffers for it (other calls fall back to the unrolled films).
                 served = side.table is not None and (side.table.channels > 1 or side.opaque
                                                      or not side.transmission)
-                if (not served and len(side.films) >= LOOP_MIN_FILMS
+                if (not served and len(side.films) >= min(LOOP_MIN_FILMS, REAL_LOOP_MIN_FILMS)
                         and not any(side.incoherent)
                         and all(ix.knots is not None for ix, _, _ in side.films)):
-                    side.loop = _LoopFilms(side.films, side.n0)
+                    loop = _LoopFilms(side.films, side.n0)
+                    if len(side.films) >= (REAL_LOOP_MIN_FILMS if loop.real_steps
+                                           else LOOP_MIN_FILMS):
+                        side.loop = loop
 
     def _plan_tables(self) -> None:
         # "auto" tabulates in vectorised variants only: in scalar variants every

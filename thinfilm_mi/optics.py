@@ -40,6 +40,7 @@ appendix A), and M. Born, E. Wolf, *Principles of Optics*, sec. 1.6.
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 from typing import Any, Sequence
@@ -631,6 +632,7 @@ def _powers(results: dict, fac: dict | None, grazing):
 
 def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool = True,
                   n0_max: float | None = None, film_n_min: float | None = None,
+                  film_n_max: float | None = None, films_max: int | None = None,
                   label: str = "thinfilm_rouard"):
     """:func:`stack_rt` with the films visited by a Dr.Jit loop instead of unrolled.
 
@@ -658,7 +660,18 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     imaginary part. With both and ``film_n_min >= n0_max`` every film's ``q`` is
     real at every angle and the loop body traces one real square root and no
     exponential per film (what :func:`stack_rt` does for literal indices).
+    With ``film_n_min >= REAL_LOOP_MARGIN * n0_max`` the loop runs
+    :func:`_stack_rt_loop_real` instead (real Fresnel amplitudes, about half
+    the work per film); ``film_n_max``, an upper bound of the films' index,
+    and ``films_max``, of ``count``, then let it drop the rescaling where it
+    cannot be needed.
     """
+    if (film_n_min is not None and n0_max is not None
+            and film_n_min >= REAL_LOOP_MARGIN * n0_max):
+        return _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength,
+                                   transmission=transmission, n0_max=n0_max,
+                                   film_n_min=film_n_min, film_n_max=film_n_max,
+                                   films_max=films_max, label=label)
     cos0 = dr.clip(cos0, 0.0, 1.0)
     sin2 = (1.0 - cos0) * (1.0 + cos0)
     beta2 = n0 * n0 * sin2
@@ -729,6 +742,169 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
                               ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
         N, D = _rouard_step(a0[pol], b, Cx(Er, Ei), N, D)
         results[pol] = (N, D, T * 4.0 * a0[pol].abs2())
+    fac = _power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
+    return _powers(results, fac, grazing)
+
+
+#: :func:`stack_rt_loop` uses the real-amplitude loop when every film's index is
+#: real and at least this factor above the ambient's: then ``q_j >= n0 sqrt(m^2 -
+#: 1) > 0`` for every film at every angle (no evanescent film, no ``q = 0``).
+REAL_LOOP_MARGIN = 1.001
+#: The real-amplitude loop keeps ``|D|`` within ``2^+-_REAL_RANGE_BITS`` of 1
+#: without rescaling when the films' contrast allows it (see
+#: :func:`_real_loop_rescale`); float32 spans 2^+-126.
+_REAL_RANGE_BITS = 100
+
+
+@functools.lru_cache(maxsize=64)
+def _real_loop_rescale(n0_max: float, film_n_min: float, film_n_max: float | None) -> int:
+    """How many films the real-amplitude loop may run before ``(N, D, T)`` must be
+    rescaled (0: rescale after every film).
+
+    In that loop ``|gamma| <= 1`` inside every film (lossless films over a
+    passive exit: ``|gamma|^2`` is a reflectance), so a step ``D' = D + r E N``
+    changes ``|D|`` by a factor in ``[1 - |r|, 1 + |r|]`` and ``|T|^2`` by one
+    in ``[(1 - |r|)^2, (1 + |r|)^2]``. ``|r|`` is bounded from the largest ratio of two
+    films' admittances at one angle, for indices in ``[n_min, n_max]``: ``q =
+    sqrt(n^2 - beta^2)`` grows with ``n`` (largest ratio at ``beta = n0``);
+    ``q / n^2`` is unimodal in ``n``, its ratio is taken on a grid of ``n`` and
+    ``beta`` (with a 2 % margin: the grid is fine and the function smooth).
+    Returns the number of films after which ``|D|`` or ``|T|^2`` could have left
+    ``2^+-_REAL_RANGE_BITS``.
+    """
+    if film_n_max is None:
+        return 0
+    lo, hi = film_n_min, max(film_n_max, film_n_min)
+    ratio_s = math.sqrt((hi * hi - n0_max * n0_max) / (lo * lo - n0_max * n0_max))
+    ratio_p = 1.0
+    for i in range(65):
+        beta = n0_max * i / 64
+        a = [math.sqrt(n * n - beta * beta) / (n * n)
+             for n in (lo + (hi - lo) * k / 256 for k in range(257))]
+        ratio_p = max(ratio_p, 1.02 * max(a) / min(a))
+    ratio = max(ratio_s, ratio_p)
+    r_max = (ratio - 1.0) / (ratio + 1.0)
+    bits = 2.0 * max(math.log2(1.0 + r_max), -math.log2(1.0 - r_max))   # |T|^2, |D|^2
+    return int(_REAL_RANGE_BITS / bits)
+
+
+def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool,
+                        n0_max: float, film_n_min: float, film_n_max: float | None,
+                        films_max: int | None, label: str):
+    """:func:`stack_rt_loop` for films of real index above the ambient's
+    (``film_n_min >= REAL_LOOP_MARGIN * n0_max``).
+
+    Every film's ``q`` is then real and positive at every angle, and so are its
+    admittances ``a`` (``q`` for s, ``q / n^2`` for p) and the Fresnel
+    amplitudes ``r = (a_j - a_j+1) / (a_j + a_j+1)`` between films. Dividing
+    the Rouard step by ``a_j + a_j+1`` (instead of multiplying through by it,
+    as :func:`_rouard_step` does) leaves, with ``X = E N``::
+
+        N' = r D + X,    D' = D + r X,    |T'|^2 = (1 + r)^2 |T|^2
+
+    (``1 + r`` is the interface's ``t``; the films' ``|e^{i delta}| = 1``): the
+    paper's ``gamma <- (r + gamma E)/(1 + r gamma E)`` with ``gamma = N / D``.
+    That is four real multiply-adds besides ``E N`` per polarisation, where
+    the complex admittances of the general step need twice that. The
+    interfaces with the exit medium (possibly absorbing) and with the ambient
+    are done outside the loop in complex arithmetic; the loop starts from
+    ``(N, D) = (a - a_exit, a + a_exit)`` below the innermost film and carries the film
+    above's ``q``, ``a_p`` and thickness into the next iteration, so each film's
+    index is gathered once. For constant films ``film(j)`` may return indices
+    that do not depend on the wavelength (one per lane): then ``q``, ``a`` and
+    ``r`` are computed once for all wavelengths.
+
+    The loop rescales ``(N, D, T)`` by a power of two after every film unless
+    :func:`_real_loop_rescale` shows, from the trace-time bounds, that ``|D|``
+    and ``|T|^2`` cannot leave float32's range for ``films_max`` films (the
+    traced code then depends only on which side of that bound the depth lies).
+    """
+    cos0 = dr.clip(cos0, 0.0, 1.0)
+    sin2 = (1.0 - cos0) * (1.0 + cos0)
+    beta2 = n0 * n0 * sin2
+    beta2_max = n0_max * n0_max
+    q0 = n0 * cos0
+    grazing = cos0 <= 0.0
+    n_ex = Cx.of(n_exit)
+    q_ex = _normal_index(n_ex, beta2, beta2_max)
+    a_ex = {"s": q_ex, "p": _cmul(q_ex, _inv(n_ex.square()))}
+    inv_wl = 1.0 / wavelength
+    zero = 0.0 * wavelength * cos0
+
+    def admittances(m):
+        n = Cx.of(m).re
+        inv_n2 = 1.0 / (n * n)
+        # n^2 - beta^2 >= n_min^2 - n0_max^2 > 0: the real root, no guard
+        q = dr.sqrt(dr.maximum(dr.fma(n, n, -beta2), 0.0))
+        return q, q * inv_n2
+
+    def phase(q, d):
+        return _phase_factor(Cx(q, 0.0), d * inv_wl, True)
+
+    # The innermost interface, film L-1 | exit medium (complex), without its
+    # division: (N, D) = (a - a_exit, a + a_exit), |T|^2 = 4 a^2 (gamma = r and
+    # |T / D|^2 = |t|^2 = |1 + r|^2); later steps are linear in (N, D) and T.
+    # Without films (count = 0) the "innermost film" is the ambient itself, 0 nm
+    # thick: the ambient step below is then transparent (r = 0, E = 1).
+    some = count > 0
+    j_last = dr.maximum(count, 1) - 1
+    m_last, d_last = film(j_last)
+    n_last = dr.select(some, Cx.of(m_last).re, n0)
+    d_last = dr.select(some, d_last, 0.0)
+    q_b, ap_b = admittances(n_last)
+    state = [j_last]
+    for pol, a_b in (("s", q_b), ("p", ap_b)):
+        a_x = a_ex[pol]
+        t = (zero + 4.0 * a_b * a_b) if transmission else 1.0
+        state += [zero + (a_b - a_x.re), zero - a_x.im, zero + (a_b + a_x.re), zero + a_x.im, t]
+    state += [q_b, ap_b, d_last]
+    every = _real_loop_rescale(n0_max, film_n_min, film_n_max)
+    rescale = films_max is None or films_max > every
+
+    def step(N: Cx, D: Cx, T, r, E: Cx):
+        X = _cmul(E, N)
+        N, D = Cx(dr.fma(r, D.re, X.re), dr.fma(r, D.im, X.im)), \
+            Cx(dr.fma(r, X.re, D.re), dr.fma(r, X.im, D.im))
+        if transmission:
+            T = T * dr.square(1.0 + r)
+        if rescale:
+            scale = _rescale_factor(D)
+            N, D = N * scale, D * scale
+            if transmission:
+                T = T * (scale * scale)
+        return N, D, T
+
+    def cond(j, *_):
+        return j > 0
+
+    def body(*st):
+        return tuple(type(old)(new) if dr.is_array_v(old) else new
+                     for old, new in zip(st, body_(*st)))
+
+    def body_(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, q_b, ap_b, d_b):
+        j = j - 1
+        E = phase(q_b, d_b)                 # the film below the interface
+        m_a, d_a = film(j)                  # the film above it
+        q_a, ap_a = admittances(m_a)
+        r_s = (q_a - q_b) / (q_a + q_b)
+        r_p = (ap_a - ap_b) / (ap_a + ap_b)
+        Ns, Ds, Ts = step(Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, r_s, E)
+        Np, Dp, Tp = step(Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, r_p, E)
+        return (j, Ns.re, Ns.im, Ds.re, Ds.im, Ts, Np.re, Np.im, Dp.re, Dp.im, Tp,
+                q_a, ap_a, d_a)
+
+    (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, q_b, ap_b, d_b) = dr.while_loop(
+        tuple(state), cond, body, label=label)
+    # The first film's phase and the interface with the ambient (a0 >= 0, real).
+    E = phase(q_b, d_b)
+    results = {}
+    for pol, (N, D, T, a_b, a0) in (
+            ("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, q_b, q0)),
+            ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, ap_b, q0 * (1.0 / (n0 * n0))))):
+        r0 = (a0 - a_b) / (a0 + a_b)
+        X = _cmul(E, N)
+        N, D = Cx(r0 * D.re + X.re, r0 * D.im + X.im), Cx(D.re + r0 * X.re, D.im + r0 * X.im)
+        results[pol] = (N, D, T * dr.square(1.0 + r0) if transmission else None)
     fac = _power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
     return _powers(results, fac, grazing)
 
