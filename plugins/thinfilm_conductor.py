@@ -65,9 +65,10 @@ The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
 (``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``
 as differentiable, opaque parameters: changing them does not recompile the
 render kernel (a table is rebuilt, ~10-30 ms, and its shape is a kernel input
-too). In exact mode a stack of 4 films or more is evaluated by a loop over the
-films inside the kernel, so the kernel and its compile time do not grow with
-the number of films.
+too). In exact mode the films are evaluated by a loop inside the kernel (from
+one film on when every film has a real index above ``ext_ior``'s, from 4 films
+otherwise), so the kernel and its compile time do not grow with the number of
+films.
 
 .. tabs::
     .. code-tab:: xml
