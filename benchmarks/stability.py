@@ -37,7 +37,7 @@ from drjit.llvm import Float, Float64, UInt32
 
 from thinfilm_mi._llvm import require_llvm
 from thinfilm_mi.kernel import unpolarised_rt
-from thinfilm_mi.optics import REAL_LOOP_MARGIN, Cx, stack_rt_loop
+from thinfilm_mi.optics import Cx, real_loop_applies, stack_rt_loop
 
 F32 = np.float32
 
@@ -295,7 +295,7 @@ def real_hints(c: Case):
     lo = min(float(np.min(np.real(n))) for n, _ in c.films)
     hi = max(float(np.max(np.real(n))) for n, _ in c.films)
     n0_max = float(np.max(c.n0))
-    if lo < REAL_LOOP_MARGIN * n0_max:
+    if not real_loop_applies(n0_max, lo):
         return None
     return dict(n0_max=n0_max, film_n_min=lo, film_n_max=hi, films_max=len(c.films))
 

@@ -29,14 +29,17 @@ def random_stack(rng, count):
     return n, k, d
 
 
-def loop_rt(n0, cos, n, k, d, n_exit, wl):
-    """stack_rt_loop on Float64 buffers (padded: a gather needs a non-empty source)."""
-    eta, kk, thk = (Float64(np.r_[a, 0.0]) for a in (n, k, d))
+def loop_rt(n0, cos, n, k, d, n_exit, wl, Arr=Float64, **hints):
+    """stack_rt_loop on buffers of type ``Arr`` (padded: a gather needs a non-empty
+    source); ``k = None``: real films (a literal 0 imaginary part)."""
+    eta, thk = (Arr(np.r_[a, 0.0]) for a in (n, d))
+    kk = None if k is None else Arr(np.r_[k, 0.0])
 
     def film(j):
-        return Cx(dr.gather(Float64, eta, j), dr.gather(Float64, kk, j)), dr.gather(Float64, thk, j)
+        im = 0.0 if kk is None else dr.gather(Arr, kk, j)
+        return Cx(dr.gather(Arr, eta, j), im), dr.gather(Arr, thk, j)
 
-    return optics.stack_rt_loop(n0, Float64(cos), UInt32(len(n)), film, n_exit, Float64(wl))
+    return optics.stack_rt_loop(n0, Arr(cos), UInt32(len(n)), film, n_exit, Arr(wl), **hints)
 
 
 @pytest.mark.parametrize("count", [0, 1, 2, 5, 13, 30])
@@ -252,15 +255,10 @@ def test_tabulated_sides_build_no_loop_buffers(llvm):
 def real_loop_rt(n0, cos, n, d, n_exit, wl, Arr=Float64, films_max="count"):
     """stack_rt_loop with the hints of a kernel whose films are real: the
     real-amplitude loop (``films_max``: the count, or None to force rescaling)."""
-    eta, thk = (Arr(np.r_[a, 0.0]) for a in (n, d))
-
-    def film(j):
-        return Cx(dr.gather(Arr, eta, j), 0.0), dr.gather(Arr, thk, j)
-
-    return optics.stack_rt_loop(n0, Arr(cos), UInt32(len(n)), film, n_exit, Arr(wl),
-                                n0_max=n0, film_n_min=float(np.min(n, initial=2.0 * n0)),
-                                film_n_max=float(np.max(n, initial=2.0 * n0)),
-                                films_max=len(n) if films_max == "count" else films_max)
+    return loop_rt(n0, cos, n, None, d, n_exit, wl, Arr, n0_max=n0,
+                   film_n_min=float(np.min(n, initial=2.0 * n0)),
+                   film_n_max=float(np.max(n, initial=2.0 * n0)),
+                   films_max=len(n) if films_max == "count" else films_max)
 
 
 @pytest.fixture

@@ -106,7 +106,7 @@ def real_hints(n0, films):
     if not n or any(x.imag != 0 for x in n):
         return None
     lo, hi = min(x.real for x in n), max(x.real for x in n)
-    if lo < optics.REAL_LOOP_MARGIN * n0:
+    if not optics.real_loop_applies(n0, lo):
         return None
     return dict(n0_max=n0, film_n_min=lo, film_n_max=hi, films_max=len(n))
 

@@ -28,7 +28,7 @@ from . import materials as _materials
 from . import tables as _tables
 from ._llvm import require_llvm
 from .errors import ThinFilmError
-from .optics import (REAL_LOOP_MARGIN, Cx, stack_amplitudes, transmittance_factor_p,
+from .optics import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
                      transmittance_factor_s)
 from .stack import AMBIENT_K_TOL, SPECTRAL_RANGE, check_thickness, parse_layers
 
@@ -275,11 +275,10 @@ class _LoopFilms:
         #: films, ``q`` and the Fresnel amplitudes are then one per lane.
         self.n0_constant = n0.knots is not None and n0.knots.size == 0
         #: The loop will run optics._stack_rt_loop_real (real amplitudes).
-        self.real_steps = self.real and self.film_n_min >= REAL_LOOP_MARGIN * self.n0_max
-        #: Every film's index is one constant (no knots): one real per film,
-        #: gathered once per lane for all the wavelengths.
-        self.constant = self.real and self.cells == 1 and all(
-            ix.knots is not None and ix.knots.size == 0 for ix, _, _ in films)
+        self.real_steps = real_loop_applies(self.n0_max, self.film_n_min)
+        #: Every film's index is one constant (no knots: a single grid cell): one
+        #: real per film, gathered once per lane for all the wavelengths.
+        self.constant = self.real and self.cells == 1
         if self.constant:
             cols = [eta[:, 0]]
         elif self.real:
@@ -309,7 +308,6 @@ class _LoopFilms:
 
     def rt(self, n0, cos_theta, exit_: Cx, wl, transmission: bool, thickness_scale):
         mi = _mi()
-        from .optics import stack_rt_loop
         if self.constant:
             if self.n0_constant:
                 n0 = n0[0]

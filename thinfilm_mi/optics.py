@@ -459,13 +459,25 @@ def _guard_zero_q(m: Cx, q: Cx, beta, like) -> Cx:
     return Cx(dr.select(small, eps_q, q.re), q.im if _is_zero(q.im) else dr.select(small, 0.0, q.im))
 
 
+def _incidence(n0, cos0):
+    """``(cos0, beta^2, q0)``: the cosine clipped to [0, 1], the squared tangential
+    index ``n0^2 sin^2`` (without cancellation) and ``q0 = n0 cos0``."""
+    cos0 = dr.clip(cos0, 0.0, 1.0)
+    return cos0, n0 * n0 * ((1.0 - cos0) * (1.0 + cos0)), n0 * cos0
+
+
+def _exit_admittances(n_exit, beta2, beta2_max):
+    """``(n_exit, q_exit, {pol: admittance})`` of the exit medium (``q`` for s,
+    ``q / n^2`` for p), as :class:`Cx`."""
+    n_ex = Cx.of(n_exit)
+    q_ex = _normal_index(n_ex, beta2, beta2_max)
+    return n_ex, q_ex, {"s": q_ex, "p": _cmul(q_ex, _inv(n_ex.square()))}
+
+
 def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission):
     """Everything the recursion needs, shared by both polarisations."""
-    cos0 = dr.clip(cos0, 0.0, 1.0)
-    sin2 = (1.0 - cos0) * (1.0 + cos0)
-    beta2 = n0 * n0 * sin2
+    cos0, beta2, q0 = _incidence(n0, cos0)
     beta2_max = n0 * n0 if _is_literal(n0) else None
-    q0 = n0 * cos0
 
     media = [Cx.of(n0)] + [Cx.of(n) for n, _ in films] + [Cx.of(n_exit)]
     qs = [Cx(q0, 0.0)] + [_normal_index(m, beta2, beta2_max) for m in media[1:]]
@@ -666,31 +678,25 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     and ``films_max``, of ``count``, then let it drop the rescaling where it
     cannot be needed.
     """
-    if (film_n_min is not None and n0_max is not None
-            and film_n_min >= REAL_LOOP_MARGIN * n0_max):
+    if real_loop_applies(n0_max, film_n_min):
         return _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength,
                                    transmission=transmission, n0_max=n0_max,
                                    film_n_min=film_n_min, film_n_max=film_n_max,
                                    films_max=films_max, label=label)
-    cos0 = dr.clip(cos0, 0.0, 1.0)
-    sin2 = (1.0 - cos0) * (1.0 + cos0)
-    beta2 = n0 * n0 * sin2
+    cos0, beta2, q0 = _incidence(n0, cos0)
     if _is_literal(n0):
         n0_max = n0
     beta2_max = n0_max * n0_max if n0_max is not None else None
     film_n2_min = film_n_min * film_n_min if film_n_min is not None else None
     beta = dr.sqrt(beta2)
-    q0 = n0 * cos0
     grazing = cos0 <= 0.0
-    n_ex = Cx.of(n_exit)
-    q_ex = _normal_index(n_ex, beta2, beta2_max)
+    n_ex, q_ex, a_ex = _exit_admittances(n_exit, beta2, beta2_max)
     zero = 0.0 * wavelength * cos0
     one = zero + 1.0
 
     def full(z: Cx) -> tuple:
         return (zero + z.re, zero + z.im)
 
-    a_ex = {"s": q_ex, "p": _cmul(q_ex, _inv(n_ex.square()))}
     inv_wl = 1.0 / wavelength
 
     def film_terms(j):
@@ -756,6 +762,14 @@ REAL_LOOP_MARGIN = 1.001
 _REAL_RANGE_BITS = 100
 
 
+def real_loop_applies(n0_max: float | None, film_n_min: float | None) -> bool:
+    """Whether :func:`stack_rt_loop` with these hints runs the real-amplitude loop
+    (``film_n_min``: a lower bound of the films' real index, ``None`` where
+    some film absorbs; ``n0_max``: an upper bound of the ambient's index)."""
+    return (film_n_min is not None and n0_max is not None
+            and film_n_min >= REAL_LOOP_MARGIN * n0_max)
+
+
 @functools.lru_cache(maxsize=64)
 def _real_loop_rescale(n0_max: float, film_n_min: float, film_n_max: float | None) -> int:
     """How many films the real-amplitude loop may run before ``(N, D, T)`` must be
@@ -819,15 +833,9 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
     and ``|T|^2`` cannot leave float32's range for ``films_max`` films (the
     traced code then depends only on which side of that bound the depth lies).
     """
-    cos0 = dr.clip(cos0, 0.0, 1.0)
-    sin2 = (1.0 - cos0) * (1.0 + cos0)
-    beta2 = n0 * n0 * sin2
-    beta2_max = n0_max * n0_max
-    q0 = n0 * cos0
+    cos0, beta2, q0 = _incidence(n0, cos0)
     grazing = cos0 <= 0.0
-    n_ex = Cx.of(n_exit)
-    q_ex = _normal_index(n_ex, beta2, beta2_max)
-    a_ex = {"s": q_ex, "p": _cmul(q_ex, _inv(n_ex.square()))}
+    n_ex, q_ex, a_ex = _exit_admittances(n_exit, beta2, n0_max * n0_max)
     inv_wl = 1.0 / wavelength
     zero = 0.0 * wavelength * cos0
 
@@ -859,15 +867,15 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
         state += [zero + (a_b - a_x.re), zero - a_x.im, zero + (a_b + a_x.re), zero + a_x.im, t]
     state += [q_b, ap_b, d_last]
     every = _real_loop_rescale(n0_max, film_n_min, film_n_max)
-    rescale = films_max is None or films_max > every
+    in_loop_rescale = films_max is None or films_max > every
 
-    def step(N: Cx, D: Cx, T, r, E: Cx):
+    def step(N: Cx, D: Cx, T, r, E: Cx, rescale: bool = True):
         X = _cmul(E, N)
         N, D = Cx(dr.fma(r, D.re, X.re), dr.fma(r, D.im, X.im)), \
             Cx(dr.fma(r, X.re, D.re), dr.fma(r, X.im, D.im))
         if transmission:
             T = T * dr.square(1.0 + r)
-        if rescale:
+        if rescale and in_loop_rescale:
             scale = _rescale_factor(D)
             N, D = N * scale, D * scale
             if transmission:
@@ -901,10 +909,8 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
     for pol, (N, D, T, a_b, a0) in (
             ("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, q_b, q0)),
             ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, ap_b, q0 * (1.0 / (n0 * n0))))):
-        r0 = (a0 - a_b) / (a0 + a_b)
-        X = _cmul(E, N)
-        N, D = Cx(r0 * D.re + X.re, r0 * D.im + X.im), Cx(D.re + r0 * X.re, D.im + r0 * X.im)
-        results[pol] = (N, D, T * dr.square(1.0 + r0) if transmission else None)
+        N, D, T = step(N, D, T, (a0 - a_b) / (a0 + a_b), E, rescale=False)
+        results[pol] = (N, D, T if transmission else None)
     fac = _power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
     return _powers(results, fac, grazing)
 
