@@ -28,12 +28,19 @@ def llvm():
     mi.set_variant("llvm_ad_spectral")
 
 
+def f32(x):
+    """Values the float32 kernel sees exactly, for the float64 reference too: near a
+    critical angle R has a square-root kink, where rounding cos to float32 alone
+    moves R by ~1e-3."""
+    return np.asarray(x, np.float32).astype(np.float64)
+
+
 def random_points(n, seed=1):
     """Directions outside the grazing sliver the table's verification leaves out
     (tables.GRAZING_COS; benchmarks/speed_vs_error.py reports the error there)."""
     rng = np.random.default_rng(seed)
-    cos = rng.uniform(tf.tables.GRAZING_COS, 1.0, n)
-    wls = [rng.uniform(360.0, 830.0, n) for _ in range(4)]
+    cos = f32(rng.uniform(tf.tables.GRAZING_COS, 1.0, n))
+    wls = [f32(rng.uniform(360.0, 830.0, n)) for _ in range(4)]
     return cos, wls
 
 
@@ -70,8 +77,8 @@ def test_dielectric_tables_both_sides_with_tir(inside):
     assert side.table is not None and side.table.channels == 2
     assert side.table.kind == ("tir" if inside else "plain")
     cos, wls = random_points(20000, seed=2)
-    # Points straddling the critical angle (cos = sqrt(1 - 1/1.6^2) = 0.78).
-    cos[:2000] = 0.7806247 + np.linspace(-1e-3, 1e-3, 2000)
+    # Points straddling the critical angle (cos = sqrt(1 - 1.000277^2/1.6^2) = 0.78049).
+    cos[:2000] = f32(0.7804861 + np.linspace(-1e-3, 1e-3, 2000))
     R, T = bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)),
                                   inside=inside, transmission=True)
     ref = tf.Stack("1.38 110; 2.1 70", substrate=1.6, ambient=K.DEFAULT_EXT_IOR)
@@ -230,3 +237,79 @@ def test_scalar_variant_uses_tables_too():
     ref = tf.Stack(STACK, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
     exact = ref.rt(np.array([400.0, 500, 600, 700]), np.arccos(0.6)).R
     assert np.max(np.abs(R - exact)) <= 1.5 * bsdf.stack.plan[False].table.error + F32
+
+
+@pytest.mark.parametrize("cubic", [True, False])
+def test_probe_lines_know_their_interpolation_error(cubic):
+    """The probe's subsampled lines against the closed form for a sinusoid: at a
+    midpoint, linear interpolation gives cos(theta/2) f and the interpolating
+    cubic spline H(theta) f, H = ((23 cos(theta/2) + cos(3 theta/2))/24) /
+    ((2 + cos theta)/3), theta = omega k (uniform B-spline interpolation on an
+    unbounded grid). Only the middle half is compared (the ``ok`` mask): there the
+    clamped ends, 3 ghost nodes plus at least 4 nodes away, perturb the spline by
+    less than 0.27^7 ~ 1e-4 of their own error, hence the 1e-4 absolute slack."""
+    from thinfilm_mi import tables
+    intervals, min_nodes = 1024, 17
+    ext = tables._ghosts(cubic, intervals, min_nodes)
+    assert ext == (3 * 64 if cubic else 0)
+    omega = 2.0 * np.pi / 37.3
+    x = np.arange(-ext, intervals + ext + 1.0)
+    f = np.cos(omega * x + 0.4)[:, None, None]
+    ok = np.zeros((x.size, 1), bool)
+    ok[ext + 256:ext + 768] = True
+    (levels,) = tables._line_levels(f, ok, cubic, intervals, min_nodes)
+    assert [k for k, _, _ in levels] == [2, 4, 8, 16, 32, 64]
+    for k, err, at in levels:
+        theta = omega * k
+        h = ((23 * np.cos(theta / 2) + np.cos(1.5 * theta)) / 24) / ((2 + np.cos(theta)) / 3) \
+            if cubic else np.cos(theta / 2)
+        mids = np.arange(k // 2, intervals, k)
+        mids = mids[(mids >= 256) & (mids < 768)]
+        expected = np.abs(1 - h) * np.abs(np.cos(omega * mids + 0.4))
+        assert abs(err - expected.max()) <= 1e-4 + 1e-6 * expected.max(), (k, err, expected.max())
+        if expected.max() > 1e-3:
+            assert at == mids[np.argmax(expected)]
+
+
+def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
+    """The probe's estimate is verified like any table (one round for STACK), and a
+    stack no table within the budgets resolves -- 30 random films on Al, with
+    cavity resonances ~0.1 nm wide -- is rejected by the probe alone, for a small
+    fraction of the evaluations a failing build used to spend (up to
+    tables.MAX_BUILD_POINTS)."""
+    from thinfilm_mi import tables
+    K._TABLE_CACHE.clear()
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
+                         "tabulate": True})
+    assert bsdf.stack.mode() == "table"
+    assert tables.last_build["result"] == "table" and tables.last_build["rounds"] == 1
+    assert tables.last_build["probe_points"] < 0.5 * tables.last_build["points"]
+    d = np.random.default_rng(6).uniform(50.0, 200.0, 30)
+    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(30))
+    with pytest.warns(UserWarning, match="cannot be tabulated"):
+        deep = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
+                             "tabulate": True})
+    assert deep.stack.mode() == "exact"
+    assert tables.last_build["result"] == "rejected by the probe"
+    assert tables.last_build["rounds"] == 0
+    assert tables.last_build["points"] < 0.05 * tables.MAX_BUILD_POINTS
+
+
+def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
+    """Whatever the probe says, only a verified table is kept: from a 16 x 16 first
+    table the refinement reaches the target, and the lookup meets the float64
+    reference within the verified error (tolerance as in the first test)."""
+    from thinfilm_mi import tables
+    monkeypatch.setattr(tables, "_estimate", lambda *a, **k: (16, 16))
+    K._TABLE_CACHE.clear()
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
+                         "tabulate": True})
+    K._TABLE_CACHE.clear()
+    table = bsdf.stack.plan[False].table
+    assert table is not None and table.error <= 1e-3
+    assert tables.last_build["rounds"] > 1
+    cos, wls = random_points(20000, seed=7)
+    R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32))))
+    ref = tf.Stack(STACK, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
+    assert err <= 1.5 * table.error + F32, err

@@ -34,13 +34,20 @@ Axes (chosen so that the tabulated functions are smooth):
   in the exit medium, above it in the same ``w`` of
   ``phi = atan(|q_exit| / q_0)``; ``R`` and ``T`` are analytic in both.
 
-The resolution is chosen from the stack's optical thickness (fringes narrow as
-``n d`` grows) and then *verified*: the exact values at the midpoints between
-nodes along each axis are compared with the interpolated ones, and the axis
-whose error is too large is refined until the sum of both axes' maximum errors
-is within the target (default 1e-3 in ``R`` and ``T``). A stack that would need
-more than :data:`MAX_TEXELS` texels, or more than :data:`MAX_BUILD_POINTS`
-exact evaluations, is not tabulated.
+The resolution is first estimated by a probe: fine 1-D lines of exact values
+along each axis (at fixed angles and wavelengths, and where the lines across
+find the sharpest features), each subsampled by 2, 4, 8, ... into 1-D tables
+whose interpolation error is then known exactly. That gives each axis's error
+as a function of its number of nodes; the target is split between the axes so
+that the table has the fewest texels. A stack that would need more than
+:data:`MAX_TEXELS` texels even with the whole target on each axis (deep stacks
+on metals, with cavity resonances ~0.1 nm wide) is rejected at this point, for
+~5·10^4 evaluations. The table is then *verified*: the exact values at the
+midpoints between nodes along each axis are compared with the interpolated
+ones, and the axis whose error is too large is refined until the sum of both
+axes' maximum errors is within the target (default 1e-3 in ``R`` and ``T``).
+A stack that would need more than :data:`MAX_TEXELS` texels, or more than
+:data:`MAX_BUILD_POINTS` exact evaluations, is not tabulated.
 
 The lookup's scale and offset constants are opaque JIT variables, so a new
 table of another shape (a thickness sweep) reuses the compiled render kernel.
@@ -49,11 +56,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import drjit as dr
 import numpy as np
 
+from .optics import Cx
 from .stack import SPECTRAL_RANGE
 
 __all__ = ["SideData", "Table", "build_table", "table_resolution", "MAX_TEXELS"]
@@ -82,10 +89,12 @@ GRAZING_COS = 0.02
 #: ~1 s for 30 films on two cores: a stack that needs more (sharp resonances,
 #: such as the surface plasmon of a metal film seen from inside glass, or the
 #: high-Q cavity modes of a deep random stack on a metal) is evaluated exactly.
-#: (A bilinear table lit from inside glass, fig8b's, needs ~2.4e6.)
+#: (A bilinear table lit from inside glass, fig8b's, needs ~1.6e6.)
 MAX_BUILD_POINTS = 3_000_000
 #: Refinement rounds after the first estimate.
 MAX_ROUNDS = 6
+#: A refinement aims at this share of the target (the rest is margin).
+REFINE_SHARE = 0.8
 
 
 @dataclass
@@ -148,16 +157,17 @@ def u_texel(cos_i, sin_i, n0, n_exit, kind: str, nu):
                      m + (m - 1) * (1.0 - dr.sqrt(x)))
 
 
-def _u_nodes_cos(s: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str, nu: int):
+def _u_nodes_cos(s: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str, nu: int,
+                 ghost: int = GHOST):
     """Inverse of :func:`u_texel` (float64 numpy): cos(theta_i) at node
     coordinates ``s`` (any shape broadcasting with the per-λ ``n0``, ``n_exit``).
 
-    On a plain axis ``s`` may lie up to :data:`GHOST` nodes beyond either end:
+    On a plain axis ``s`` may lie up to ``ghost`` nodes beyond either end:
     ``w < 0`` continues to negative angles (``cos`` of ``|theta|``) and
     ``w > 1`` mirrors about grazing incidence (``cos = sin((1 - w)^2 pi/2)``
     is even about ``w = 1``), both the analytic continuation of ``R(w)``."""
     if kind == "plain":
-        w = np.clip(s / (nu - 1), -GHOST / (nu - 1), 1.0 + GHOST / (nu - 1))
+        w = np.clip(s / (nu - 1), -ghost / (nu - 1), 1.0 + ghost / (nu - 1))
         return np.sin((1.0 - w) ** 2 * HALF_PI)
     m = nu // 2
     t = np.clip(s / (m - 1), 0.0, 1.0) * HALF_PI          # transmit segment: theta_t
@@ -322,45 +332,273 @@ def _indices(side: SideData, wl: np.ndarray):
     return side.n0(wl_ix), [n(wl_ix) for n, _ in side.films], side.n_exit(wl_ix)
 
 
-def _rows(indices, rows):
-    """The indices of :func:`_indices` on a subset of its wavelengths."""
-    n0, films, n_exit = indices
-    return n0[rows], [n[rows] for n in films], n_exit[rows]
-
-
-def _evaluate(side: SideData, cos0: np.ndarray, wl: np.ndarray, indices) -> np.ndarray:
-    """Exact float64 R [, T] on a grid: ``cos0`` of shape (len wl, M), one row per
-    wavelength of ``wl`` with its ``indices`` (:func:`_indices`); returns shape
-    (len wl, M, channels). The indices are repeated along the row; the phase
-    follows the wavelength also beyond 360-830 nm."""
+def _evaluate(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
+              indices) -> np.ndarray:
+    """Exact float64 R [, T] at points ``(cos0[i], wl[rows[i]])`` (flat arrays),
+    with ``indices`` (:func:`_indices`) at the wavelengths ``wl``; returns shape
+    (len cos0, channels). One trace and one kernel launch for all the points;
+    the phase follows the wavelength also beyond 360-830 nm."""
     from drjit.llvm import Float64
 
-    from ._backend import float64_array, repeated
+    from ._backend import float64_array
 
-    cols = cos0.shape[1]
     n0, film_n, n_exit = indices
-    films = [(repeated(n, cols, complex_=True), dr.opaque(Float64, float(d)))
-             for n, (_, d) in zip(film_n, side.films)]
-    res = side.rt(repeated(n0, cols), float64_array(cos0), films,
-                  repeated(n_exit, cols, complex_=True), repeated(wl, cols), side.transmission)
+
+    def cx(values):
+        values = np.asarray(values, np.complex128)[rows]
+        if not np.any(values.imag):   # a literal zero: the core's real-index paths
+            return Cx(float64_array(values.real), 0.0)
+        return Cx(float64_array(values.real), float64_array(values.imag))
+
+    films = [(cx(n), dr.opaque(Float64, float(d))) for n, (_, d) in zip(film_n, side.films)]
+    res = side.rt(float64_array(np.asarray(n0, np.float64)[rows]), float64_array(cos0), films,
+                  cx(n_exit), float64_array(np.asarray(wl, np.float64)[rows]),
+                  side.transmission)
     res = res if side.transmission else (res,)
     dr.eval(*res)
-    return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1).reshape(
-        len(wl), cols, -1)
+    return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1)
 
 
-def _grid(side: SideData, kind: str, s: np.ndarray, t: np.ndarray, nu: int, nv: int,
-          indices=None, with_cos: bool = False):
-    """Exact values at node coordinates ``s`` (u, 1-D) x ``t`` (v, 1-D): (len t, len s, C)
-    (and the cosines of incidence, (len t, len s), if ``with_cos``). ``indices``:
-    :func:`_indices` at the wavelengths of ``t``, if already known."""
-    wl = _v_nodes_wl(t, nv)
-    indices = _indices(side, wl) if indices is None else indices
-    n0 = np.asarray(indices[0], np.float64)[:, None]
-    ne = np.asarray(indices[2]).real[:, None]
-    cos0 = np.broadcast_to(_u_nodes_cos(s[None, :], n0, ne, kind, nu), (len(t), len(s)))
-    vals = _evaluate(side, cos0, wl, indices)
-    return (vals, cos0) if with_cos else vals
+class _Points:
+    """Point sets (node coordinates ``s`` along u x ``t`` along v, for a table of
+    ``nu x nv`` nodes) gathered into one :func:`_evaluate` call."""
+
+    def __init__(self, side: SideData, kind: str):
+        self.side, self.kind = side, kind
+        self.sets = []   # (t, s, nu, nv, ghost): the product t x s
+
+    def add(self, s, t, nu: int, nv: int, ghost: int = GHOST) -> None:
+        """The points ``t x s``; a plain u axis reaches ``ghost`` nodes beyond its ends."""
+        self.sets.append((np.asarray(t, np.float64), np.asarray(s, np.float64), nu, nv, ghost))
+
+    @property
+    def size(self) -> int:
+        return sum(t.size * s.size for t, s, *_ in self.sets)
+
+    def evaluate(self):
+        """``[(values (len t, len s, C), cos0 (len t, len s))]`` for every set."""
+        wl = np.concatenate([_v_nodes_wl(t, nv) for t, _, _, nv, _ in self.sets])
+        wl, inverse = np.unique(wl, return_inverse=True)
+        indices = _indices(self.side, wl)
+        n0 = np.asarray(indices[0], np.float64)
+        ne = np.asarray(indices[2]).real
+        cos, rows, start = [], [], 0
+        for t, s, nu, _, ghost in self.sets:
+            r = inverse[start:start + t.size]
+            start += t.size
+            c = _u_nodes_cos(s[None, :], n0[r][:, None], ne[r][:, None], self.kind, nu, ghost)
+            cos.append(np.broadcast_to(c, (t.size, s.size)))
+            rows.append(np.broadcast_to(r[:, None], (t.size, s.size)))
+        vals = _evaluate(self.side, np.concatenate([c.ravel() for c in cos]),
+                         np.concatenate([r.ravel() for r in rows]), wl, indices)
+        out, start = [], 0
+        for (t, s, *_), c in zip(self.sets, cos):
+            n = t.size * s.size
+            out.append((vals[start:start + n].reshape(t.size, s.size, -1), c))
+            start += n
+        return out
+
+
+# -- first estimate from fine 1-D lines -------------------------------------------
+#: Intervals of the probe's lines along v and along u (a power of two: their
+#: subsamplings are tables of 2^k times fewer intervals), and of the finer line
+#: taken where the first cannot resolve the target (enough to test MAX_V, MAX_U).
+PROBE_V, PROBE_U = 2048, 512
+PROBE_V_FINE, PROBE_U_FINE = 2 * MAX_V, 2 * MAX_U
+#: Lines placed where the lines along the other axis err most.
+PROBE_HOT_LINES = 4
+#: Share of the target each axis is probed for: half, less a margin for the
+#: columns and rows the probe does not see.
+PROBE_SHARE = 0.4
+#: Nodes of the reference axis on which the probe's columns and rows are placed.
+_REF = 1001
+
+
+def _line_levels(f: np.ndarray, ok: np.ndarray, cubic: bool, intervals: int,
+                 min_nodes: int) -> list:
+    """For fine lines ``f`` (shape ``(values, lines, channels)``, ``intervals``
+    intervals each), per line: ``[(k, err, at)]`` for ``k`` = 2, 4, 8, ...: the
+    largest interpolation error at the allowed (``ok``, shape ``(values,
+    lines)``) midpoints when only every ``k``-th value is kept as nodes (at
+    least ``min_nodes``), and where it is (fine node coordinate, 0 ..
+    intervals). A cubic line holds :func:`_ghosts` fine values beyond each end,
+    so every subsampling has the table's :data:`GHOST` nodes there."""
+    ext = (f.shape[0] - 1 - intervals) // 2
+    levels, k = [], 2
+    while intervals // k + 1 >= min_nodes:
+        n = intervals // k + 1
+        mid = slice(ext + k // 2, ext + intervals, k)
+        if cubic:
+            c = f[ext - GHOST * k:ext + intervals + GHOST * k + 1:k]
+            approx = _bspline_midpoints(bspline_coefficients(c, axis=0), 0, GHOST, n)
+        else:
+            c = f[ext:ext + intervals + 1:k]
+            approx = 0.5 * (c[:-1] + c[1:])
+        dev = np.where(ok[mid], np.abs(approx - f[mid]).max(axis=-1), 0.0)
+        i = np.argmax(dev, axis=0)
+        levels.append((k, dev[i, np.arange(dev.shape[1])], k // 2 + k * i))
+        k *= 2
+    return [[(k, float(e[line]), int(at[line])) for k, e, at in levels]
+            for line in range(f.shape[1])]
+
+
+def _ghosts(cubic: bool, intervals: int, min_nodes: int) -> int:
+    """Fine intervals a probe line extends beyond each end: :data:`GHOST` nodes of
+    its coarsest subsampling (cubic lines only)."""
+    k_max = 1 << int(math.log2((intervals) // (min_nodes - 1)))
+    return GHOST * k_max if cubic else 0
+
+
+def _nodes_for(levels: list, intervals: int, target: float, order: int) -> tuple:
+    """Nodes a line of ``intervals`` fine intervals needs for an error ``target``,
+    from its :func:`_line_levels`, interpolated in log-log between the finest
+    level that fails and the one below it (local order clamped to [1, order]);
+    whether the line resolved it (``False``: even ``k = 2`` fails, and the count
+    is extrapolated); and where the failing level errs most (``None`` if none
+    fails)."""
+    prev = None
+    for k, e, at in levels:
+        if e > target:
+            if prev is None:   # beyond the line's resolution: extrapolate
+                e2 = levels[1][1] if len(levels) > 1 else e
+                p = min(max(math.log2(max(e2, e) / e), 1.0), order)
+                return intervals / (k * (target / e) ** (1.0 / p)) + 1.0, False, at
+            p = min(max(math.log2(e / max(prev[1], 1e-300)), 1.0), order)
+            ks = min(max(k * (target / e) ** (1.0 / p), prev[0]), k)
+            return intervals / ks + 1.0, True, at
+        prev = (k, e)
+    return intervals / levels[-1][0] + 1.0, True, None
+
+
+def _probe_columns(kind: str) -> np.ndarray:
+    """u node coordinates (on a reference axis of :data:`_REF` nodes, twice that
+    for a split axis) of the probe's lines along v: normal incidence, two
+    oblique ones and the edge of the grazing sliver (and, split, both sides of
+    the critical angle)."""
+    # (just inside the verified range: the sliver's edge itself may round out of it)
+    w_graz = 1.0 - math.sqrt(math.asin(1.001 * GRAZING_COS) / HALF_PI)
+    if kind == "plain":
+        return np.array([0.0, 0.5, 1.0 - math.sqrt(math.asin(0.1) / HALF_PI), w_graz]) * (_REF - 1)
+    return np.concatenate([np.array([0.0, 0.5, 0.95]) * (_REF - 1),
+                           _REF + np.array([0.05, 0.5, w_graz]) * (_REF - 1)])
+
+
+class _Curves:
+    """The error curves of an axis's probe lines (:func:`_line_levels`): how many
+    nodes the axis needs for a given error, as the worst of its lines."""
+
+    def __init__(self, order: int, factor: int):
+        self.order, self.factor = order, factor   # factor 2: a split axis's two segments
+        self.lines = []    # (levels, intervals, fine)
+
+    def need(self, target: float) -> float:
+        """Nodes for ``target``; a coarse line that cannot resolve it defers to the
+        fine lines, where there are any."""
+        fine = any(f for _, _, f in self.lines)
+        n = 0.0
+        for levels, intervals, is_fine in self.lines:
+            count, resolved, _ = _nodes_for(levels, intervals, target, self.order)
+            if resolved or is_fine or not fine:
+                n = max(n, count)
+        return self.factor * n
+
+
+def _probe(side: SideData, kind: str, error: float, axis: str, lines: np.ndarray,
+           intervals: int, curves: _Curves, stats: dict, fine: bool = False) -> tuple:
+    """Fine 1-D lines of exact values along ``axis`` (``"v"``: at the u node
+    coordinates ``lines`` of a reference axis of :data:`_REF` nodes, twice that
+    if split; ``"u"``: at the v coordinates ``lines`` of such an axis), each
+    subsampled by 2, 4, 8, ...: a subsampling is a 1-D table whose error at its
+    midpoints is known exactly (:func:`_line_levels`). The lines' error curves
+    are added to ``curves``, the points evaluated to ``stats["probe_points"]``.
+
+    Returns ``hot`` (``[(nodes, coordinate)]``: where on the other axis's
+    reference each line errs most, for the lines that fail :data:`PROBE_SHARE`
+    of ``error``, with the nodes they need for it) and the line that needs most
+    ``(nodes, line, resolved)``.
+    """
+    cubic = kind == "plain"
+    min_nodes = 65 if fine else 17
+    ext = _ghosts(cubic, intervals, min_nodes)
+    pts = _Points(side, kind)
+    if axis == "v":
+        pts.add(lines, np.arange(-ext, intervals + ext + 1.0), _REF if cubic else 2 * _REF,
+                intervals + 1)
+    elif cubic:
+        pts.add(np.arange(-ext, intervals + ext + 1.0), lines, intervals + 1, _REF, ghost=ext)
+    else:
+        pts.add(np.arange(2.0 * (intervals + 1)), lines, 2 * (intervals + 1), _REF)
+    ((vals, cos),) = pts.evaluate()
+    stats["probe_points"] += pts.size
+    if axis == "u":   # (lines, values, C) -> (values, lines, C)
+        vals, cos = np.swapaxes(vals, 0, 1), cos.T
+        if not cubic:   # the two segments of a split axis, each of intervals + 1 nodes
+            m = intervals + 1
+            vals = np.concatenate([vals[:m], vals[m:]], axis=1)
+            cos = np.concatenate([cos[:m], cos[m:]], axis=1)
+    hot, worst = [], (-1.0, None, True)
+    for i, levels in enumerate(_line_levels(vals, cos >= GRAZING_COS, cubic, intervals,
+                                            min_nodes)):
+        curves.lines.append((levels, intervals, fine))
+        n, resolved, at = _nodes_for(levels, intervals, PROBE_SHARE * error, curves.order)
+        if n > worst[0]:
+            worst = (n, lines[i % lines.size], resolved)
+        if at is not None:
+            segment = _REF if (axis == "u" and i >= lines.size) else 0
+            hot.append((n, segment + at / intervals * (_REF - 1)))
+    return hot, worst
+
+
+def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: dict):
+    """``(nu, nv)`` for a first table, from :func:`_probe`.
+
+    Resonances are narrow in both directions, so a fixed set of lines misses
+    them: lines along u at five wavelengths find where along u each errs most;
+    lines along v run at :func:`_probe_columns` and there; more lines along u
+    run where those along v err most. An axis whose lines could not resolve
+    :data:`PROBE_SHARE` of the target is probed again at its worst line, on a
+    line fine enough to test :data:`MAX_V` / :data:`MAX_U`.
+
+    The target is then split between the axes to minimise the texels: each
+    axis's error curve is measured, and where one converges slowly (a kink of
+    a tabulated index along λ is only first order) it is cheaper to give it
+    most of the error. ``(None, None)`` where even the whole ``error`` per axis
+    would need more than MAX_U, MAX_V or ``max_texels`` texels: a stack that no
+    table resolves fails in milliseconds.
+    """
+    cubic = kind == "plain"
+    order = 4 if cubic else 2
+    cu, cv = _Curves(order, 1 if cubic else 2), _Curves(order, 1)
+
+    def hot(found):
+        return [c for _, c in sorted(found, reverse=True)[:PROBE_HOT_LINES]]
+
+    u_rows = np.linspace(0.0, _REF - 1.0, 5)
+    hot_u, worst_u = _probe(side, kind, error, "u", u_rows, PROBE_U, cu, stats)
+    cols = np.unique(np.concatenate([_probe_columns(kind), hot(hot_u)]))
+    hot_v, worst_v = _probe(side, kind, error, "v", cols, PROBE_V, cv, stats)
+    if hot_v:
+        _, w = _probe(side, kind, error, "u", np.unique(hot(hot_v)), PROBE_U, cu, stats)
+        worst_u = max(worst_u, w, key=lambda x: x[0])
+    for axis, (_, line, resolved), curves, fine in (("v", worst_v, cv, PROBE_V_FINE),
+                                                    ("u", worst_u, cu, PROBE_U_FINE)):
+        if not resolved:
+            _probe(side, kind, error, axis, np.array([line]), fine, curves, stats, fine=True)
+    if cu.need(error) > MAX_U or cv.need(error) > MAX_V \
+            or cu.need(error) * cv.need(error) > max_texels:
+        return None, None
+    budget = 2.0 * PROBE_SHARE * error
+    splits = [(cu.need(a * budget) * cv.need((1.0 - a) * budget), a)
+              for a in np.linspace(0.1, 0.9, 17)]
+    a = min(splits)[1]
+    return cu.need(a * budget), cv.need((1.0 - a) * budget)
+
+
+#: What the last :func:`build_table` did: ``kind``, ``probe_points`` and
+#: ``points`` (exact evaluations by the probe and in all), ``rounds`` (tables
+#: built and verified) and ``result`` ("table", "rejected by the probe", "over
+#: budget", "critical angle varies").
+last_build: dict = {}
 
 
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
@@ -370,31 +608,49 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     (or the exit medium's critical angle depends on λ).
 
     A plain axis gives a cubic table, a split one (total internal reflection)
-    a bilinear one. Verification: the exact values midway between neighbouring
-    nodes along u (on every other v row) and along v (on every other u column)
-    are compared with the interpolated ones; the sum of the two maxima (for
-    incidence outside the grazing sliver, :data:`GRAZING_COS`) must be within
-    ``error``. The cell across the critical angle of a split axis has zero
-    width in angle and is skipped.
+    a bilinear one. The first resolution is the larger of
+    :func:`table_resolution`'s (from the optical thickness) and the probe's
+    (:func:`_estimate`, which also rejects hopeless stacks early). Verification:
+    the exact values midway between neighbouring nodes along u (on every other
+    v row) and along v (on every other u column) are compared with the
+    interpolated ones; the sum of the two maxima (for incidence outside the
+    grazing sliver, :data:`GRAZING_COS`) must be within ``error``. The cell
+    across the critical angle of a split axis has zero width in angle and is
+    skipped. Otherwise the axis that exceeds its share is refined, at the
+    convergence order observed between rounds.
+
+    What the build did is left in :data:`last_build`.
     """
+    global last_build
     kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
+    last_build = stats = {"kind": kind, "probe_points": 0, "rounds": 0, "points": 0,
+                          "result": "critical angle varies"}
     if kind is None:
         return None
     cubic = kind == "plain"
     g = GHOST if cubic else 0
     order = 4 if cubic else 2
     nu, nv = table_resolution(side, error, wavelengths, cubic)
-    spent = 0
+    pu, pv = _estimate(side, kind, error, max_texels, stats)
+    stats["points"] = stats["probe_points"]
+    if pu is None:
+        stats["result"] = "rejected by the probe"
+        return None
+    nu = min(max(nu, int(math.ceil(1.05 * pu))), MAX_U)
+    nv = min(max(nv, int(math.ceil(1.05 * pv))), MAX_V)
+    stats["result"] = "over budget"
+    history = {}
     for _ in range(MAX_ROUNDS + 1):
         if kind == "tir":
             nu += nu % 2
-        spent += (nu + 2 * g) * (nv + 2 * g) + nu * nv   # the nodes, and the checks
-        if nu > MAX_U or nv > MAX_V or nu * nv > max_texels or spent > MAX_BUILD_POINTS:
+        points = (nu + 2 * g) * (nv + 2 * g) + nu * nv   # the nodes, and the checks
+        if (nu > MAX_U or nv > MAX_V or nu * nv > max_texels
+                or stats["points"] + points > MAX_BUILD_POINTS):
             return None
+        stats["points"] += points
+        stats["rounds"] += 1
         su = np.arange(-g, nu + g, dtype=np.float64)
         tv = np.arange(-g, nv + g, dtype=np.float64)
-        at_nodes = _indices(side, _v_nodes_wl(tv, nv))
-        nodes = _grid(side, kind, su, tv, nu, nv, at_nodes)
         mu = np.arange(nu - 1) + 0.5
         cols_u = np.arange(nu - 1)
         if kind == "tir":
@@ -402,15 +658,19 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
             mu, cols_u = mu[keep], cols_u[keep]
         rows = np.arange(0, nv, 2) + g      # every other real v row
         cols = np.arange(0, nu, 2) + g      # every other real u column
-        mid_u, cos_u = _grid(side, kind, mu, tv[rows], nu, nv, _rows(at_nodes, rows),
-                             with_cos=True)
-        mid_v, cos_v = _grid(side, kind, su[cols], np.arange(nv - 1) + 0.5, nu, nv,
-                             with_cos=True)
+        pts = _Points(side, kind)
+        pts.add(su, tv, nu, nv)
+        pts.add(mu, tv[rows], nu, nv)
+        pts.add(su[cols], np.arange(nv - 1) + 0.5, nu, nv)
+        (nodes, _), (mid_u, cos_u), (mid_v, cos_v) = pts.evaluate()
         if cubic:
             cu = bspline_coefficients(nodes, axis=1)
-            cv = bspline_coefficients(nodes, axis=0)
+            coeffs = bspline_coefficients(cu, axis=0)
+            # The spline along v through node column j has the coefficients
+            # B_u coeffs (B_u: the u spline's (1, 4, 1) / 6 at its nodes).
+            cv = (coeffs[:, cols - 1] + 4.0 * coeffs[:, cols] + coeffs[:, cols + 1]) / 6.0
             approx_u = _bspline_midpoints(cu[rows], 1, g, nu)
-            approx_v = _bspline_midpoints(cv[:, cols], 0, g, nv)
+            approx_v = _bspline_midpoints(cv, 0, g, nv)
         else:
             approx_u = 0.5 * (nodes[rows][:, cols_u] + nodes[rows][:, cols_u + 1])
             approx_v = 0.5 * (nodes[:-1, cols] + nodes[1:, cols])
@@ -419,15 +679,33 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         dev = np.abs(mid_v - approx_v).max(axis=-1)
         err_v = float(np.max(np.where(cos_v >= GRAZING_COS, dev, 0.0)))
         if err_u + err_v <= error:
-            values = bspline_coefficients(cu, axis=0) if cubic else nodes
+            values = coeffs if cubic else nodes
+            stats["result"] = "table"
             return Table(values, kind, err_u + err_v, nodes.shape[-1], cubic)
-        # Interpolation error goes as h^order once fringes are resolved: refine
-        # the offending axis (10% margin, at most 3x a round: far from
-        # convergence the power law overshoots).
-        fu = 1.1 * (err_u / (0.5 * error)) ** (1 / order) if err_u > 0.5 * error else 1.0
-        fv = 1.1 * (err_v / (0.5 * error)) ** (1 / order) if err_v > 0.5 * error else 1.0
-        if nu * nv * fu * fv > 4 * max_texels:
+        # Refine: aim at REFINE_SHARE of the target; an axis already within
+        # half of that keeps its nodes and leaves the rest to the other.
+        budget = REFINE_SHARE * error
+        if err_u <= 0.5 * budget:
+            goal = {"u": err_u, "v": budget - err_u}
+        elif err_v <= 0.5 * budget:
+            goal = {"u": budget - err_v, "v": err_v}
+        else:
+            goal = {"u": 0.5 * budget, "v": 0.5 * budget}
+        factors = {}
+        for axis, n, err in (("u", nu, err_u), ("v", nv, err_v)):
+            if err <= goal[axis]:
+                factors[axis] = 1.0
+                continue
+            # Once the fringes are resolved the error falls as h^order; before
+            # that more slowly: use the order seen since the last round.
+            p, last = order, history.get(axis)
+            if last is not None and last[0] != n and last[1] > 0 and err > 0:
+                p = min(max(math.log(last[1] / err) / math.log((n - 1) / (last[0] - 1)), 1.0),
+                        order)
+            factors[axis] = min(3.0, 1.05 * (err / goal[axis]) ** (1.0 / p))
+            history[axis] = (n, err)
+        if nu * nv * factors["u"] * factors["v"] > 4 * max_texels:
             return None   # hopeless within the budget: do not spend the time
-        nu = int(math.ceil((nu - 1) * min(3.0, fu))) + 1
-        nv = int(math.ceil((nv - 1) * min(3.0, fv))) + 1
+        nu = int(math.ceil((nu - 1) * factors["u"])) + 1
+        nv = int(math.ceil((nv - 1) * factors["v"])) + 1
     return None
