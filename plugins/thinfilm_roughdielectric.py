@@ -54,7 +54,8 @@ Thin-film coated rough dielectric (:monosp:`thinfilm_roughdielectric`)
      where the exit medium can totally reflect): its cost does not grow
      with the number of films. ``auto`` tabulates stacks of 2 films or more in
      vectorised variants, unless a ``thickness`` texture is given, gradients
-     are tracked, or the target cannot be met (then: exact).
+     are tracked, or the target cannot be met within 2^19 texels, a table that
+     still fits the cache (then: exact).
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).

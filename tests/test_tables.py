@@ -313,3 +313,19 @@ def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
     ref = tf.Stack(STACK, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
     err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
     assert err <= 1.5 * table.error + F32, err
+
+
+def test_auto_keeps_only_tables_that_fit_the_cache():
+    """A table too large for the cache costs as much per lookup as the recursion
+    (benchmarks/SPEED.md): ``auto`` renders such a stack exactly, after the probe
+    alone; ``tabulate=true`` still builds it."""
+    from thinfilm_mi import tables
+    layers = "2.3 800; 1.46 800"
+    K._TABLE_CACHE.clear()
+    big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
+                        "tabulate": True})
+    table = big.stack.plan[False].table
+    assert table is not None and K.AUTO_MAX_TEXELS < table.texels <= tables.MAX_TEXELS
+    auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
+    assert auto.stack.mode() == "exact"
+    assert tables.last_build["rounds"] == 0   # the probe's estimate alone says so

@@ -193,6 +193,12 @@ DEFAULT_TABLE_ERROR = 1e-3
 #: the skips); below it the exact recursion is as cheap as a lookup (see
 #: benchmarks/speed_vs_error.py).
 AUTO_MIN_FILMS = 2
+#: ``tabulate="auto"`` keeps tables of at most this many texels (over all
+#: channels, 2 MiB of float32): a cubic lookup in a table that fits the cache
+#: costs 3-4.6 ns per point, beyond it 7-12 ns, as much as the exact recursion
+#: of 3-10 films (benchmarks/SPEED.md). ``tabulate=true`` allows
+#: :data:`tables.MAX_TEXELS` per channel.
+AUTO_MAX_TEXELS = 1 << 19
 #: A film is optically opaque when the amplitude of light crossing it once,
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
 #: is below this: what lies beneath then changes r by less than ~1e-9.
@@ -617,7 +623,7 @@ def _tables_cache(stack: KernelStack, side: _Side):
     """The table of ``side``, shared between stacks with identical optics.
 
     The key is the stack's numbers (every index on the 1 nm grid, thicknesses,
-    incoherent flags, what is tabulated, the target), so two BSDFs with the
+    incoherent flags, what is tabulated, the target, the texel cap), so two BSDFs with the
     same films share one texture. Tables are never modified in place.
     """
     import hashlib
@@ -634,8 +640,11 @@ def _tables_cache(stack: KernelStack, side: _Side):
         for v in values[id(ix)]:
             h.update(v.tobytes())
     h.update(repr([(_scalar(d), inc) for _, d, inc in side.films]).encode())
+    transmission = side.transmission and not side.opaque
+    max_texels = (AUTO_MAX_TEXELS // (2 if transmission else 1) if stack.tabulate == "auto"
+                  else _tables.MAX_TEXELS)
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
-                   stack.table_error)).encode())
+                   stack.table_error, max_texels)).encode())
     key = h.hexdigest()
     if key in _TABLE_CACHE:
         return _TABLE_CACHE[key]
@@ -662,9 +671,9 @@ def _tables_cache(stack: KernelStack, side: _Side):
 
     data = _tables.SideData(
         n0=n0, films=[(on(ix), _scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
-        transmission=side.transmission and not side.opaque, rt=rt,
+        transmission=transmission, rt=rt,
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
-    table = _tables.build_table(data, stack.table_error, _GRID)
+    table = _tables.build_table(data, stack.table_error, _GRID, max_texels)
     if len(_TABLE_CACHE) > 256:
         _TABLE_CACHE.clear()
     _TABLE_CACHE[key] = table
