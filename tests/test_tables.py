@@ -329,3 +329,63 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
     assert auto.stack.mode() == "exact"
     assert tables.last_build["rounds"] == 0   # the probe's estimate alone says so
+
+
+@pytest.mark.parametrize("n", [2, 3, 16, 33, 700])
+def test_bspline_coefficients_solve_the_clamped_system(n):
+    """The recursive-filter solution against a dense solve of the clamped system
+    (c[i-1] + 4 c[i] + c[i+1]) / 6 = f[i], c[-1] = c[0], c[n] = c[n-1]: the
+    filters' truncation (|pole|^32 = 5e-19) and rounding leave ~1e-15."""
+    from thinfilm_mi import tables
+    A = (np.diag(np.full(n, 4.0)) + np.diag(np.ones(n - 1), 1) + np.diag(np.ones(n - 1), -1)) / 6
+    A[0, 0] += 1.0 / 6.0
+    A[-1, -1] += 1.0 / 6.0
+    f = np.random.default_rng(n).uniform(-1.0, 1.0, (n, 5, 2))
+    ref = np.linalg.solve(A, f.reshape(n, -1)).reshape(f.shape)
+    assert np.max(np.abs(tables.bspline_coefficients(f, axis=0) - ref)) < 1e-13
+    assert np.max(np.abs(tables.bspline_coefficients(np.moveaxis(f, 0, 1), axis=1)
+                         - np.moveaxis(ref, 0, 1))) < 1e-13
+
+
+def test_a_table_build_does_not_import_scipy():
+    """Importing scipy.linalg costs ~0.2 s in a new process: table builds do without."""
+    import subprocess
+    import sys
+    code = ("import sys, mitsuba as mi; mi.set_variant('llvm_ad_spectral'); import thinfilm_mi\n"
+            f"b = mi.load_dict({{'type': 'thinfilm_conductor', 'layers': {STACK!r}, "
+            "'material': 'Cu', 'tabulate': True})\n"
+            "assert b.stack.mode() == 'table'\n"
+            "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("layers", ["1.46 100; 2.3 60; 1.38 90; 2.1 50; 1.46 80",
+                                    "1.46 100; 2.3 60; 0.2+3j 6; 2.1 50; 1.46 80"])
+def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
+    """From tables.BUILD_LOOP_MIN_FILMS films the build evaluates the stack as a
+    loop over buffers of the films (real and complex loops): the table meets the
+    independent float64 reference like the unrolled builds (tolerance as in the
+    first test)."""
+    from thinfilm_mi import tables
+    calls = []
+    loop = K.unpolarised_rt_loop
+
+    def counted(*a, **k):
+        calls.append(k["film_n_min"])
+        return loop(*a, **k)
+    monkeypatch.setattr(K, "unpolarised_rt_loop", counted)
+    K._TABLE_CACHE.clear()
+    bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
+                         "tabulate": True})
+    K._TABLE_CACHE.clear()
+    table = bsdf.stack.plan[False].table
+    assert table is not None and tables.last_build["result"] == "table"
+    assert len(layers.split(";")) >= tables.BUILD_LOOP_MIN_FILMS and calls
+    assert all((m is None) == ("j" in layers) for m in calls)   # complex loop iff absorbing
+    cos, wls = random_points(20000, seed=8)
+    R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32))))
+    ref = tf.Stack(layers, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
+    assert err <= 1.5 * table.error + F32, err

@@ -344,15 +344,9 @@ class _LoopFilms:
         return self._rt(film, n0, cos_theta, exit_, wl, transmission)
 
     def _rt(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool):
-        from .optics import stack_rt_loop
-        Rs, Rp, Ts, Tp = stack_rt_loop(n0, cos_theta, self.count, film, exit_, wl,
-                                       transmission=transmission, n0_max=self.n0_max,
-                                       film_n_min=self.film_n_min, film_n_max=self.film_n_max,
-                                       films_max=self.n_films)
-        R = 0.5 * (Rs + Rp)
-        if not transmission:
-            return R
-        return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+        return unpolarised_rt_loop(n0, cos_theta, self.count, film, exit_, wl, transmission,
+                                   n0_max=self.n0_max, film_n_min=self.film_n_min,
+                                   film_n_max=self.film_n_max, films_max=self.n_films)
 
 
 class _Side:
@@ -650,15 +644,26 @@ def _tables_cache(stack: KernelStack, side: _Side):
         return _TABLE_CACHE[key]
 
     def on(ix, real=False):
+        """The index of ``ix`` at given wavelengths (numpy), through its textures;
+        a uniform spectrum's one value (read above through the texture) is
+        broadcast without a kernel launch."""
         memo = {}
+        eta_grid, k_grid = values[id(ix)]
+        constant = [v[0] if tex.class_name() == "UniformSpectrum" else None
+                    for tex, v in ((ix.eta, eta_grid), (ix.k, k_grid))]
+
+        def part(i, tex, wl):
+            if constant[i] is not None:
+                return np.full(wl.shape, constant[i])
+            return texture_on_grid(tex, wl)
 
         def f(wl):   # the build asks for the same wavelengths several times
             wl = np.asarray(wl, np.float64)
             key = wl.tobytes()
             if key not in memo:
-                eta = texture_on_grid(ix.eta, wl)
+                eta = part(0, ix.eta, wl)
                 memo.clear()
-                memo[key] = eta if real else eta + 1j * texture_on_grid(ix.k, wl)
+                memo[key] = eta if real else eta + 1j * part(1, ix.k, wl)
             return memo[key]
         return f
 
@@ -672,6 +677,7 @@ def _tables_cache(stack: KernelStack, side: _Side):
     data = _tables.SideData(
         n0=n0, films=[(on(ix), _scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
         transmission=transmission, rt=rt,
+        rt_loop=None if any(incoherent) else unpolarised_rt_loop,
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
     table = _tables.build_table(data, stack.table_error, _GRID, max_texels)
     if len(_TABLE_CACHE) > 256:
@@ -695,6 +701,19 @@ def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
                + a.tp.abs2() * transmittance_factor_p(a.n_exit, a.q_exit, q0))
     T = dr.select(a.grazing, 0.0, dr.clip(T, 0.0, 1.0 - R))
     return R, T
+
+
+def unpolarised_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = True, **hints):
+    """:func:`unpolarised_rt` with the films visited by a loop
+    (:func:`optics.stack_rt_loop`, whose arguments and trace-time ``hints`` these
+    are): the render kernels' deep stacks and the table builds' (float64)."""
+    from .optics import stack_rt_loop
+    Rs, Rp, Ts, Tp = stack_rt_loop(n0, cos0, count, film, n_exit, wl,
+                                   transmission=transmission, **hints)
+    R = 0.5 * (Rs + Rp)
+    if not transmission:
+        return R
+    return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
 
 
 def optional_texture(props, name: str):

@@ -91,6 +91,10 @@ GRAZING_COS = 0.02
 #: high-Q cavity modes of a deep random stack on a metal) is evaluated exactly.
 #: (A bilinear table lit from inside glass, fig8b's, needs ~1.6e6.)
 MAX_BUILD_POINTS = 3_000_000
+#: Builds evaluate stacks of this many films or more as a loop over the films: its
+#: float64 kernel is compiled once for every depth (the unrolled kernel of 30
+#: films took ~0.9 s to compile, once per depth and process).
+BUILD_LOOP_MIN_FILMS = 4
 #: Refinement rounds after the first estimate.
 MAX_ROUNDS = 6
 #: A refinement aims at this share of the target (the rest is margin).
@@ -107,6 +111,8 @@ class SideData:
     the evaluator ``(n0, cos0, films, n_exit, wl, transmission) -> R | (R, T)``
     (the coherent :func:`~thinfilm_mi.kernel.unpolarised_rt` or the
     incoherent-aware one), ``transmission`` whether ``T`` is tabulated too.
+    ``rt_loop``, where given, evaluates :data:`BUILD_LOOP_MIN_FILMS` films or
+    more as a loop (:func:`~thinfilm_mi.kernel.unpolarised_rt_loop`).
     """
     n0: object                      # callable wl -> real ndarray
     films: list                     # [(callable wl -> complex ndarray, thickness)]
@@ -114,6 +120,7 @@ class SideData:
     transmission: bool
     rt: object
     fringe_films: list = field(default_factory=list)  # indices of coherent films
+    rt_loop: object = None
 
 
 def tir_kind(n0: np.ndarray, n_exit: np.ndarray) -> str | None:
@@ -228,21 +235,41 @@ def table_resolution(side: SideData, error: float, wavelengths: np.ndarray,
 
 
 # -- cubic B-spline coefficients ---------------------------------------------------
+#: The pole of the cubic B-spline interpolation filter, ``z + 1/z = -4``.
+_POLE = math.sqrt(3.0) - 2.0
+#: Terms of each recursive filter kept: 2^5 = 32, |pole|^32 = 5e-19.
+_POLE_STEPS = 5
+
+
 def bspline_coefficients(values: np.ndarray, axis: int) -> np.ndarray:
     """Coefficients ``c`` of the clamped cubic B-spline that interpolates
     ``values`` along ``axis``: ``(c[i-1] + 4 c[i] + c[i+1]) / 6 = f[i]`` with
     ``c[-1] = c[0]`` and ``c[N] = c[N-1]`` (the clamping of
-    ``Texture2f.eval_cubic`` with ``WrapMode.Clamp``): one tridiagonal solve
-    (LAPACK, through ``scipy.linalg.solve_banded``) for all the other axes."""
-    from scipy.linalg import solve_banded
+    ``Texture2f.eval_cubic`` with ``WrapMode.Clamp``).
 
+    That system is the unbounded one for ``f`` extended by half-sample
+    mirroring (its solution is then mirrored too, so ``c[-1] = c[0]``), whose
+    inverse is the recursive filter pair ``c = -6 z (1 - z q^-1)^-1 (1 - z
+    q)^-1 f`` (``q`` the shift, ``z`` = :data:`_POLE`; Unser, "Splines: a
+    perfect fit for signal and image processing", IEEE SPM 16(6), 1999). Each
+    recursion runs as :data:`_POLE_STEPS` doubling steps ``y += z^s y(i - s)``,
+    ``s = 1, 2, 4, ...``: a few whole-array numpy operations instead of a loop
+    over the nodes, and no SciPy (whose import costs ~0.2 s in a new process).
+    """
     f = np.moveaxis(np.asarray(values, np.float64), axis, 0)
     n = f.shape[0]
-    ab = np.empty((3, n))
-    ab[0], ab[1], ab[2] = 1.0 / 6.0, 4.0 / 6.0, 1.0 / 6.0
-    ab[1, 0] = ab[1, -1] = 5.0 / 6.0
-    c = solve_banded((1, 1), ab, f.reshape(n, -1), overwrite_b=False, check_finite=False)
-    return np.moveaxis(c.reshape(f.shape), 0, axis)
+    ext = 1 << _POLE_STEPS
+    j = np.arange(-ext, n + ext) % (2 * n)
+    y = f[np.where(j >= n, 2 * n - 1 - j, j)]
+    power, s = _POLE, 1
+    for _ in range(_POLE_STEPS):     # causal: y[i] = sum_k z^k f[i - k]
+        y[s:] = y[s:] + power * y[:-s]
+        power, s = power * power, 2 * s
+    power, s = _POLE, 1
+    for _ in range(_POLE_STEPS):     # anticausal: c[i] = sum_k z^k y[i + k]
+        y[:-s] = y[:-s] + power * y[s:]
+        power, s = power * power, 2 * s
+    return np.moveaxis((-6.0 * _POLE) * y[ext:ext + n], 0, axis)
 
 
 def _bspline_midpoints(coeffs: np.ndarray, axis: int, g: int, n: int) -> np.ndarray:
@@ -337,23 +364,51 @@ def _evaluate(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray
     """Exact float64 R [, T] at points ``(cos0[i], wl[rows[i]])`` (flat arrays),
     with ``indices`` (:func:`_indices`) at the wavelengths ``wl``; returns shape
     (len cos0, channels). One trace and one kernel launch for all the points;
-    the phase follows the wavelength also beyond 360-830 nm."""
-    from drjit.llvm import Float64
+    the phase follows the wavelength also beyond 360-830 nm.
 
-    from ._backend import float64_array
+    The per-wavelength values go in as small buffers gathered inside the kernel
+    at ``rows`` (no per-point copies: fresh large numpy buffers cost page
+    faults); real indices with a literal zero imaginary part (the core's
+    real-index paths). Deep stacks run as a loop gathering film ``j``'s index
+    at row ``r`` from a buffer at ``j * len(wl) + r``."""
+    from drjit.llvm import Float64, UInt32
+
+    from ._backend import aligned_array, float64_array
 
     n0, film_n, n_exit = indices
+    film_n = [np.asarray(n, np.complex128) for n in film_n]
+    at = aligned_array(rows, np.uint32, UInt32)
+
+    def per_row(values):
+        return dr.gather(Float64, float64_array(values), at)
 
     def cx(values):
-        values = np.asarray(values, np.complex128)[rows]
-        if not np.any(values.imag):   # a literal zero: the core's real-index paths
-            return Cx(float64_array(values.real), 0.0)
-        return Cx(float64_array(values.real), float64_array(values.imag))
+        values = np.asarray(values, np.complex128)
+        return Cx(per_row(values.real), per_row(values.imag) if np.any(values.imag) else 0.0)
 
-    films = [(cx(n), dr.opaque(Float64, float(d))) for n, (_, d) in zip(film_n, side.films)]
-    res = side.rt(float64_array(np.asarray(n0, np.float64)[rows]), float64_array(cos0), films,
-                  cx(n_exit), float64_array(np.asarray(wl, np.float64)[rows]),
-                  side.transmission)
+    args = (per_row(n0), float64_array(cos0))
+    tail = (cx(n_exit), per_row(wl), side.transmission)
+    if side.rt_loop is not None and len(film_n) >= BUILD_LOOP_MIN_FILMS:
+        re = np.concatenate([n.real for n in film_n])
+        real = not any(np.any(n.imag) for n in film_n)
+        buf_re = float64_array(re)
+        buf_im = None if real else float64_array(np.concatenate([n.imag for n in film_n]))
+        thick = float64_array(np.array([d for _, d in side.films], np.float64))
+        width = dr.opaque(UInt32, len(wl))
+
+        def film(j):
+            i = j * width + at
+            m = Cx(dr.gather(Float64, buf_re, i),
+                   0.0 if real else dr.gather(Float64, buf_im, i))
+            return m, dr.gather(Float64, thick, j)
+
+        res = side.rt_loop(*args, dr.opaque(UInt32, len(film_n), len(rows)), film, *tail,
+                           n0_max=float(np.max(n0)), film_n_min=float(re.min()) if real else None,
+                           film_n_max=float(re.max()) if real else None,
+                           films_max=len(film_n))
+    else:
+        films = [(cx(n), dr.opaque(Float64, float(d))) for n, (_, d) in zip(film_n, side.films)]
+        res = side.rt(*args, films, *tail)
     res = res if side.transmission else (res,)
     dr.eval(*res)
     return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1)
