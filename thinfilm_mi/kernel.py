@@ -222,8 +222,11 @@ def texture_on_grid(tex, wavelengths: np.ndarray = _GRID) -> np.ndarray:
             si.wavelengths = mi.Spectrum(*[float(x) for x in padded[i:i + 4]])
             out.extend(float(v) for v in tex.eval(si))
         return np.asarray(out[:n], dtype=np.float64)
+    from ._backend import aligned_array
+
     si = dr.zeros(mi.SurfaceInteraction3f, n)
-    w = mi.Float(wl.astype(np.float32))
+    # an aligned buffer: Dr.Jit compiles a kernel per alignment of its inputs
+    w = aligned_array(wl, np.float32, mi.Float)
     si.wavelengths = mi.Spectrum(w, w, w, w)
     value = tex.eval(si)
     return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()

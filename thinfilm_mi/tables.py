@@ -434,6 +434,8 @@ class _Points:
         """``[(values (len t, len s, C), cos0 (len t, len s))]`` for every set."""
         wl = np.concatenate([_v_nodes_wl(t, nv) for t, _, _, nv, _ in self.sets])
         wl, inverse = np.unique(wl, return_inverse=True)
+        if wl.size == 1:   # Dr.Jit traces a 1-element buffer as a scalar: another kernel
+            wl = np.repeat(wl, 2)
         indices = _indices(self.side, wl)
         n0 = np.asarray(indices[0], np.float64)
         ne = np.asarray(indices[2]).real
