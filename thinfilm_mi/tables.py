@@ -85,11 +85,12 @@ GHOST = 3
 #: contribution to an image is a sliver at silhouettes. Tables interpolate
 #: there too; benchmarks/speed_vs_error.py reports the error including it.
 GRAZING_COS = 0.02
-#: Exact evaluations a build may spend (all rounds, nodes and checks), up to
-#: ~1 s for 30 films on two cores: a stack that needs more (sharp resonances,
-#: such as the surface plasmon of a metal film seen from inside glass, or the
-#: high-Q cavity modes of a deep random stack on a metal) is evaluated exactly.
-#: (A bilinear table lit from inside glass, fig8b's, needs ~1.6e6.)
+#: Exact evaluations a build may spend (probe, and all rounds' nodes and
+#: checks), up to ~1 s for 30 films on two cores: a stack that needs more
+#: (sharp resonances, such as the surface plasmon of a metal film seen from
+#: inside glass, or the high-Q cavity modes of a deep random stack on a metal)
+#: is evaluated exactly. (A bilinear table lit from inside glass, fig8b's,
+#: needs ~1.6e6.)
 MAX_BUILD_POINTS = 3_000_000
 #: Builds evaluate stacks of this many films or more as a loop over the films: its
 #: float64 kernel is compiled once for every depth (the unrolled kernel of 30
