@@ -17,11 +17,11 @@ the grazing sliver (cos theta >= ``tables.GRAZING_COS``) that table builds verif
   the float32 recursion as traced into the render kernels (llvm_ad_spectral,
   4 wavelengths per lane; --points (cos, lambda) pairs in all);
 * table: the same call with ``tabulate`` true and ``table_error`` 1e-2, 3e-3,
-  1e-3, 3e-4: the interpolation (cubic B-spline, or bilinear for a split
-  axis), the table's nu x nv, its build time (first build, which includes
-  compiling the float64 build kernels, and a second build of the same stack
-  with the table cache cleared), the verified error the build reports, and the
-  measured errors. A stack whose sharp resonances cannot be resolved within
+  1e-3, 3e-4: the interpolation (cubic B-spline; "split" where the angle
+  axis is split at a critical angle), the table's nu x nv, its build time
+  (first build, which includes compiling the float64 build kernels, and a
+  second build of the same stack with the table cache cleared), the verified
+  error the build reports, and the measured errors. A stack whose sharp resonances cannot be resolved within
   ``tables.MAX_TEXELS`` texels and ``tables.MAX_BUILD_POINTS`` evaluations gets
   no table: the row says so. Every target is tried (a failing build took
   0.02-0.06 s in our runs: the probe rejects it); with --stop-at-failure
@@ -199,7 +199,7 @@ def main():
             mx, rms, mx_v = errors(R, ref_R, cos64)
             ns = t / npts * 1e9
             results.append((L, f"table {e:g}", ns, mx))
-            kind = "cubic" if tab.cubic else "bilinear"
+            kind = "cubic" if tab.kind == "plain" else "cubic, split"
             print(f"| {L} | table ({kind}) | {e:g} | {tab.nu} x {tab.nv} | {t_first:.3f} / "
                   f"{t_second:.3f} | {tab.error:.1e} | {ns:.2f} | {mx:.1e} | {mx_v:.1e} | "
                   f"{rms:.1e} |", flush=True)

@@ -33,14 +33,13 @@ Thin-film coated smooth dielectric (:monosp:`thinfilm_dielectric`)
      exact evaluation.
  * - tabulate
    - |string| or |bool|
-   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R``
-     (and ``T`` where needed) is read from a verified table over (angle,
-     wavelength) instead of the recursion (a cubic B-spline; bilinear
-     where the exit medium can totally reflect): its cost does not grow
-     with the number of films. ``auto`` tabulates stacks of 2 films or more in
-     vectorised variants, unless a ``thickness`` texture is given, gradients
-     are tracked, or the target cannot be met within 2^19 texels, a table that
-     still fits the cache (then: exact).
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
+     ``T`` where needed) is read from a verified table over (angle, wavelength) instead
+     of the recursion (a cubic B-spline, split at the critical angle where the exit
+     medium can totally reflect): its cost does not grow with the number of films.
+     ``auto`` tabulates stacks of 2 films or more in vectorised variants, unless a
+     ``thickness`` texture is given, gradients are tracked, or the target cannot be met
+     within 2^19 texels, a table that still fits the cache (then: exact).
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).

@@ -18,7 +18,7 @@ from _kernels import compiled, interaction
 # A float32 kernel value against float64: rounding below 3e-5 for these stacks
 # (tests/test_bsdf_specular.py). A table lookup adds its interpolation error,
 # which the build verified to be below ``table.error`` at the midpoints of its
-# cells; bilinear interpolation errs most near those midpoints, so a point
+# cells; the cubic spline's error peaks near those midpoints, so a point
 # anywhere may exceed it only marginally: we allow 1.5x plus the float32 term.
 F32 = 3e-5
 
@@ -67,11 +67,15 @@ def test_table_matches_float64_within_its_verified_error():
     assert err > 1e-6   # it really is the interpolated table, not the recursion
 
 
+@pytest.mark.parametrize("layers", ["1.38 110; 2.1 70", "Au 20"])
 @pytest.mark.parametrize("inside", [False, True])
-def test_dielectric_tables_both_sides_with_tir(inside):
-    """Inside glass the exit medium totally reflects: the split axis puts the
-    critical angle on a node, so the kink costs no accuracy."""
-    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": "1.38 110; 2.1 70",
+def test_dielectric_tables_both_sides_with_tir(inside, layers):
+    """Inside glass the exit medium totally reflects: the angle axis is split at the
+    critical angle, each segment a cubic spline of its own (ghost nodes mirrored
+    at normal and grazing incidence, extrapolated at the critical angle), so the
+    kink costs no accuracy; the gold film (the paper's Fig. 8b) adds its surface
+    plasmon dip just beyond the critical angle."""
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": layers,
                          "int_ior": 1.6, "tabulate": True})
     side = bsdf.stack.plan[inside]
     assert side.table is not None and side.table.channels == 2
@@ -81,7 +85,7 @@ def test_dielectric_tables_both_sides_with_tir(inside):
     cos[:2000] = f32(0.7804861 + np.linspace(-1e-3, 1e-3, 2000))
     R, T = bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)),
                                   inside=inside, transmission=True)
-    ref = tf.Stack("1.38 110; 2.1 70", substrate=1.6, ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(layers, substrate=1.6, ambient=K.DEFAULT_EXT_IOR)
     if inside:
         ref = ref.reversed()
     tol = 1.5 * side.table.error + F32
@@ -262,36 +266,59 @@ def test_scalar_variant_uses_tables_too():
     assert np.max(np.abs(R - exact)) <= 1.5 * bsdf.stack.plan[False].table.error + F32
 
 
-@pytest.mark.parametrize("cubic", [True, False])
-def test_probe_lines_know_their_interpolation_error(cubic):
+@pytest.mark.parametrize("ends", [("values", "values"), ("mirror", "extrapolate"),
+                                  ("extrapolate", "mirror")])
+def test_probe_lines_know_their_interpolation_error(ends):
     """The probe's subsampled lines against the closed form for a sinusoid: at a
-    midpoint, linear interpolation gives cos(theta/2) f and the interpolating
-    cubic spline H(theta) f, H = ((23 cos(theta/2) + cos(3 theta/2))/24) /
-    ((2 + cos theta)/3), theta = omega k (uniform B-spline interpolation on an
-    unbounded grid). Only the middle half is compared (the ``ok`` mask): there the
-    clamped ends, 3 ghost nodes plus at least 4 nodes away, perturb the spline by
-    less than 0.27^7 ~ 1e-4 of their own error, hence the 1e-4 absolute slack."""
+    midpoint the interpolating cubic spline gives H(theta) f, H = ((23 cos(theta/2)
+    + cos(3 theta/2))/24) / ((2 + cos theta)/3), theta = omega k (uniform B-spline
+    interpolation on an unbounded grid). Only the middle half is compared (the
+    ``ok`` mask): there the ends (evaluated, mirrored or extrapolated ghosts, 3
+    nodes, clamped beyond) are at least 4 nodes away and perturb the spline by
+    less than 0.27^4 ~ 5e-3 of their own error (at most ~1e-2 here, where the
+    sinusoid is not even about an end), hence the 1e-4 absolute slack; checked
+    for the subsamplings that resolve the sinusoid (theta < 3: more than two
+    nodes a period; beyond it an extrapolated ghost is meaningless)."""
     from thinfilm_mi import tables
     intervals, min_nodes = 1024, 17
-    ext = tables._ghosts(cubic, intervals, min_nodes)
-    assert ext == (3 * 64 if cubic else 0)
+    ext = tables._ghosts(intervals, min_nodes) if ends[0] == "values" else 0
+    assert tables._ghosts(intervals, min_nodes) == 3 * 64
     omega = 2.0 * np.pi / 37.3
     x = np.arange(-ext, intervals + ext + 1.0)
     f = np.cos(omega * x + 0.4)[:, None, None]
     ok = np.zeros((x.size, 1), bool)
     ok[ext + 256:ext + 768] = True
-    (levels,) = tables._line_levels(f, ok, cubic, intervals, min_nodes)
+    (levels,) = tables._line_levels(f, ok, intervals, min_nodes, ends)
     assert [k for k, _, _ in levels] == [2, 4, 8, 16, 32, 64]
     for k, err, at in levels:
         theta = omega * k
-        h = ((23 * np.cos(theta / 2) + np.cos(1.5 * theta)) / 24) / ((2 + np.cos(theta)) / 3) \
-            if cubic else np.cos(theta / 2)
+        if theta >= 3.0:
+            continue
+        h = ((23 * np.cos(theta / 2) + np.cos(1.5 * theta)) / 24) / ((2 + np.cos(theta)) / 3)
         mids = np.arange(k // 2, intervals, k)
         mids = mids[(mids >= 256) & (mids < 768)]
         expected = np.abs(1 - h) * np.abs(np.cos(omega * mids + 0.4))
         assert abs(err - expected.max()) <= 1e-4 + 1e-6 * expected.max(), (k, err, expected.max())
         if expected.max() > 1e-3:
             assert at == mids[np.argmax(expected)]
+
+
+def test_ghost_nodes():
+    """Mirrored ends copy the nodes beyond the end node; extrapolated ends continue
+    the cubic through the last four nodes exactly; given ends are kept in order."""
+    from thinfilm_mi import tables
+    x = np.arange(10.0)
+    f = x ** 3 - 2 * x
+    out = tables.with_ghosts(f, "mirror", "extrapolate")
+    assert np.array_equal(out[:3], f[[3, 2, 1]])
+    xr = np.arange(10.0, 13.0)
+    assert np.allclose(out[-3:], xr ** 3 - 2 * xr, rtol=0, atol=1e-9)
+    out = tables.with_ghosts(f, "extrapolate", "mirror")
+    xl = np.arange(-3.0, 0.0)
+    assert np.allclose(out[:3], xl ** 3 - 2 * xl, rtol=0, atol=1e-9)
+    assert np.array_equal(out[-3:], f[[8, 7, 6]])
+    out = tables.with_ghosts(f, np.array([1.0, 2.0, 3.0]), np.array([7.0, 8.0, 9.0]))
+    assert np.array_equal(out, np.concatenate([[1, 2, 3], f, [7, 8, 9]]))
 
 
 def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():

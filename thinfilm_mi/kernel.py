@@ -134,6 +134,17 @@ class SpectralIndex:
 
         return cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat, grid)
 
+    @property
+    def kinks(self) -> np.ndarray:
+        """Wavelengths inside 360-830 nm where the index's slope may jump: a
+        dataset's own knots (it is interpolated linearly between them). None for
+        constants and formulas (their 1 nm sampling bends the slope by ~1e-7);
+        unknown, hence none, for textures given by the user."""
+        if self.material is None:
+            return np.empty(0)
+        knots = getattr(self.material, "knots", lambda: np.empty(0))()
+        return knots[(knots > _GRID[0]) & (knots < _GRID[-1])]
+
     @classmethod
     def from_textures(cls, eta_tex, k_tex, label: str) -> "SpectralIndex":
         return cls(eta_tex, k_tex, label)
@@ -681,6 +692,7 @@ def _tables_cache(stack: KernelStack, side: _Side):
         n0=n0, films=[(on(ix), _scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
         transmission=transmission, rt=rt,
         rt_loop=None if any(incoherent) else unpolarised_rt_loop,
+        kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
     table = _tables.build_table(data, stack.table_error, _GRID, max_texels)
     if len(_TABLE_CACHE) > 256:

@@ -9,16 +9,18 @@ core (:func:`thinfilm_mi.kernel.unpolarised_rt` on ``drjit.llvm.Float64``) and
 looked up in the render kernel, where its cost does not depend on the number of
 films.
 
-Interpolation: where ``R`` and ``T`` are analytic over the whole table (the
-exit medium cannot totally reflect) the texture holds the coefficients of the
-interpolating cubic B-spline (``Texture2f.eval_cubic``, 16 texels a lookup):
-its error falls as h^4, so a fringe needs 4-5x fewer nodes per axis than with
-the paper's linear interpolation (h^2) for the same error, and a table ~20x
-fewer texels. The coefficients are solved for (a tridiagonal system per axis)
-on a grid extended by :data:`GHOST` nodes beyond each edge, at which the stack
-is evaluated too, so the spline's end conditions do not reach the tabulated
-range. Where the exit medium totally reflects, ``R`` has a square-root kink at
-the critical angle: that table is bilinear, with the kink on a node.
+Interpolation: the texture holds the coefficients of the interpolating cubic
+B-spline (``Texture2f.eval_cubic``, 16 texels a lookup): its error falls as
+h^4, so a fringe needs 4-5x fewer nodes per axis than with the paper's linear
+interpolation (h^2) for the same error, and a table ~20x fewer texels. The
+coefficients are solved for (a tridiagonal system per axis) on a grid extended
+by :data:`GHOST` nodes beyond each edge, at which the stack is evaluated too
+(its analytic continuation), so the spline's end conditions do not reach the
+tabulated range. Where the exit medium totally reflects, ``R`` has a
+square-root kink at the critical angle: the angle axis is split there into two
+segments, each a spline of its own with its own ghost nodes (mirrored about
+normal and grazing incidence, where the functions are even, and extrapolated
+at the critical angle, beyond which neither continues), stored side by side.
 
 Axes (chosen so that the tabulated functions are smooth):
 
@@ -89,8 +91,7 @@ GRAZING_COS = 0.02
 #: checks), up to ~1 s for 30 films on two cores: a stack that needs more
 #: (sharp resonances, such as the surface plasmon of a metal film seen from
 #: inside glass, or the high-Q cavity modes of a deep random stack on a metal)
-#: is evaluated exactly. (A bilinear table lit from inside glass, fig8b's,
-#: needs ~1.6e6.)
+#: is evaluated exactly. (fig8b's table lit from inside glass needs ~2e5.)
 MAX_BUILD_POINTS = 3_000_000
 #: Builds evaluate stacks of this many films or more as a loop over the films: its
 #: float64 kernel is compiled once for every depth (the unrolled kernel of 30
@@ -114,6 +115,8 @@ class SideData:
     incoherent-aware one), ``transmission`` whether ``T`` is tabulated too.
     ``rt_loop``, where given, evaluates :data:`BUILD_LOOP_MIN_FILMS` films or
     more as a loop (:func:`~thinfilm_mi.kernel.unpolarised_rt_loop`).
+    ``kinks``: wavelengths where an index's slope jumps (tabulated data), at
+    which the build checks the table too.
     """
     n0: object                      # callable wl -> real ndarray
     films: list                     # [(callable wl -> complex ndarray, thickness)]
@@ -122,6 +125,7 @@ class SideData:
     rt: object
     fringe_films: list = field(default_factory=list)  # indices of coherent films
     rt_loop: object = None
+    kinks: np.ndarray = field(default_factory=lambda: np.empty(0))
 
 
 def tir_kind(n0: np.ndarray, n_exit: np.ndarray) -> str | None:
@@ -201,15 +205,14 @@ def _v_nodes_wl(t: np.ndarray, nv: int) -> np.ndarray:
 
 
 # -- resolution ----------------------------------------------------------------
-def _phase_step(error: float, cubic: bool) -> float:
+def _phase_step(error: float) -> float:
     """Largest node spacing ``h`` (in fringe phase) at which a fringe ``cos(phi)``
-    of unit amplitude interpolates within ``error / 2``: ``h^2 / 8`` for linear
-    interpolation, ``5 h^4 / 384`` for the cubic interpolating spline."""
-    return (38.4 * error) ** 0.25 if cubic else math.sqrt(4.0 * error)
+    of unit amplitude interpolates within ``error / 2``: ``5 h^4 / 384`` for the
+    cubic interpolating spline."""
+    return (38.4 * error) ** 0.25
 
 
-def table_resolution(side: SideData, error: float, wavelengths: np.ndarray,
-                     cubic: bool = True) -> tuple[int, int]:
+def table_resolution(side: SideData, error: float, wavelengths: np.ndarray) -> tuple[int, int]:
     """First estimate of ``(nu, nv)`` for a target max error ``error``.
 
     Each axis gets half the target and enough nodes for the fringe phase it
@@ -219,7 +222,7 @@ def table_resolution(side: SideData, error: float, wavelengths: np.ndarray,
     ``4 pi / lambda_min sum_j d_j (Re q_j(0) - Re q_j(grazing))``. The estimate
     is then verified and refined by :func:`build_table`.
     """
-    h = _phase_step(error, cubic)
+    h = _phase_step(error)
     n0 = side.n0(wavelengths)
     ot_v, ot_u = 0.0, 0.0
     for j in side.fringe_films:
@@ -282,22 +285,61 @@ def _bspline_midpoints(coeffs: np.ndarray, axis: int, g: int, n: int) -> np.ndar
     return np.moveaxis(mid, 0, axis)
 
 
+def with_ghosts(real: np.ndarray, left, right, g: int = GHOST) -> np.ndarray:
+    """``real`` (nodes along axis 0) with ``g`` ghost nodes before and after.
+
+    An end is either an array of the ``g`` values there, in the axis's order
+    (evaluated: the stack's analytic continuation), ``"mirror"`` (the function
+    is even about the end node: ``f(-k) = f(k)``) or ``"extrapolate"`` (the
+    cubic through the four nodes nearest the end, where no continuation can be
+    evaluated: at a critical angle)."""
+    def outwards(spec, inner):
+        # the ghosts at -1, -2, ..., -g of the nodes inner[0], inner[1], ...
+        if spec == "mirror":
+            return inner[1:g + 1]
+        f0, f1, f2, f3 = inner[0], inner[1], inner[2], inner[3]
+        return np.stack([4 * f0 - 6 * f1 + 4 * f2 - f3,
+                         10 * f0 - 20 * f1 + 15 * f2 - 4 * f3,
+                         20 * f0 - 45 * f1 + 36 * f2 - 10 * f3][:g])
+    lo = np.asarray(left) if not isinstance(left, str) else outwards(left, real)[::-1]
+    hi = np.asarray(right) if not isinstance(right, str) else outwards(right, real[::-1])
+    return np.concatenate([lo, real, hi], axis=0)
+
+
+#: How each end of a segment of the u axis gets its ghost nodes
+#: (:func:`with_ghosts`): a plain axis's are evaluated; a split axis's transmit
+#: segment is even about normal incidence (uniform in the refraction angle),
+#: its total-reflection segment about grazing incidence (``w = 1``), and both
+#: are extrapolated at the critical angle, beyond which they do not continue.
+SPLIT_ENDS = (("mirror", "extrapolate"), ("extrapolate", "mirror"))
+
+
+def _bspline_at(coeffs: np.ndarray, t: np.ndarray, g: int) -> np.ndarray:
+    """The spline with ``coeffs`` along axis 0 (node ``i`` at index ``i + g``) at
+    node coordinates ``t`` (uniform cubic B-spline weights)."""
+    i = np.floor(t).astype(np.int64)
+    f = (t - i)[(...,) + (None,) * (coeffs.ndim - 1)]
+    w = ((1 - f) ** 3 / 6, (3 * f ** 3 - 6 * f ** 2 + 4) / 6,
+         (-3 * f ** 3 + 3 * f ** 2 + 3 * f + 1) / 6, f ** 3 / 6)
+    return sum(wk * coeffs[i + g - 1 + k] for k, wk in enumerate(w))
+
+
 # -- building -------------------------------------------------------------------
 class Table:
     """A built table: a float32 ``Texture2f`` (channels ``R`` [, ``T``]) with its axes.
 
-    ``values`` has shape ``(nv + 2g, nu + 2g, channels)``: the cubic spline's
-    coefficients with ``g`` = :data:`GHOST` ghost nodes (``cubic``), or the
-    node values (``g = 0``) of a bilinear table.
+    ``values`` holds the cubic spline's coefficients with :data:`GHOST` ghost
+    nodes around every segment of each axis: shape ``(nv + 2g, nu + 2g,
+    channels)``, or for a split axis ``(nv + 2g, 2 (nu/2 + 2g), channels)``
+    (the transmit segment's columns, then the total-reflection segment's).
     """
 
-    def __init__(self, values: np.ndarray, kind: str, error: float, channels: int,
-                 cubic: bool = False):
+    def __init__(self, values: np.ndarray, kind: str, error: float, channels: int):
         import mitsuba as mi
 
-        g = GHOST if cubic else 0
-        self.cubic = cubic
-        self.nv, self.nu = values.shape[0] - 2 * g, values.shape[1] - 2 * g
+        g = GHOST
+        segments = 2 if kind == "tir" else 1
+        self.nv, self.nu = values.shape[0] - 2 * g, values.shape[1] - 2 * g * segments
         self.kind = kind
         self.channels = channels
         #: the verified max abs interpolation error (sum of both axes' maxima)
@@ -313,13 +355,22 @@ class Table:
             return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else mi.Float(value)
         self._nu = constant(self.nu)
         self._nv = constant(self.nv)
-        self._inv_u = constant(1.0 / (self.nu + 2 * g))
+        self._inv_u = constant(1.0 / values.shape[1])
         self._inv_v = constant(1.0 / (self.nv + 2 * g))
         self._offset = g + 0.5   # node 0 sits at texel centre g
+        # a split axis: node coordinates beyond the critical cell are in the
+        # second segment, 2g texels further
+        self._split = constant(0.5 * self.nu - 0.5) if kind == "tir" else None
 
     @property
     def texels(self) -> int:
         return self.nu * self.nv
+
+    def _u(self, cos_i, sin_i, n0, n_exit):
+        x = u_texel(cos_i, sin_i, n0, n_exit, self.kind, self._nu)
+        if self._split is not None:
+            x = x + dr.select(x > self._split, 2.0 * GHOST, 0.0)
+        return (x + self._offset) * self._inv_u
 
     def lookup(self, cos_i, n0, n_exit, wavelengths, active=True):
         """``[R]`` or ``[R, T]`` as spectra: one lookup per wavelength.
@@ -334,22 +385,18 @@ class Table:
         sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
         out = [[] for _ in range(self.channels)]
         if self.kind == "plain":
-            u = (u_texel(cos_i, sin_i, 1.0, 1.0, "plain", self._nu) + self._offset) * self._inv_u
+            u = self._u(cos_i, sin_i, 1.0, 1.0)
         for i in range(len(wavelengths)):
             if self.kind != "plain":
-                u = (u_texel(cos_i, sin_i, n0[i], n_exit[i], self.kind, self._nu)
-                     + self._offset) * self._inv_u
+                u = self._u(cos_i, sin_i, n0[i], n_exit[i])
             v = (v_texel(wavelengths[i], self._nv) + self._offset) * self._inv_v
-            p = mi.Point2f(u, v)
-            res = self.texture.eval_cubic(p, active) if self.cubic \
-                else self.texture.eval(p, active)
+            res = self.texture.eval_cubic(mi.Point2f(u, v), active)
             for c in range(self.channels):
                 out[c].append(res[c])
         res = [mi.Spectrum(*vals) for vals in out]
-        if self.cubic:
-            res[0] = dr.clip(res[0], 0.0, 1.0)
-            if self.channels > 1:
-                res[1] = dr.clip(res[1], 0.0, 1.0 - res[0])
+        res[0] = dr.clip(res[0], 0.0, 1.0)
+        if self.channels > 1:
+            res[1] = dr.clip(res[1], 0.0, 1.0 - res[0])
         return res
 
 
@@ -472,26 +519,27 @@ PROBE_SHARE = 0.4
 _REF = 1001
 
 
-def _line_levels(f: np.ndarray, ok: np.ndarray, cubic: bool, intervals: int,
-                 min_nodes: int) -> list:
+def _line_levels(f: np.ndarray, ok: np.ndarray, intervals: int, min_nodes: int,
+                 ends=("values", "values")) -> list:
     """For fine lines ``f`` (shape ``(values, lines, channels)``, ``intervals``
     intervals each), per line: ``[(k, err, at)]`` for ``k`` = 2, 4, 8, ...: the
-    largest interpolation error at the allowed (``ok``, shape ``(values,
-    lines)``) midpoints when only every ``k``-th value is kept as nodes (at
-    least ``min_nodes``), and where it is (fine node coordinate, 0 ..
-    intervals). A cubic line holds :func:`_ghosts` fine values beyond each end,
-    so every subsampling has the table's :data:`GHOST` nodes there."""
+    largest error at the allowed (``ok``, shape ``(values, lines)``) midpoints
+    of the interpolating cubic spline through every ``k``-th value (at least
+    ``min_nodes`` nodes), and where it is (fine node coordinate, 0 ..
+    intervals). Each subsampling gets :data:`GHOST` ghost nodes as the table
+    would (:func:`with_ghosts`): an end ``"values"`` reads them from the
+    :func:`_ghosts` fine values the line holds beyond it."""
     ext = (f.shape[0] - 1 - intervals) // 2
+    g = GHOST
     levels, k = [], 2
     while intervals // k + 1 >= min_nodes:
         n = intervals // k + 1
         mid = slice(ext + k // 2, ext + intervals, k)
-        if cubic:
-            c = f[ext - GHOST * k:ext + intervals + GHOST * k + 1:k]
-            approx = _bspline_midpoints(bspline_coefficients(c, axis=0), 0, GHOST, n)
-        else:
-            c = f[ext:ext + intervals + 1:k]
-            approx = 0.5 * (c[:-1] + c[1:])
+        left = f[ext - g * k:ext:k] if ends[0] == "values" else ends[0]
+        right = f[ext + intervals + k:ext + intervals + g * k + 1:k] \
+            if ends[1] == "values" else ends[1]
+        c = with_ghosts(f[ext:ext + intervals + 1:k], left, right)
+        approx = _bspline_midpoints(bspline_coefficients(c, axis=0), 0, g, n)
         dev = np.where(ok[mid], np.abs(approx - f[mid]).max(axis=-1), 0.0)
         i = np.argmax(dev, axis=0)
         levels.append((k, dev[i, np.arange(dev.shape[1])], k // 2 + k * i))
@@ -500,11 +548,10 @@ def _line_levels(f: np.ndarray, ok: np.ndarray, cubic: bool, intervals: int,
             for line in range(f.shape[1])]
 
 
-def _ghosts(cubic: bool, intervals: int, min_nodes: int) -> int:
-    """Fine intervals a probe line extends beyond each end: :data:`GHOST` nodes of
-    its coarsest subsampling (cubic lines only)."""
-    k_max = 1 << int(math.log2((intervals) // (min_nodes - 1)))
-    return GHOST * k_max if cubic else 0
+def _ghosts(intervals: int, min_nodes: int) -> int:
+    """Fine intervals a probe line extends beyond an end whose ghost nodes are
+    evaluated: :data:`GHOST` nodes of its coarsest subsampling."""
+    return GHOST * (1 << int(math.log2(intervals // (min_nodes - 1))))
 
 
 def _nodes_for(levels: list, intervals: int, target: float, order: int) -> tuple:
@@ -575,35 +622,36 @@ def _probe(side: SideData, kind: str, error: float, axis: str, lines: np.ndarray
     of ``error``, with the nodes they need for it) and the line that needs most
     ``(nodes, line, resolved)``.
     """
-    cubic = kind == "plain"
+    split = kind == "tir"
     min_nodes = 65 if fine else 17
-    ext = _ghosts(cubic, intervals, min_nodes)
+    ext = _ghosts(intervals, min_nodes)
     pts = _Points(side, kind)
     if axis == "v":
-        pts.add(lines, np.arange(-ext, intervals + ext + 1.0), _REF if cubic else 2 * _REF,
+        pts.add(lines, np.arange(-ext, intervals + ext + 1.0), 2 * _REF if split else _REF,
                 intervals + 1)
-    elif cubic:
-        pts.add(np.arange(-ext, intervals + ext + 1.0), lines, intervals + 1, _REF, ghost=ext)
-    else:
+    elif split:
         pts.add(np.arange(2.0 * (intervals + 1)), lines, 2 * (intervals + 1), _REF)
+    else:
+        pts.add(np.arange(-ext, intervals + ext + 1.0), lines, intervals + 1, _REF, ghost=ext)
     ((vals, cos),) = pts.evaluate()
     stats["probe_points"] += pts.size
-    if axis == "u":   # (lines, values, C) -> (values, lines, C)
+    if axis == "v":
+        parts = [(vals, cos, ("values", "values"))]
+    else:   # (lines, values, C) -> (values, lines, C)
         vals, cos = np.swapaxes(vals, 0, 1), cos.T
-        if not cubic:   # the two segments of a split axis, each of intervals + 1 nodes
-            m = intervals + 1
-            vals = np.concatenate([vals[:m], vals[m:]], axis=1)
-            cos = np.concatenate([cos[:m], cos[m:]], axis=1)
+        m = intervals + 1   # a split axis: two segments of m nodes each
+        parts = ([(vals[:m], cos[:m], SPLIT_ENDS[0]), (vals[m:], cos[m:], SPLIT_ENDS[1])]
+                 if split else [(vals, cos, ("values", "values"))])
     hot, worst = [], (-1.0, None, True)
-    for i, levels in enumerate(_line_levels(vals, cos >= GRAZING_COS, cubic, intervals,
-                                            min_nodes)):
-        curves.lines.append((levels, intervals, fine))
-        n, resolved, at = _nodes_for(levels, intervals, PROBE_SHARE * error, curves.order)
-        if n > worst[0]:
-            worst = (n, lines[i % lines.size], resolved)
-        if at is not None:
-            segment = _REF if (axis == "u" and i >= lines.size) else 0
-            hot.append((n, segment + at / intervals * (_REF - 1)))
+    for segment, (f, c, ends) in enumerate(parts):
+        for i, levels in enumerate(_line_levels(f, c >= GRAZING_COS, intervals, min_nodes,
+                                                ends)):
+            curves.lines.append((levels, intervals, fine))
+            n, resolved, at = _nodes_for(levels, intervals, PROBE_SHARE * error, curves.order)
+            if n > worst[0]:
+                worst = (n, lines[i], resolved)
+            if at is not None:
+                hot.append((n, segment * _REF + at / intervals * (_REF - 1)))
     return hot, worst
 
 
@@ -624,9 +672,8 @@ def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: d
     would need more than MAX_U, MAX_V or ``max_texels`` texels: a stack that no
     table resolves fails in milliseconds.
     """
-    cubic = kind == "plain"
-    order = 4 if cubic else 2
-    cu, cv = _Curves(order, 1 if cubic else 2), _Curves(order, 1)
+    split = kind == "tir"
+    cu, cv = _Curves(4, 2 if split else 1), _Curves(4, 1)
 
     def hot(found):
         return [c for _, c in sorted(found, reverse=True)[:PROBE_HOT_LINES]]
@@ -665,17 +712,18 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     met within ``max_texels`` texels and :data:`MAX_BUILD_POINTS` evaluations
     (or the exit medium's critical angle depends on λ).
 
-    A plain axis gives a cubic table, a split one (total internal reflection)
-    a bilinear one. The first resolution is the larger of
-    :func:`table_resolution`'s (from the optical thickness) and the probe's
-    (:func:`_estimate`, which also rejects hopeless stacks early). Verification:
-    the exact values midway between neighbouring nodes along u (on every other
-    v row) and along v (on every other u column) are compared with the
-    interpolated ones; the sum of the two maxima (for incidence outside the
-    grazing sliver, :data:`GRAZING_COS`) must be within ``error``. The cell
-    across the critical angle of a split axis has zero width in angle and is
-    skipped. Otherwise the axis that exceeds its share is refined, at the
-    convergence order observed between rounds.
+    The table holds the coefficients of the interpolating cubic B-spline, on a
+    plain u axis or on each segment of a split one (total internal
+    reflection), whose ghost nodes come from :data:`SPLIT_ENDS`. The first
+    resolution is the larger of :func:`table_resolution`'s (from the optical
+    thickness) and the probe's (:func:`_estimate`, which also rejects hopeless
+    stacks early). Verification: the exact values midway between neighbouring
+    nodes along u (on every other v row) and along v (on every other u column)
+    are compared with the interpolated ones; the sum of the two maxima (for
+    incidence outside the grazing sliver, :data:`GRAZING_COS`) must be within
+    ``error``. The cell across the critical angle of a split axis has zero
+    width in angle and is skipped. Otherwise the axis that exceeds its share
+    is refined, at the convergence order observed between rounds.
 
     What the build did is left in :data:`last_build`.
     """
@@ -685,10 +733,9 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
                           "result": "critical angle varies"}
     if kind is None:
         return None
-    cubic = kind == "plain"
-    g = GHOST if cubic else 0
-    order = 4 if cubic else 2
-    nu, nv = table_resolution(side, error, wavelengths, cubic)
+    g, order = GHOST, 4
+    split = kind == "tir"
+    nu, nv = table_resolution(side, error, wavelengths)
     pu, pv = _estimate(side, kind, error, max_texels, stats)
     stats["points"] = stats["probe_points"]
     if pu is None:
@@ -699,47 +746,58 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     stats["result"] = "over budget"
     history = {}
     for _ in range(MAX_ROUNDS + 1):
-        if kind == "tir":
+        if split:
             nu += nu % 2
-        points = (nu + 2 * g) * (nv + 2 * g) + nu * nv   # the nodes, and the checks
+        # the nodes (a split axis's ghosts are not evaluated), and the checks
+        points = (nu + (0 if split else 2 * g)) * (nv + 2 * g) + nu * nv \
+            + len(side.kinks) * (nu // 2)
         if (nu > MAX_U or nv > MAX_V or nu * nv > max_texels
                 or stats["points"] + points > MAX_BUILD_POINTS):
             return None
         stats["points"] += points
         stats["rounds"] += 1
-        su = np.arange(-g, nu + g, dtype=np.float64)
+        m = nu // 2
+        su = np.arange(0 if split else -g, nu + (0 if split else g), dtype=np.float64)
         tv = np.arange(-g, nv + g, dtype=np.float64)
         mu = np.arange(nu - 1) + 0.5
-        cols_u = np.arange(nu - 1)
-        if kind == "tir":
-            keep = mu != nu // 2 - 0.5
-            mu, cols_u = mu[keep], cols_u[keep]
-        rows = np.arange(0, nv, 2) + g      # every other real v row
-        cols = np.arange(0, nu, 2) + g      # every other real u column
+        if split:
+            mu = mu[mu != m - 0.5]
+        rows = np.arange(0, nv, 2) + g      # every other real v row (index into tv)
+        cols = np.arange(0, nu, 2)          # every other real u node
+        # Where an index's slope jumps (tabulated data) the spline errs most
+        # beside, not between, the nodes: check there too.
+        kinks = v_texel(side.kinks, nv)
         pts = _Points(side, kind)
         pts.add(su, tv, nu, nv)
         pts.add(mu, tv[rows], nu, nv)
-        pts.add(su[cols], np.arange(nv - 1) + 0.5, nu, nv)
+        pts.add(cols.astype(np.float64), np.concatenate([np.arange(nv - 1) + 0.5, kinks]),
+                nu, nv)
         (nodes, _), (mid_u, cos_u), (mid_v, cos_v) = pts.evaluate()
-        if cubic:
-            cu = bspline_coefficients(nodes, axis=1)
-            coeffs = bspline_coefficients(cu, axis=0)
-            # The spline along v through node column j has the coefficients
-            # B_u coeffs (B_u: the u spline's (1, 4, 1) / 6 at its nodes).
-            cv = (coeffs[:, cols - 1] + 4.0 * coeffs[:, cols] + coeffs[:, cols + 1]) / 6.0
-            approx_u = _bspline_midpoints(cu[rows], 1, g, nu)
-            approx_v = _bspline_midpoints(cv, 0, g, nv)
+        # Spline coefficients along u, per segment with its ghosts, then along v.
+        if split:
+            segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *ends), 0, 1)
+                    for part, ends in zip((nodes[:, :m], nodes[:, m:]), SPLIT_ENDS)]
+            cu = [bspline_coefficients(seg, axis=1) for seg in segs]
+            approx_u = np.concatenate([_bspline_midpoints(c[rows], 1, g, m) for c in cu],
+                                      axis=1)
+            cu = np.concatenate(cu, axis=1)
+            texel = cols + g + np.where(cols >= m, 2 * g, 0)
         else:
-            approx_u = 0.5 * (nodes[rows][:, cols_u] + nodes[rows][:, cols_u + 1])
-            approx_v = 0.5 * (nodes[:-1, cols] + nodes[1:, cols])
+            cu = bspline_coefficients(nodes, axis=1)
+            approx_u = _bspline_midpoints(cu[rows], 1, g, nu)
+            texel = cols + g
+        coeffs = bspline_coefficients(cu, axis=0)
+        # The spline along v through node column j has the coefficients
+        # B_u coeffs (B_u: the u spline's (1, 4, 1) / 6 at its nodes).
+        cv = (coeffs[:, texel - 1] + 4.0 * coeffs[:, texel] + coeffs[:, texel + 1]) / 6.0
+        approx_v = np.concatenate([_bspline_midpoints(cv, 0, g, nv), _bspline_at(cv, kinks, g)])
         dev = np.abs(mid_u - approx_u).max(axis=-1)
         err_u = float(np.max(np.where(cos_u >= GRAZING_COS, dev, 0.0)))
         dev = np.abs(mid_v - approx_v).max(axis=-1)
         err_v = float(np.max(np.where(cos_v >= GRAZING_COS, dev, 0.0)))
         if err_u + err_v <= error:
-            values = coeffs if cubic else nodes
             stats["result"] = "table"
-            return Table(values, kind, err_u + err_v, nodes.shape[-1], cubic)
+            return Table(coeffs, kind, err_u + err_v, nodes.shape[-1])
         # Refine: aim at REFINE_SHARE of the target; an axis already within
         # half of that keeps its nodes and leaves the rest to the other.
         budget = REFINE_SHARE * error
