@@ -137,9 +137,9 @@ class SpectralIndex:
     @property
     def kinks(self) -> np.ndarray:
         """Wavelengths inside 360-830 nm where the index's slope may jump: a
-        dataset's own knots (it is interpolated linearly between them). None for
-        constants and formulas (their 1 nm sampling bends the slope by ~1e-7);
-        unknown, hence none, for textures given by the user."""
+        dataset's own knots (it is interpolated linearly between them). Empty
+        for constants and formulas (their 1 nm sampling bends the slope by
+        ~1e-7) and for textures given by the user (unknown)."""
         if self.material is None:
             return np.empty(0)
         knots = getattr(self.material, "knots", lambda: np.empty(0))()
@@ -631,8 +631,9 @@ def _tables_cache(stack: KernelStack, side: _Side):
     """The table of ``side``, shared between stacks with identical optics.
 
     The key is the stack's numbers (every index on the 1 nm grid, thicknesses,
-    incoherent flags, what is tabulated, the target, the texel cap), so two BSDFs with the
-    same films share one texture. Tables are never modified in place.
+    incoherent flags, what is tabulated, the target, the texel cap), so two
+    BSDFs with the same films share one texture. Tables are never modified in
+    place.
     """
     import hashlib
 

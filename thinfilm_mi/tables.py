@@ -95,7 +95,7 @@ GRAZING_COS = 0.02
 MAX_BUILD_POINTS = 3_000_000
 #: Builds evaluate stacks of this many films or more as a loop over the films: its
 #: float64 kernel is compiled once for every depth (the unrolled kernel of 30
-#: films took ~0.9 s to compile, once per depth and process).
+#: films took ~0.9 s to compile, once per depth with an empty kernel cache).
 BUILD_LOOP_MIN_FILMS = 4
 #: Refinement rounds after the first estimate.
 MAX_ROUNDS = 6
@@ -116,7 +116,10 @@ class SideData:
     ``rt_loop``, where given, evaluates :data:`BUILD_LOOP_MIN_FILMS` films or
     more as a loop (:func:`~thinfilm_mi.kernel.unpolarised_rt_loop`).
     ``kinks``: wavelengths where an index's slope jumps (tabulated data), at
-    which the build checks the table too.
+    which the build checks the table too. ``absorbing`` (set by
+    :func:`build_table`): whether each film and the exit medium absorb
+    anywhere in the range, so that every evaluation of a build traces the same
+    kernel whatever its wavelengths.
     """
     n0: object                      # callable wl -> real ndarray
     films: list                     # [(callable wl -> complex ndarray, thickness)]
@@ -126,6 +129,7 @@ class SideData:
     fringe_films: list = field(default_factory=list)  # indices of coherent films
     rt_loop: object = None
     kinks: np.ndarray = field(default_factory=lambda: np.empty(0))
+    absorbing: tuple | None = None
 
 
 def tir_kind(n0: np.ndarray, n_exit: np.ndarray) -> str | None:
@@ -430,15 +434,18 @@ def _evaluate(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray
     def per_row(values):
         return dr.gather(Float64, float64_array(values), at)
 
-    def cx(values):
+    absorbing = side.absorbing or (tuple(bool(np.any(n.imag)) for n in film_n)
+                                   + (bool(np.any(np.asarray(n_exit).imag)),))
+
+    def cx(values, complex_):
         values = np.asarray(values, np.complex128)
-        return Cx(per_row(values.real), per_row(values.imag) if np.any(values.imag) else 0.0)
+        return Cx(per_row(values.real), per_row(values.imag) if complex_ else 0.0)
 
     args = (per_row(n0), float64_array(cos0))
-    tail = (cx(n_exit), per_row(wl), side.transmission)
+    tail = (cx(n_exit, absorbing[-1]), per_row(wl), side.transmission)
     if side.rt_loop is not None and len(film_n) >= BUILD_LOOP_MIN_FILMS:
         re = np.concatenate([n.real for n in film_n])
-        real = not any(np.any(n.imag) for n in film_n)
+        real = not any(absorbing[:-1])
         buf_re = float64_array(re)
         buf_im = None if real else float64_array(np.concatenate([n.imag for n in film_n]))
         thick = float64_array(np.array([d for _, d in side.films], np.float64))
@@ -455,7 +462,8 @@ def _evaluate(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray
                            film_n_max=float(re.max()) if real else None,
                            films_max=len(film_n))
     else:
-        films = [(cx(n), dr.opaque(Float64, float(d))) for n, (_, d) in zip(film_n, side.films)]
+        films = [(cx(n, a), dr.opaque(Float64, float(d)))
+                 for n, a, (_, d) in zip(film_n, absorbing, side.films)]
         res = side.rt(*args, films, *tail)
     res = res if side.transmission else (res,)
     dr.eval(*res)
@@ -735,6 +743,8 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         return None
     g, order = GHOST, 4
     split = kind == "tir"
+    side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)
+                      + (bool(np.any(np.asarray(side.n_exit(wavelengths)).imag)),))
     nu, nv = table_resolution(side, error, wavelengths)
     pu, pv = _estimate(side, kind, error, max_texels, stats)
     stats["points"] = stats["probe_points"]
