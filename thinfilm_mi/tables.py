@@ -586,14 +586,15 @@ def _nodes_for(levels: list, intervals: int, target: float, order: int) -> tuple
 def _probe_columns(kind: str) -> np.ndarray:
     """u node coordinates (on a reference axis of :data:`_REF` nodes, twice that
     for a split axis) of the probe's lines along v: normal incidence, two
-    oblique ones and the edge of the grazing sliver (and, split, both sides of
-    the critical angle)."""
+    oblique ones and the edge of the grazing sliver; split, more on both sides
+    of the critical angle, just beyond which (the surface plasmon, and where
+    ``R`` follows the ambient's index most steeply) tables err most."""
     # (just inside the verified range: the sliver's edge itself may round out of it)
     w_graz = 1.0 - math.sqrt(math.asin(1.001 * GRAZING_COS) / HALF_PI)
     if kind == "plain":
         return np.array([0.0, 0.5, 1.0 - math.sqrt(math.asin(0.1) / HALF_PI), w_graz]) * (_REF - 1)
-    return np.concatenate([np.array([0.0, 0.5, 0.95]) * (_REF - 1),
-                           _REF + np.array([0.05, 0.5, w_graz]) * (_REF - 1)])
+    return np.concatenate([np.array([0.0, 0.5, 0.8, 0.95]) * (_REF - 1),
+                           _REF + np.array([0.05, 0.15, 0.3, 0.5, w_graz]) * (_REF - 1)])
 
 
 class _Curves:
