@@ -642,6 +642,21 @@ def _powers(results: dict, fac: dict | None, grazing):
     return Rs, Rp, Ts, Tp
 
 
+def _films_left(j, *_):
+    """The film loops' condition: films remain above the current interface."""
+    return j > 0
+
+
+def _loop_body(step):
+    """``step`` as a ``dr.while_loop`` body. Some products mix types (mi.Spectrum
+    with Dr.Jit's Array4f): they are cast back, as a loop's state may not change
+    type."""
+    def body(*st):
+        return tuple(type(old)(new) if dr.is_array_v(old) else new
+                     for old, new in zip(st, step(*st)))
+    return body
+
+
 def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool = True,
                   n0_max: float | None = None, film_n_min: float | None = None,
                   film_n_max: float | None = None, films_max: int | None = None,
@@ -718,15 +733,6 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
              *full(Cx(0.0)), *full(Cx(1.0)), t0,
              *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
 
-    def cond(j, *_):
-        return j > 0
-
-    def body(*st):
-        # Some products mix types (mi.Spectrum with Dr.Jit's Array4f): cast back,
-        # as a loop's state may not change type.
-        return tuple(type(old)(new) if dr.is_array_v(old) else new
-                     for old, new in zip(st, step(*st)))
-
     def step(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, bsr, bsi, bpr, bpi, Er, Ei):
         j = j - 1
         a, E, mag2 = film_terms(j)
@@ -741,7 +747,8 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
         return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
 
     (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp,
-     bsr, bsi, bpr, bpi, Er, Ei) = dr.while_loop(state, cond, body, label=label)
+     bsr, bsi, bpr, bpi, Er, Ei) = dr.while_loop(state, _films_left, _loop_body(step),
+                                                 label=label)
     a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
     results = {}
     for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
@@ -882,14 +889,7 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
                 T = T * (scale * scale)
         return N, D, T
 
-    def cond(j, *_):
-        return j > 0
-
-    def body(*st):
-        return tuple(type(old)(new) if dr.is_array_v(old) else new
-                     for old, new in zip(st, body_(*st)))
-
-    def body_(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, q_b, ap_b, d_b):
+    def body(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, q_b, ap_b, d_b):
         j = j - 1
         E = phase(q_b, d_b)                 # the film below the interface
         m_a, d_a = film(j)                  # the film above it
@@ -902,7 +902,7 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
                 q_a, ap_a, d_a)
 
     (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, q_b, ap_b, d_b) = dr.while_loop(
-        tuple(state), cond, body, label=label)
+        tuple(state), _films_left, _loop_body(body), label=label)
     # The first film's phase and the interface with the ambient (a0 >= 0, real).
     E = phase(q_b, d_b)
     results = {}
