@@ -5,6 +5,9 @@ import numpy as np
 
 import drjit as dr
 import mitsuba as mi
+from drjit.llvm import Float64, UInt32
+
+from thinfilm_mi import optics
 
 
 def interaction(wls):
@@ -18,3 +21,18 @@ def compiled(history):
     """JIT kernels in a ``dr.kernel_history()`` that were compiled (not cache hits)."""
     return [k for k in history if k["type"] == dr.KernelType.JIT
             and not k.get("cache_hit", False) and not k.get("cache_disk", False)]
+
+
+def loop_rt(n0, cos, n, k, d, n_exit, wl, Arr=Float64, rt=optics.stack_rt_loop, **hints):
+    """``rt`` (``optics.stack_rt_loop``, or ``kernel.unpolarised_rt_loop``) with the
+    films gathered from buffers of type ``Arr``, as the render kernels do (padded: a
+    gather needs a non-empty source); ``k = None``: real films (a literal 0
+    imaginary part)."""
+    eta, thk = (Arr(np.r_[a, 0.0]) for a in (n, d))
+    kk = None if k is None else Arr(np.r_[k, 0.0])
+
+    def film(j):
+        im = 0.0 if kk is None else dr.gather(Arr, kk, j)
+        return optics.Cx(dr.gather(Arr, eta, j), im), dr.gather(Arr, thk, j)
+
+    return rt(n0, Arr(cos), UInt32(len(n)), film, n_exit, Arr(wl), **hints)

@@ -11,14 +11,14 @@ import tmm
 
 import drjit as dr
 import mitsuba as mi
-from drjit.llvm import Float64, UInt32
+from drjit.llvm import Float64
 
 import thinfilm_mi as tf
 from thinfilm_mi import kernel as K
 from thinfilm_mi import optics
 from thinfilm_mi.optics import Cx
 
-from _kernels import compiled, interaction
+from _kernels import compiled, interaction, loop_rt
 
 
 def random_stack(rng, count):
@@ -27,19 +27,6 @@ def random_stack(rng, count):
     k = rng.uniform(0.0, 20.0, count) * (rng.random(count) < 0.5)
     d = rng.uniform(0.0, 2000.0, count)
     return n, k, d
-
-
-def loop_rt(n0, cos, n, k, d, n_exit, wl, Arr=Float64, **hints):
-    """stack_rt_loop on buffers of type ``Arr`` (padded: a gather needs a non-empty
-    source); ``k = None``: real films (a literal 0 imaginary part)."""
-    eta, thk = (Arr(np.r_[a, 0.0]) for a in (n, d))
-    kk = None if k is None else Arr(np.r_[k, 0.0])
-
-    def film(j):
-        im = 0.0 if kk is None else dr.gather(Arr, kk, j)
-        return Cx(dr.gather(Arr, eta, j), im), dr.gather(Arr, thk, j)
-
-    return optics.stack_rt_loop(n0, Arr(cos), UInt32(len(n)), film, n_exit, Arr(wl), **hints)
 
 
 @pytest.mark.parametrize("count", [0, 1, 2, 5, 13, 30])

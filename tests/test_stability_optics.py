@@ -21,12 +21,14 @@ import numpy as np
 import pytest
 
 import drjit as dr
-from drjit.llvm import Float, Float64, UInt32
+from drjit.llvm import Float, Float64
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from thinfilm_mi import optics
-from thinfilm_mi.kernel import unpolarised_rt
+from thinfilm_mi.kernel import unpolarised_rt, unpolarised_rt_loop
+
+from _kernels import loop_rt
 
 FILM_COUNTS = (1, 2, 7, 30)
 
@@ -79,20 +81,14 @@ def evaluate(Arr, n0, films, n_exit, wl, cos0):
     out = optics.stack_rt(arr(n0), c, f, ne, arr(wl))
     amp = optics.stack_amplitudes(arr(n0), c, f, ne, arr(wl))
     # The loop over films of the render kernels (kernel.LOOP_MIN_FILMS), its
-    # films gathered from buffers (padded: a gather needs a non-empty source).
-    bufs = [Arr(np.array([v(film) for film in films] + [0.0], np.float64))
-            for v in (lambda x: complex(x[0]).real, lambda x: complex(x[0]).imag,
-                      lambda x: x[1])]
-
-    def film(j):
-        eta, k, d = (dr.gather(Arr, b, j) for b in bufs)
-        return optics.Cx(eta, k), d
-
-    looped = [optics.stack_rt_loop(arr(n0), c, UInt32(len(films)), film, ne, arr(wl))]
+    # films gathered from buffers.
+    n, k, d = (np.array([v(film) for film in films], np.float64)
+               for v in (lambda x: complex(x[0]).real, lambda x: complex(x[0]).imag,
+                         lambda x: x[1]))
+    looped = [loop_rt(arr(n0), c, n, k, d, ne, arr(wl), Arr)]
     hints = real_hints(n0, films)
     if hints:   # the kernels' loop for real films above the ambient (real amplitudes)
-        looped.append(optics.stack_rt_loop(arr(n0), c, UInt32(len(films)), film, ne, arr(wl),
-                                           **hints))
+        looped.append(loop_rt(arr(n0), c, n, k, d, ne, arr(wl), Arr, **hints))
     leaves = [np.array(x, np.float64) for x in out]
     for z in (amp.rs, amp.rp, amp.ts, amp.tp):
         leaves += [np.array(z.re, np.float64), np.array(z.im, np.float64)]
@@ -198,8 +194,9 @@ U32 = 2.0 ** -24
 
 def _unpolarised(Arr, n0, films, n_exit, wl, cos0, loop=False):
     """Unpolarised R, T as the kernels form them: ``unpolarised_rt`` (films unrolled)
-    or, with ``loop``, ``optics.stack_rt_loop`` over buffers of the (per-point
-    constant) films with R = (Rs + Rp) / 2 and T clipped to [0, 1 - R];
+    or, with ``loop``, ``unpolarised_rt_loop`` (``optics.stack_rt_loop`` with R =
+    (Rs + Rp) / 2 and T clipped to [0, 1 - R]) over buffers of the (per-point
+    constant) films;
     ``loop="real"`` passes the hints of real films (:func:`real_hints`)."""
     size = cos0.size
 
@@ -210,18 +207,11 @@ def _unpolarised(Arr, n0, films, n_exit, wl, cos0, loop=False):
 
     ne = optics.Cx(arr(np.real(n_exit)), arr(np.imag(n_exit)))
     if loop:
-        bufs = [Arr(np.array([g(n, d) for n, d in films] + [0.0], np.float64))
-                for g in (lambda n, d: np.real(n), lambda n, d: np.imag(n), lambda n, d: d)]
-
-        def film(j):
-            eta, k, d = (dr.gather(Arr, b, j) for b in bufs)
-            return optics.Cx(eta, k), d
-
+        n, k, d = (np.array([g(n, d) for n, d in films], np.float64)
+                   for g in (lambda n, d: np.real(n), lambda n, d: np.imag(n), lambda n, d: d))
         hints = real_hints(n0, films) if loop == "real" else {}
-        Rs, Rp, Ts, Tp = optics.stack_rt_loop(arr(n0), arr(cos0), UInt32(len(films)), film, ne,
-                                              arr(wl), **hints)
-        R = 0.5 * (Rs + Rp)
-        T = dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+        R, T = loop_rt(arr(n0), arr(cos0), n, k, d, ne, arr(wl), Arr, rt=unpolarised_rt_loop,
+                       **hints)
     else:
         f = [(optics.Cx(arr(np.real(n)), arr(np.imag(n))), arr(d)) for n, d in films]
         R, T = unpolarised_rt(arr(n0), arr(cos0), f, ne, arr(wl), True)
