@@ -87,6 +87,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from thinfilm_mi import modes
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (SpectralIndex, check_texture_at_least, check_unqueried,
                                 check_variant, optional_texture, stack_from_props)
@@ -128,6 +129,7 @@ class ThinFilmConductor(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
         self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
         self.specular_reflectance = optional_texture(props, "specular_reflectance")
         check_unqueried(props, NAME)
@@ -141,7 +143,8 @@ class ThinFilmConductor(mi.BSDF):
             return bs, mi.Spectrum(0.0)
         cos_i = mi.Frame3f.cos_theta(si.wi)
         active = mi.Bool(active) & (cos_i > 0)
-        value = self.stack.reflectance(si, cos_i, active)
+        resp = self.mode.response(self.stack, si, cos_i, active)
+        value = resp.R
         if self.specular_reflectance is not None:
             value *= self.specular_reflectance.eval(si, active)
         bs.wo = mi.reflect(si.wi)
@@ -149,7 +152,8 @@ class ThinFilmConductor(mi.BSDF):
         bs.pdf = 1.0
         bs.sampled_component = mi.UInt32(0)
         bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DeltaReflection)
-        return bs, dr.select(active, value, 0.0)
+        return bs, dr.select(active, self.mode.value(value, resp.reflection, ctx, si.wi, bs.wo),
+                             0.0)
 
     def eval(self, ctx, si, wo, active=True):
         return mi.Spectrum(0.0)
