@@ -58,8 +58,11 @@ A perfectly smooth conductor (metal or semiconductor substrate) under a stack of
 thin films, each of which may be dielectric, metallic or semiconducting (complex
 index). The reflectance is the exact composite reflectance of the multilayer
 (Rouard's recursion, Hirayama et al. eq. 1-5), evaluated at the path's
-wavelengths in the render kernel, for unpolarised light. Only spectral,
-unpolarised variants are supported.
+wavelengths in the render kernel, for unpolarised light in ``*_spectral``
+variants. In ``*_spectral_polarized`` variants it returns the Mueller matrix of
+the stack's exact complex amplitudes ``r_s``, ``r_p`` (never a table), rotated
+into Mitsuba's Stokes bases as Mitsuba's ``conductor`` does; with no films it
+equals ``conductor``'s matrix. RGB and mono variants are refused.
 
 The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
 (``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``

@@ -67,6 +67,14 @@ reciprocal). Refraction directions and ``bs.eta`` follow Mitsuba's
 mean index over 360-830 nm (a path has one direction for all its wavelengths)
 while ``R`` and ``T`` use the exact index at each wavelength.
 
+In ``*_spectral_polarized`` variants the weights are Mueller matrices of the
+stack's exact complex amplitudes (``r_s, r_p`` and ``t_s, t_p`` with the
+``n cos θ`` power factor), from the side the ray arrives on, rotated into
+Mitsuba's Stokes bases as Mitsuba's ``dielectric`` does (the transmission
+matrix is the same from both sides by reciprocity); lobe choice and radiance
+scaling are as above, with ``R`` and ``T`` the matrices' ``M00``. With no films
+they equal ``dielectric``'s matrices.
+
 .. tabs::
     .. code-tab:: xml
 

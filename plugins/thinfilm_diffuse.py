@@ -48,7 +48,10 @@ Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
 A perfectly diffuse (Lambertian) base under a stack of thin films, after
 Hirayama et al. section 2.4. Component 0 is the delta reflection of the
 coating, component 1 the diffuse lobe; the thin films are evaluated at the
-path's wavelengths in the render kernel (float32), for unpolarised light.
+path's wavelengths in the render kernel (float32), for unpolarised light. In
+``*_spectral_polarized`` variants component 0 is the Mueller matrix of the
+coating's exact amplitudes (rotated as Mitsuba's ``conductor`` does) and
+component 1 is Mitsuba's ``depolarizer`` of the value below, as ``diffuse``.
 
 **The two parts of the stack.** With films ``1..N`` (outside in) and an
 *absorbing* innermost film ``N`` (``k > 0`` somewhere in 360-830 nm), the

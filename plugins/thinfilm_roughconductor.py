@@ -78,7 +78,10 @@ with ``m`` the half vector. ``D``, ``G``, the sampling routine and its density
 are Mitsuba's ``MicrofacetDistribution``; ``R`` is the thin-film recursion
 (Hirayama et al. eq. 1-5) for unpolarised light, evaluated at the path's
 wavelengths in the render kernel. The layer parameters appear in
-``mi.traverse`` as for ``thinfilm_conductor``.
+``mi.traverse`` as for ``thinfilm_conductor``. In ``*_spectral_polarized``
+variants ``R`` becomes the Mueller matrix of the stack's exact amplitudes at the
+microfacet, rotated about ``m`` as Mitsuba's ``roughconductor`` does (with no
+films: its matrix).
 
 .. tabs::
     .. code-tab:: xml

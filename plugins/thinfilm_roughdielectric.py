@@ -81,6 +81,11 @@ the path's wavelengths), as in ``thinfilm_dielectric``; the weights are then
 radiance) and ``pdf()`` includes the same ``P``. Refraction directions use the
 mean real indices over 360-830 nm, as in ``thinfilm_dielectric``.
 
+In ``*_spectral_polarized`` variants ``R`` and ``T`` become the Mueller matrices
+of the stack's exact amplitudes at the microfacet, rotated about ``m`` as
+Mitsuba's ``roughconductor`` rotates its reflection. Unlike Mitsuba's
+``roughdielectric``, which depolarizes, this plugin keeps the polarization.
+
 .. tabs::
     .. code-tab:: xml
 

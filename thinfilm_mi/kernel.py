@@ -238,7 +238,7 @@ def texture_on_grid(tex, wavelengths: np.ndarray = _GRID) -> np.ndarray:
         padded = np.concatenate([wl, np.full((-n) % 4, wl[-1] if n else 500.0)])
         out = []
         for i in range(0, padded.size, 4):
-            si.wavelengths = mi.Spectrum(*[float(x) for x in padded[i:i + 4]])
+            si.wavelengths = mi.UnpolarizedSpectrum(*[float(x) for x in padded[i:i + 4]])
             out.extend(float(v) for v in tex.eval(si))
         return np.asarray(out[:n], dtype=np.float64)
     from ._backend import aligned_array
@@ -246,7 +246,7 @@ def texture_on_grid(tex, wavelengths: np.ndarray = _GRID) -> np.ndarray:
     si = dr.zeros(mi.SurfaceInteraction3f, n)
     # an aligned buffer: Dr.Jit compiles a kernel per alignment of its inputs
     w = aligned_array(wl, np.float32, mi.Float)
-    si.wavelengths = mi.Spectrum(w, w, w, w)
+    si.wavelengths = mi.UnpolarizedSpectrum(w, w, w, w)
     value = tex.eval(si)
     return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
 
@@ -359,7 +359,8 @@ class _LoopFilms:
                 else:
                     eta.append(dr.lerp(v[0], v[2], t))
                     k.append(dr.lerp(v[1], v[3], t))
-            index = Cx(mi.Spectrum(*eta), 0.0 if self.real else mi.Spectrum(*k))
+            U = mi.UnpolarizedSpectrum
+            index = Cx(U(*eta), 0.0 if self.real else U(*k))
             d = dr.gather(mi.Float, self.thickness, j)
             return index, (d if thickness_scale is None else d * thickness_scale)
 
@@ -475,6 +476,11 @@ class KernelStack:
         opaque = [self._opaque(ix, dv) for ix, _, dv in kept]
         self.plan = {inside: self._side(inside, t, films, opaque)
                      for inside, t in self.sides.items()}
+        self.table_failed = []
+        if _mi().is_polarized:
+            # Polarized variants evaluate the amplitudes exactly (thinfilm_mi.amplitudes);
+            # tables and film loops hold powers only: none is built.
+            return
         self._plan_tables()
         if dr.is_jit_v(_mi().Float):
             for side in self.plan.values():
@@ -581,7 +587,7 @@ class KernelStack:
             res = table.lookup(cos_theta, n0, n_exit, wl, active)
             if not transmission:
                 return res[0]
-            return res[0], (mi.Spectrum(0.0) if side.opaque else res[1])
+            return res[0], (mi.UnpolarizedSpectrum(0.0) if side.opaque else res[1])
         exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
             else side.exit.eval(si, active)
         if side.loop is not None and not _index_grads(side, si, active):
@@ -591,7 +597,7 @@ class KernelStack:
                      for ix, d, _ in side.films]
             out = _rt(n0, cos_theta, films, exit_, wl, side.incoherent, transmission)
         if transmission and side.opaque:
-            return out[0], mi.Spectrum(0.0)
+            return out[0], mi.UnpolarizedSpectrum(0.0)
         return out
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
@@ -818,7 +824,7 @@ def texture_minimum(tex, mono: bool = False):
         if jit:
             si = dr.zeros(mi.SurfaceInteraction3f, n)
             si.uv = mi.Point2f(mi.Float(uu), mi.Float(vv))
-            si.wavelengths = mi.Spectrum(*[mi.Float(x) for x in lam])
+            si.wavelengths = mi.UnpolarizedSpectrum(*[mi.Float(x) for x in lam])
             val = tex.eval_1(si) if mono else tex.eval(si)
             arr = np.array(val, dtype=np.float64)
             return float(np.min(arr)) if arr.size else None
@@ -826,7 +832,7 @@ def texture_minimum(tex, mono: bool = False):
         for j in range(n):
             si = dr.zeros(mi.SurfaceInteraction3f)
             si.uv = mi.Point2f(float(uu[j]), float(vv[j]))
-            si.wavelengths = mi.Spectrum(*[float(x[j]) for x in lam])
+            si.wavelengths = mi.UnpolarizedSpectrum(*[float(x[j]) for x in lam])
             val = tex.eval_1(si) if mono else tex.eval(si)
             lo = min(lo, float(val) if mono else min(float(val[c]) for c in range(4)))
         return lo
