@@ -88,8 +88,9 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.kernel import (SpectralIndex, check_texture_at_least, check_unqueried,
-                                check_variant, optional_texture, stack_from_props)
+from thinfilm_mi.kernel import (SpectralIndex, check_unqueried, check_variant, optional_texture,
+                                stack_from_props)
+from thinfilm_mi.textures import check_texture_range, uniform
 
 NAME = "thinfilm_conductor"
 
@@ -111,14 +112,14 @@ def substrate_from_props(props, plugin: str) -> SpectralIndex:
                 if not (v == v) or (name == "eta" and v <= 0) or (name == "k" and v < 0):
                     raise ThinFilmError(f"{plugin}: '{name}' must be "
                                         f"{'> 0' if name == 'eta' else '>= 0'}, got {v!r}")
-                v = mi.load_dict({"type": "uniform", "value": float(v)})
+                v = uniform(v)
             else:
                 try:
                     v = props.get_unbounded_texture(name)
                 except Exception as e:
                     raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
                                         f"spectrum/texture, got {v!r} ({e})") from None
-                check_texture_at_least(v, 0.0, f"{plugin}: '{name}'", strict=(name == "eta"))
+                check_texture_range(v, f"{plugin}: '{name}'", 0.0, strict=(name == "eta"))
             values[name] = v
         return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
     return SpectralIndex.from_material(props.get("material", "Au"), "material")

@@ -161,6 +161,7 @@ from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant,
                                 ext_ior_from_props, films_from_props, opaque_float,
                                 stack_options_from_props)
 from thinfilm_mi.optics import film_attenuation
+from thinfilm_mi.textures import regular, uniform
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple")
@@ -186,7 +187,7 @@ def _absorbs(index) -> bool:
 
 def _reflectance_from_props(props):
     if "reflectance" not in props:
-        return mi.load_dict({"type": "uniform", "value": 0.5})
+        return uniform(0.5)
     value = props.get("reflectance")
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         if not (0.0 <= value <= 1.0):
@@ -209,15 +210,13 @@ def _spectrum(tex, values):
     ``regular`` spectrum refuses a zero integral)."""
     values = np.asarray(values, dtype=np.float64)
     if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
-        return mi.load_dict({"type": "uniform", "value": 0.0})
+        return uniform(0.0)
     params = mi.traverse(tex) if tex is not None else None
     if params is not None and "values" in params:
         params["values"] = mi.Float(values.astype(np.float32))
         params.update()
         return tex
-    return mi.load_dict({"type": "regular", "wavelength_min": float(GRID[0]),
-                         "wavelength_max": float(GRID[-1]),
-                         "values": ", ".join(f"{v:.9g}" for v in values)})
+    return regular(values, GRID[0], GRID[-1])
 
 
 class ThinFilmDiffuse(mi.BSDF):

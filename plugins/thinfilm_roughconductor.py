@@ -106,6 +106,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture,
                                 stack_from_props)
 from thinfilm_mi.plugins.thinfilm_conductor import substrate_from_props
+from thinfilm_mi.textures import uniform
 
 NAME = "thinfilm_roughconductor"
 
@@ -123,7 +124,7 @@ def _alpha_texture(props, name: str, plugin: str):
         if not math.isfinite(value) or value <= 0:
             raise ThinFilmError(f"{plugin}: '{name}' (roughness) must be a finite number > 0, "
                                 f"got {value!r} (for a smooth surface use the smooth plugin)")
-        return mi.load_dict({"type": "uniform", "value": float(value)})
+        return uniform(value)
     try:
         return props.get_texture(name)
     except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError

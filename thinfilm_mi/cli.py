@@ -300,13 +300,10 @@ def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
         raise UsageError(f"scene file not found: {path}")
     if not path.is_file():
         raise UsageError(f"scene file is not a file: {path}")
+    # Mitsuba's default, parallel instantiation: the thin-film constructors make
+    # no nested mi.load_dict (see thinfilm_mi.textures), so they are safe beside
+    # C++ plugins resolving files on other loader threads.
     config = mi.parser.ParserConfig(variant or mi.variant())
-    # Instantiate sequentially. In parallel loading the thin-film plugins'
-    # constructors (float64 table builds) run beside C++ plugins in Mitsuba's
-    # loader threads; after the cubic-table change the full test suite failed
-    # intermittently (~1 load in 3) with "basic_string::_M_create" from hdrfilm
-    # or bitmap. Cause not found; the Python constructors hold the GIL anyway.
-    config.parallel = False
     # Like mi.load_file: files named in the scene (meshes, textures, data) are
     # looked up next to the scene file first; the search path is restored after.
     resolver = mi.file_resolver()

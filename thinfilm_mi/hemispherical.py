@@ -29,7 +29,8 @@ from drjit.llvm import Float64
 from ._backend import float64_array, repeated
 from ._llvm import require_llvm
 from .optics import Cx, film_attenuation
-from .kernel import texture_on_grid, unpolarised_rt
+from .kernel import unpolarised_rt
+from .textures import texture_on_grid
 from .stack import SPECTRAL_RANGE
 
 __all__ = ["GRID", "texture_on_grid", "unpolarised_rt", "hemispherical_factors"]

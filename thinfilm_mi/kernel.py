@@ -30,18 +30,15 @@ from ._llvm import require_llvm
 from .errors import ThinFilmError
 from .optics import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
                      transmittance_factor_s)
-from .stack import AMBIENT_K_TOL, SPECTRAL_RANGE, check_thickness, parse_layers
+from .stack import AMBIENT_K_TOL, check_thickness, parse_layers
+from .textures import (GRID, _mi, check_texture_range, irregular, scalar, texture_on_grid,
+                       uniform)
 
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
 DEFAULT_EXT_IOR = 1.000277
 
-_GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
-                    int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)
-
-
-def _mi():
-    import mitsuba as mi
-    return mi
+_GRID = GRID
+_scalar = scalar
 
 
 def check_variant(plugin: str) -> None:
@@ -99,7 +96,6 @@ class SpectralIndex:
         with the dataset's own knots: tabulated data are reproduced exactly and
         formulas to better than 1e-7.
         """
-        mi = _mi()
         try:
             mat = _materials.resolve(spec)
         except ValueError as e:
@@ -109,8 +105,7 @@ class SpectralIndex:
             raise ThinFilmError(msg if msg.startswith(name) else f"{name}: {msg}") from None
         if mat.constant is not None:
             c = mat.constant
-            return cls(mi.load_dict({"type": "uniform", "value": float(c.real)}),
-                       mi.load_dict({"type": "uniform", "value": float(c.imag)}),
+            return cls(uniform(c.real), uniform(c.imag),
                        mat.name, c, mat, np.empty(0))
         # A 1 nm grid (enough for formulas: error ~ h^2 n''/8 < 1e-7) plus the
         # dataset's own knots, so tabulated data are reproduced exactly.
@@ -127,10 +122,8 @@ class SpectralIndex:
 
         def spectrum(v):
             if np.all(v == v[0]):  # e.g. k = 0 everywhere (Mitsuba's spectra need mass)
-                return mi.load_dict({"type": "uniform", "value": float(v[0])})
-            return mi.load_dict({"type": "irregular",
-                                 "wavelengths": ", ".join(f"{x:.12g}" for x in grid),
-                                 "values": ", ".join(f"{x:.9g}" for x in v)})
+                return uniform(v[0])
+            return irregular(grid, v)
 
         return cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat, grid)
 
@@ -216,41 +209,6 @@ AUTO_MAX_TEXELS = 1 << 19
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
 #: is below this: what lies beneath then changes r by less than ~1e-9.
 OPAQUE_AMPLITUDE = 1e-9
-
-
-def texture_on_grid(tex, wavelengths: np.ndarray = _GRID) -> np.ndarray:
-    """A Mitsuba spectral texture evaluated at ``wavelengths`` (float64 numpy).
-
-    Evaluated through the texture itself (not its source data), so values edited
-    through ``mi.traverse`` are seen exactly as the render kernel sees them. A
-    uniform spectrum's one value is read as its mean, without a kernel launch
-    (~40 us each; a stack's constant films have two such textures apiece).
-    """
-    mi = _mi()
-    wl = np.asarray(wavelengths, dtype=np.float64).ravel()
-    n = wl.size
-    if tex.class_name() == "UniformSpectrum":
-        return np.full(n, _scalar(tex.mean()))
-    if not dr.is_jit_v(mi.Float):   # scalar variants: four wavelengths per call
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        padded = np.concatenate([wl, np.full((-n) % 4, wl[-1] if n else 500.0)])
-        out = []
-        for i in range(0, padded.size, 4):
-            si.wavelengths = mi.Spectrum(*[float(x) for x in padded[i:i + 4]])
-            out.extend(float(v) for v in tex.eval(si))
-        return np.asarray(out[:n], dtype=np.float64)
-    from ._backend import aligned_array
-
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    # an aligned buffer: Dr.Jit compiles a kernel per alignment of its inputs
-    w = aligned_array(wl, np.float32, mi.Float)
-    si.wavelengths = mi.Spectrum(w, w, w, w)
-    value = tex.eval(si)
-    return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
-
-
-def _scalar(d) -> float:
-    return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
 
 
 #: Exact evaluation of a side with at least this many films runs the recursion
@@ -769,67 +727,9 @@ def thickness_texture_from_props(props, plugin: str):
     except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
         raise ThinFilmError(f"{plugin}: 'thickness' must be a number or a texture, "
                             f"got {value!r} ({e})") from None
-    check_texture_at_least(tex, 0.0, f"{plugin}: 'thickness' (a scale on every film's "
-                           "thickness)", mono=True)
+    check_texture_range(tex, f"{plugin}: 'thickness' (a scale on every film's thickness)", 0.0,
+                        mono=True)
     return tex
-
-
-def texture_minimum(tex, mono: bool = False):
-    """The smallest value of a texture at load time, or ``None`` if it cannot be evaluated
-    without a shape (e.g. ``mesh_attribute``).
-
-    Evaluated on Mitsuba's spectral grid (360-830 nm, 1 nm) and, for a spatially
-    varying texture, at every texel centre of its resolution (at least a 64 x 64
-    UV grid; 16 x 16 and a 10 nm grid in scalar variants): exact for bitmaps
-    (bilinear interpolation is a convex combination of texels) and uniform or
-    tabulated spectra, a dense sample for procedural textures. ``mono``:
-    evaluate ``eval_1`` (as the thickness scale is read) instead of ``eval``.
-    """
-    mi = _mi()
-    jit = dr.is_jit_v(mi.Float)
-    wl = _GRID if jit else _GRID[::10]
-    if tex.is_spatially_varying():
-        res = [int(r) for r in tex.resolution()]
-        nu, nv = (max(res[0], 64), max(res[1], 64)) if jit else (16, 16)
-        nu, nv = min(nu, 4096), min(nv, 4096)
-        u, v = np.meshgrid((np.arange(nu) + 0.5) / nu, (np.arange(nv) + 0.5) / nv)
-        u, v = u.ravel(), v.ravel()
-    else:
-        u = v = np.full(1, 0.5)
-    n = max(u.size, -(-wl.size // 4))
-    i = np.arange(n)
-    uu, vv = u[i % u.size], v[i % v.size]
-    lam = [wl[(4 * i + c) % wl.size] for c in range(4)]
-    try:
-        if jit:
-            si = dr.zeros(mi.SurfaceInteraction3f, n)
-            si.uv = mi.Point2f(mi.Float(uu), mi.Float(vv))
-            si.wavelengths = mi.Spectrum(*[mi.Float(x) for x in lam])
-            val = tex.eval_1(si) if mono else tex.eval(si)
-            arr = np.array(val, dtype=np.float64)
-            return float(np.min(arr)) if arr.size else None
-        lo = math.inf
-        for j in range(n):
-            si = dr.zeros(mi.SurfaceInteraction3f)
-            si.uv = mi.Point2f(float(uu[j]), float(vv[j]))
-            si.wavelengths = mi.Spectrum(*[float(x[j]) for x in lam])
-            val = tex.eval_1(si) if mono else tex.eval(si)
-            lo = min(lo, float(val) if mono else min(float(val[c]) for c in range(4)))
-        return lo
-    except Exception:  # noqa: BLE001 - textures that need a shape cannot be checked here
-        return None
-
-
-def check_texture_at_least(tex, bound: float, what: str, mono: bool = False,
-                           strict: bool = False) -> None:
-    """Raise :class:`ThinFilmError` naming ``what`` if the texture goes below ``bound``
-    (or reaches it, with ``strict``) anywhere :func:`texture_minimum` looks."""
-    lo = texture_minimum(tex, mono)
-    if lo is None:
-        return
-    if not math.isfinite(lo) or lo < bound or (strict and lo <= bound):
-        raise ThinFilmError(f"{what} must be {'>' if strict else '>='} {bound:g} everywhere, "
-                            f"got a texture with minimum {lo!r}")
 
 
 def tabulate_from_props(props, plugin: str) -> bool | str:
