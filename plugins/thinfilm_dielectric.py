@@ -139,7 +139,11 @@ class ThinFilmDielectric(mi.BSDF):
             total = pr + pt
             prob_r = dr.select(total > 0, pr / dr.select(total > 0, total, 1.0), 1.0)
             selected_r = (sample1 <= prob_r) & active
-            bs.pdf = dr.detach(dr.select(selected_r, prob_r, 1.0 - prob_r))
+            # The choice is a detached sampling decision: its probability divides
+            # the weight as a constant, so the weight's gradient is dR/p (dT/(1-p))
+            # per wavelength and its expectation d(R + T).
+            prob_r = dr.detach(prob_r)
+            bs.pdf = dr.select(selected_r, prob_r, 1.0 - prob_r)
             weight = dr.select(selected_r, R / dr.select(prob_r > 0, prob_r, 1.0),
                                T / dr.select(prob_r < 1, 1.0 - prob_r, 1.0))
         elif has_r:

@@ -328,7 +328,9 @@ class ThinFilmDiffuse(mi.BSDF):
             kd = self.reflectance.eval(si, active)
             series = self._series(si, kd, active)
         if has_spec and has_diff:
-            prob_spec = self._prob_specular(si, k_r, t_i, kd, series, active)
+            # detached: a sampling decision divides the weight as a constant
+            # (the weight's gradient is then that of k_r, resp. the diffuse term)
+            prob_spec = dr.detach(self._prob_specular(si, k_r, t_i, kd, series, active))
         else:
             prob_spec = mi.Float(1.0 if has_spec else 0.0)
         sel_spec = active & (sample1 < prob_spec)
@@ -341,7 +343,7 @@ class ThinFilmDiffuse(mi.BSDF):
         bs.sampled_type = dr.select(sel_spec, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
                                     mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
         pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo_diff)
-        bs.pdf = dr.detach(dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff))
+        bs.pdf = dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff)
 
         weight = mi.Spectrum(0.0)
         if has_spec:

@@ -182,10 +182,12 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         R, T = self._rt(si, dot_wi_m, cos_i, active, transmission=has_t)
 
         if has_r and has_t:
-            prob_r = self._prob_r(R, T)
+            # detached: a sampling decision divides the weight as a constant
+            # (see thinfilm_dielectric)
+            prob_r = dr.detach(self._prob_r(R, T))
             selected_r = (sample1 <= prob_r) & active
             selected_t = (sample1 > prob_r) & active
-            bs.pdf *= dr.detach(dr.select(selected_r, prob_r, 1.0 - prob_r))
+            bs.pdf *= dr.select(selected_r, prob_r, 1.0 - prob_r)
             weight = dr.select(selected_r, R / dr.select(prob_r > 0, prob_r, 1.0),
                                T / dr.select(prob_r < 1, 1.0 - prob_r, 1.0))
         elif has_r:
