@@ -279,7 +279,10 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
             weight = distr.G(si.wi, bs.wo, m) * cos_m / (cos_i * mi.Frame3f.cos_theta(m))
         # Jacobian of the half-direction mapping
         bs.pdf = dr.select(active, bs.pdf / (4.0 * dr.dot(bs.wo, m)), 0.0)
-        bs.wo = dr.select(active, bs.wo, mi.reflect(si.wi))  # finite where no sample
+        # A rejected sample has no direction (wo = 0, as Mitsuba's roughdielectric
+        # leaves it): a blendbsdf re-weighting by the other lobe's eval/pdf at wo
+        # then finds 0 there, as it finds 0 below the horizon for roughconductor.
+        bs.wo = dr.select(active, bs.wo, 0.0)
         value = self._reflectance(si, cos_m, active) * weight
         return bs, dr.select(active, value, 0.0)
 

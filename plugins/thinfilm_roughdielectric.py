@@ -224,8 +224,9 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
             weight *= distr.eval(m) * distr.G(si.wi, bs.wo, m) * dr.abs(dot_wi_m) \
                 / (dr.select(pdf_m > 0, pdf_m, 1.0) * dr.abs(cos_i))
         active &= selected_r | selected_t
-        # Lanes without a sample keep finite fields (a unit wo, eta = 1, pdf = 0).
-        bs.wo = dr.select(active, bs.wo, mi.reflect(si.wi))
+        # Lanes without a sample: wo = 0 (Mitsuba's convention: no lobe of a
+        # blendbsdf evaluates there), eta = 1, pdf = 0, weight 0.
+        bs.wo = dr.select(active, bs.wo, 0.0)
         bs.pdf = dr.select(active, bs.pdf, 0.0)
         return bs, dr.select(active, weight, 0.0)
 
