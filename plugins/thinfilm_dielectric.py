@@ -86,6 +86,7 @@ import mitsuba as mi
 
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
                                 stack_from_props)
+from thinfilm_mi.params import ParameterGuard
 
 NAME = "thinfilm_dielectric"
 
@@ -105,8 +106,8 @@ class ThinFilmDielectric(mi.BSDF):
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
         self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
         self.eta = interior.mean_real() / self.stack.ambient.mean_real()
-        self.specular_reflectance = optional_texture(props, "specular_reflectance")
-        self.specular_transmittance = optional_texture(props, "specular_transmittance")
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
+        self.specular_transmittance = optional_texture(props, "specular_transmittance", NAME)
         check_unqueried(props, NAME)
         self.m_components = [
             mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide,
@@ -114,6 +115,7 @@ class ThinFilmDielectric(mi.BSDF):
             | mi.BSDFFlags.NonSymmetric,
         ]
         self.m_flags = self.m_components[0] | self.m_components[1]
+        self.guard = ParameterGuard(self, NAME)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         has_r = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
@@ -189,7 +191,7 @@ class ThinFilmDielectric(mi.BSDF):
                 callback.put(name, tex, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        self.stack.parameters_changed()
+        self.guard.changed(self, self.stack.parameters_changed)
 
     def to_string(self):
         return (f"ThinFilmDielectric[\n  layers = {self.stack.describe()},\n"

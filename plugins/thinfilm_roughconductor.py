@@ -106,7 +106,8 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture,
                                 stack_from_props)
 from thinfilm_mi.plugins.thinfilm_conductor import substrate_from_props
-from thinfilm_mi.textures import uniform
+from thinfilm_mi.params import MAX_ALPHA, ParameterGuard
+from thinfilm_mi.textures import check_texture_range, uniform
 
 NAME = "thinfilm_roughconductor"
 
@@ -121,15 +122,19 @@ def _alpha_texture(props, name: str, plugin: str):
         raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0 or a texture, "
                             f"got {value!r}")
     if isinstance(value, (int, float)):
-        if not math.isfinite(value) or value <= 0:
-            raise ThinFilmError(f"{plugin}: '{name}' (roughness) must be a finite number > 0, "
-                                f"got {value!r} (for a smooth surface use the smooth plugin)")
+        if not math.isfinite(value) or not 0 < value <= MAX_ALPHA:
+            raise ThinFilmError(f"{plugin}: '{name}' (roughness) must be a finite number > 0 "
+                                f"and <= {MAX_ALPHA:g}, got {value!r} (for a smooth surface "
+                                "use the smooth plugin)")
         return uniform(value)
     try:
-        return props.get_texture(name)
+        tex = props.get_texture(name)
     except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
         raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0 or a texture, "
                             f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{plugin}: '{name}' (roughness)", 0.0, MAX_ALPHA, mono=True,
+                        strict=True)
+    return tex
 
 
 class Microfacet:
@@ -235,7 +240,7 @@ def rough_bsdf_base():
                     callback.put(name, tex, mi.ParamFlags.Differentiable)
 
         def parameters_changed(self, keys):
-            self.stack.parameters_changed()
+            self.guard.changed(self, self.stack.parameters_changed)
 
     return RoughBSDF
 
@@ -246,11 +251,12 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
         mi.BSDF.__init__(self, props)
         self.microfacet = Microfacet(props, NAME)
         self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
-        self.specular_reflectance = optional_texture(props, "specular_reflectance")
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
         check_unqueried(props, NAME)
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | self.microfacet.flags
         self.m_components = [flags]
         self.m_flags = flags
+        self.guard = ParameterGuard(self, NAME)
 
     def _reflectance(self, si, cos_theta_m, active):
         """Composite reflectance of the films at the microfacet angle (times the factor)."""

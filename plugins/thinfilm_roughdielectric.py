@@ -104,6 +104,7 @@ import mitsuba as mi
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
                                 stack_from_props)
+from thinfilm_mi.params import ParameterGuard
 from thinfilm_mi.plugins.thinfilm_dielectric import DEFAULT_INT_IOR, spectral_mean
 from thinfilm_mi.plugins.thinfilm_roughconductor import Microfacet, rough_bsdf_base
 
@@ -130,12 +131,13 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
                                 "refraction is undefined; use thinfilm_dielectric)")
         #: Relative index for directions (mean real indices, as thinfilm_dielectric).
         self.eta = n_int / n_ext
-        self.specular_reflectance = optional_texture(props, "specular_reflectance")
-        self.specular_transmittance = optional_texture(props, "specular_transmittance")
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
+        self.specular_transmittance = optional_texture(props, "specular_transmittance", NAME)
         check_unqueried(props, NAME)
         sides = mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide | self.microfacet.flags
         self.m_components = [GLOSSY_R | sides, GLOSSY_T | sides | mi.BSDFFlags.NonSymmetric]
         self.m_flags = self.m_components[0] | self.m_components[1]
+        self.guard = ParameterGuard(self, NAME)
 
     def _rt(self, si, dot_wi_m, cos_i, active, transmission: bool):
         """``R`` and ``T`` (or ``None``) of the films at the microfacet angle.

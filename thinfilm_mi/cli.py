@@ -67,6 +67,10 @@ DEFAULT_VARIANT = "llvm_ad_spectral"
 DEFAULT_OUT_DIR = "out"
 #: samples (pixels x spp) rendered by one mi.render call at most
 DEFAULT_MAX_PASS_SAMPLES = 1 << 22
+#: largest film accepted by --size: 2^28 pixels (16384 x 16384) already need ~10 GiB
+#: of film and image buffers in a spectral variant; 100000x100000 failed deep in
+#: Mitsuba's film allocation with no message
+MAX_PIXELS = 1 << 28
 #: a render is split into at least this many passes (when spp allows)
 MIN_PASSES = 8
 
@@ -123,6 +127,16 @@ def one_line(message: str) -> str:
     return text or "unknown error"
 
 
+def root_cause(e: BaseException) -> BaseException:
+    """The innermost exception of a chain: Dr.Jit's custom operations (``mi.render``)
+    wrap the real error in one that only says "(see above)"."""
+    seen = set()
+    while (e.__cause__ or e.__context__) is not None and id(e) not in seen:
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return e
+
+
 # --------------------------------------------------------------------------------------
 # argument parsing
 
@@ -149,7 +163,11 @@ def parse_size(text: str | None) -> tuple[int, int] | None:
     m = re.fullmatch(r"\s*(\d+)\s*[xX*,]\s*(\d+)\s*", text)
     if not m or int(m.group(1)) <= 0 or int(m.group(2)) <= 0:
         raise UsageError(f"--size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. --size 640x480")
-    return int(m.group(1)), int(m.group(2))
+    w, h = int(m.group(1)), int(m.group(2))
+    if w * h > MAX_PIXELS:
+        raise UsageError(f"--size {text!r}: {w * h} pixels; at most {MAX_PIXELS} "
+                         f"(e.g. {int(math.isqrt(MAX_PIXELS))}x{int(math.isqrt(MAX_PIXELS))})")
+    return w, h
 
 
 def add_render_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -507,7 +525,7 @@ def render_file(scene_path: str | os.PathLike, output: str | os.PathLike | None 
     except CLIError:
         raise
     except Exception as e:
-        raise RenderFailure(f"rendering {scene_file} failed: {one_line(e)}") from e
+        raise RenderFailure(f"rendering {scene_file} failed: {one_line(root_cause(e))}") from e
 
     import thinfilm_mi
 

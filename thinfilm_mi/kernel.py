@@ -586,7 +586,8 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
     return unpolarised_rt(n0, cos0, films, n_exit, wl, transmission)
 
 
-_TABLE_CACHE: dict = {}
+#: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).
+_TABLE_CACHE = _tables.TableCache()
 
 
 def _tables_cache(stack: KernelStack, side: _Side):
@@ -617,8 +618,9 @@ def _tables_cache(stack: KernelStack, side: _Side):
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
                    stack.table_error, max_texels)).encode())
     key = h.hexdigest()
-    if key in _TABLE_CACHE:
-        return _TABLE_CACHE[key]
+    found, table = _TABLE_CACHE.get(key)
+    if found:
+        return table
 
     def on(ix, real=False):
         memo = {}
@@ -647,9 +649,7 @@ def _tables_cache(stack: KernelStack, side: _Side):
         kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
     table = _tables.build_table(data, stack.table_error, _GRID, max_texels)
-    if len(_TABLE_CACHE) > 256:
-        _TABLE_CACHE.clear()
-    _TABLE_CACHE[key] = table
+    _TABLE_CACHE.put(key, table)
     return table
 
 
@@ -683,9 +683,20 @@ def unpolarised_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = 
     return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
 
 
-def optional_texture(props, name: str):
-    """The texture ``name`` of a plugin's properties, or ``None`` if it was not given."""
-    return props.get_texture(name) if name in props else None
+def optional_texture(props, name: str, plugin: str):
+    """The factor texture ``name`` of a plugin's properties (``specular_reflectance``,
+    ``specular_transmittance``), or ``None`` if it was not given. Its values must be
+    finite and >= 0 (a negative or infinite factor renders black or NaN)."""
+    if name not in props:
+        return None
+    value = props.get(name)
+    try:
+        tex = props.get_texture(name)
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{plugin}: '{name}' must be a number, a spectrum or a texture, "
+                            f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{plugin}: '{name}'", 0.0)
+    return tex
 
 
 def films_from_props(props, plugin: str) -> list[tuple[SpectralIndex, float]]:
