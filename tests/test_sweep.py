@@ -25,7 +25,6 @@ pytest.importorskip("distributed")
 
 import mitsuba as mi  # noqa: E402
 
-import thinfilm_mi  # noqa: E402
 from thinfilm_mi import cli, exr, sweeps  # noqa: E402
 from thinfilm_mi.cli import UsageError  # noqa: E402
 

@@ -7,6 +7,9 @@ command does the same job from Python::
                     [--spp N] [--size WxH] [--variant V] [-D name=value ...]
                     [--seed S] [--verbose]
 
+Parameter grids (many frames of one scene, on Dask worker processes or a
+cluster) are ``thinfilm-render sweep``: see :mod:`thinfilm_mi.sweeps`.
+
 Several scenes are rendered one after the other in the same process (Mitsuba
 and the plugins are set up once), each into ``DIR/<scene-stem>.exr``; ``-o``
 names the output of a single scene only.
@@ -72,7 +75,7 @@ MIN_PASSES = 8
 
 __all__ = [
     "render_main", "run", "add_render_arguments", "setup_llvm_only", "setup_variant", "build_parser", "render_file", "load_scene",
-    "parse_defines", "parse_size", "plan_passes", "plan_outputs", "RenderResult", "CLIError",
+    "parse_defines", "parse_size", "plan_passes", "plan_outputs", "output_attributes", "RenderResult", "CLIError",
 ]
 
 

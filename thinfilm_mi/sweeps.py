@@ -69,12 +69,13 @@ import math
 import os
 import re
 import secrets
+import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence, TextIO
 
@@ -414,16 +415,25 @@ class SweepWorkerPlugin(WorkerPlugin):
     """Dask worker plugin: runs :func:`setup_process` when a worker starts (and
     on every worker that joins later, e.g. one restarted after a crash).
     ``threads`` is the Dr.Jit thread count; None uses the worker's own thread
-    count (``dask worker --nthreads``)."""
+    count (``dask worker --nthreads``). ``ignore_sigint`` (local clusters):
+    the workers leave Ctrl-C to the client, which stops them."""
 
     def __init__(self, variant: str = DEFAULT_VARIANT, threads: int | None = None,
-                 verbose: bool = False):
+                 verbose: bool = False, ignore_sigint: bool = False):
         self.variant = variant
         self.threads = threads
         self.verbose = verbose
+        self.ignore_sigint = ignore_sigint
         self.name = f"thinfilm-sweep-{variant}"
 
     def setup(self, worker) -> None:
+        if self.ignore_sigint:
+            # Local workers share the terminal's process group: Ctrl-C is the
+            # client's to handle (it stops them), not a traceback from each.
+            try:
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+            except ValueError:  # not the main thread
+                pass
         setup_process(self.variant, self.threads or max(1, int(worker.state.nthreads)), self.verbose)
 
 
@@ -610,6 +620,10 @@ def write_contact_sheet(path: Path, out_dir: Path, axes: Sequence[Axis],
 
     varying = [a for a in axes if len(a.values) > 1]
     n = len(rows)
+    previews = [out_dir / r["png"] for r in rows
+                if r.get("status") == "ok" and r.get("png") and (out_dir / r["png"]).is_file()]
+    images = {p: mpimg.imread(str(p)) for p in previews}
+    aspect = (lambda im: im.shape[0] / im.shape[1])(next(iter(images.values()))) if images else 0.75
     if len(varying) >= 2 and len(varying[-1].values) <= 12:
         cols = len(varying[-1].values)
     else:
@@ -617,16 +631,17 @@ def write_contact_sheet(path: Path, out_dir: Path, axes: Sequence[Axis],
     rows_n = max(1, math.ceil(n / cols))
     dpi = 100
     w_in = thumb_px / dpi
-    fig = Figure(figsize=(cols * w_in, rows_n * (w_in * 0.75 + 0.32 + 0.12 * len(varying))), dpi=dpi)
+    fig = Figure(figsize=(cols * w_in, rows_n * (w_in * aspect + 0.1 + 0.1 * max(1, len(varying)))),
+                 dpi=dpi)
     FigureCanvasAgg(fig)
     for i, row in enumerate(rows):
         ax = fig.add_subplot(rows_n, cols, i + 1)
         ax.set_xticks([])
         ax.set_yticks([])
         label = "\n".join(f"{_label(a.name)}={row.get(a.name, '')}" for a in varying) or "frame"
-        png = row.get("png") or ""
-        if row.get("status") == "ok" and png and (out_dir / png).is_file():
-            ax.imshow(mpimg.imread(str(out_dir / png)))
+        png = out_dir / row["png"] if row.get("png") else None
+        if png in images:
+            ax.imshow(images[png])
         else:
             ax.set_facecolor("0.8")
             ax.text(0.5, 0.5, "failed" if row.get("status") == "failed" else "no preview",
@@ -645,13 +660,16 @@ class _Progress:
     def __init__(self, total: int, stream: TextIO, width: int = 30):
         self.total, self.stream, self.width = total, stream, width
         self.start = time.perf_counter()
+        self.first: int | None = None  # frames already done at the first update
         self.interactive = bool(getattr(stream, "isatty", lambda: False)())
         self.last = ""
 
     def update(self, done: int, failed: int) -> None:
+        if self.first is None:
+            self.first = done
         filled = int(round(self.width * done / max(1, self.total)))
         elapsed = time.perf_counter() - self.start
-        rate = done / elapsed * 60.0 if elapsed > 0 else 0.0
+        rate = (done - self.first) / elapsed * 60.0 if elapsed > 0 else 0.0
         self.last = (f"\r{PROG}: [{'#' * filled}{'.' * (self.width - filled)}] {done}/{self.total} "
                      f"frames, {failed} failed, {elapsed:.1f} s, {rate:.1f} frames/min")
         if self.interactive:
@@ -781,8 +799,7 @@ def _previous_rows(out: Path, job: Job, frames: Sequence[Frame], names: Sequence
     return done
 
 
-def _connect(workers: int | None, scheduler: str | None, client, variant: str, n_tasks: int,
-             log: Callable[[str], None]):
+def _connect(workers: int | None, scheduler: str | None, client, variant: str):
     """(client, cluster we own or None, client we own?, worker count for planning)."""
     from distributed import Client
 
@@ -889,10 +906,10 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
 
     n_workers = 0
     if todo:
-        n_workers, rows = _run(job, frames, todo, rows, names, workers=local_workers if client is None
-                               and scheduler is None else None, scheduler=scheduler, client=client,
-                               frames_per_task=frames_per_task, stream=stream, on_frame=on_frame,
-                               timeout=timeout, flush=flush, log=log)
+        n_workers = _run(job, todo, rows, total=len(frames),
+                         workers=local_workers if client is None and scheduler is None else None,
+                         scheduler=scheduler, client=client, frames_per_task=frames_per_task,
+                         stream=stream, on_frame=on_frame, timeout=timeout, flush=flush)
     flush()
     ordered = [rows[f.index] for f in frames]
     sheet = write_contact_sheet(out / CONTACT_SHEET, out, axes, ordered) if contact_sheet else None
@@ -902,79 +919,91 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
                        manifest=manifest, contact_sheet=sheet)
 
 
-def _run(job: Job, frames: Sequence[Frame], todo: Sequence[Frame], rows: dict[int, dict[str, Any]],
-         names: Sequence[str], *, workers, scheduler, client, frames_per_task, stream, on_frame,
-         timeout, flush, log) -> tuple[int, dict[int, dict[str, Any]]]:
-    """Render ``todo`` on the cluster, filling ``rows``; cleans up on any exit."""
-    from distributed import as_completed
+def _results(fut, chunk: Sequence[Frame]) -> list[tuple[int, dict[str, Any]]]:
+    """``(frame index, row)`` of each frame of a finished task; a task that raised (its worker died
+    ``ALLOWED_FAILURES + 1`` times, or it could not run) fails all its frames."""
     from distributed.scheduler import KilledWorker
 
-    client, cluster, own_client = _connect(workers, scheduler, client, job.variant, len(todo), log)
+    if fut.status == "finished":
+        results = fut.result()
+    else:
+        exc = fut.exception()
+        if isinstance(exc, KilledWorker):
+            error = f"the worker process died {ALLOWED_FAILURES + 1} times while rendering this frame's task"
+        else:
+            error = f"{type(exc).__name__}: {one_line(exc)}"
+        results = [{"index": f.index, "status": "failed", "error": error, "png": "", "seconds": 0.0}
+                   for f in chunk]
+    by_index = {f.index: f for f in chunk}
+    rows = []
+    for res in results:
+        frame = by_index[res["index"]]
+        rows.append((frame.index, {**frame.params, "exr": frame.exr if res["status"] == "ok" else "",
+                                   **{k: v for k, v in res.items() if k != "index"},
+                                   "rendered": True}))
+    return rows
+
+
+def _run(job: Job, todo: Sequence[Frame], rows: dict[int, dict[str, Any]], *, total: int,
+         workers, scheduler, client, frames_per_task, stream, on_frame, timeout,
+         flush) -> int:
+    """Render ``todo`` on the cluster, adding to ``rows``; returns the number of
+    workers. On any exit: stops the work, removes temporary files, and on an
+    early exit (Ctrl-C, timeout, an error) records the frames that finished."""
+    from distributed import as_completed
+
+    client, cluster, own_client = _connect(workers, scheduler, client, job.variant)
     prefix = f"thinfilm-sweep-{secrets.token_hex(6)}-"
     futures: dict[Any, list[Frame]] = {}
-    bar = _Progress(len(frames), stream) if stream is not None else None
-    done = len(rows)
+    consumed: set = set()
+    bar = _Progress(total, stream) if stream is not None else None
     failed = sum(r["status"] == "failed" for r in rows.values())
     finished = False
     try:
-        client.register_plugin(SweepWorkerPlugin(job.variant, job.threads, job.verbose))
+        client.register_plugin(SweepWorkerPlugin(job.variant, job.threads, job.verbose,
+                                                 ignore_sigint=cluster is not None))
         n_workers = workers or len(client.nthreads())
-        tasks = plan_tasks(todo, n_workers or 8, frames_per_task)
-        for i, chunk in enumerate(tasks):
-            fut = client.submit(render_frames, job, chunk, key=f"{prefix}{i}", pure=False)
-            futures[fut] = chunk
+        for i, chunk in enumerate(plan_tasks(todo, n_workers or 8, frames_per_task)):
+            futures[client.submit(render_frames, job, chunk, key=f"{prefix}{i}", pure=False)] = chunk
         if bar:
-            bar.update(done, failed)
+            bar.update(len(rows), failed)
         last_flush = time.monotonic()
         for fut in as_completed(list(futures), timeout=timeout):
-            chunk = futures[fut]
-            if fut.status == "finished":
-                results = fut.result()
-            else:
-                exc = fut.exception()
-                if isinstance(exc, KilledWorker):
-                    error = (f"the worker process died {ALLOWED_FAILURES + 1} times while rendering "
-                             "this frame's task")
-                else:
-                    error = f"{type(exc).__name__}: {one_line(exc)}"
-                results = [{"index": f.index, "status": "failed", "error": error, "png": "",
-                            "seconds": 0.0} for f in chunk]
-            by_index = {f.index: f for f in chunk}
-            for res in results:
-                frame = by_index[res["index"]]
-                row = {**frame.params, "exr": frame.exr if res["status"] == "ok" else "",
-                       **{k: v for k, v in res.items() if k != "index"}, "rendered": True}
-                rows[frame.index] = row
-                done += 1
+            consumed.add(fut)
+            for index, row in _results(fut, futures[fut]):
+                rows[index] = row
                 failed += row["status"] == "failed"
                 if bar:
-                    bar.update(done, failed)
+                    bar.update(len(rows), failed)
                 if on_frame is not None:
                     on_frame(row)
             if time.monotonic() - last_flush >= MANIFEST_INTERVAL:
                 flush()
                 last_flush = time.monotonic()
         finished = True
-        return n_workers, rows
+        return n_workers
     finally:
         if bar:
             bar.close()
-        if not finished:  # Ctrl-C, timeout, an error in on_frame: stop and leave no partial files
+        if not finished:  # Ctrl-C, timeout, an error in on_frame: keep what is done, stop the rest
+            for fut, chunk in futures.items():
+                if fut not in consumed and fut.status == "finished":
+                    rows.update(_results(fut, chunk))
             pending = [f for f in futures if not f.done()]
             if pending:
                 client.cancel(pending)
-            if cluster is None and pending:
-                _drain(client, prefix, DRAIN_TIMEOUT, log)
+                if cluster is None:
+                    _drain(client, prefix, DRAIN_TIMEOUT)
         if own_client:
             client.close()
         if cluster is not None:
-            cluster.close()
+            cluster.close()  # after the worker processes are gone, nothing writes any more
         _remove_parts(Path(job.out_dir) / FRAMES_DIR)
         if not finished:
             flush()
 
 
-def _drain(client, prefix: str, timeout: float, log: Callable[[str], None]) -> None:
+def _drain(client, prefix: str, timeout: float) -> None:
     """Wait (at most ``timeout`` s) until no task of this sweep still runs on
     the external cluster: a cancelled task finishes its frame regardless."""
     deadline = time.monotonic() + timeout
@@ -986,7 +1015,8 @@ def _drain(client, prefix: str, timeout: float, log: Callable[[str], None]) -> N
         if not any(running.values()):
             return
         time.sleep(0.05)  # polling the workers' state, not a synchronisation by delay
-    log(f"frames still running on the cluster after {timeout:.0f} s; not waiting longer")
+    print(f"{PROG}: frames still running on the cluster after {timeout:.0f} s; not waiting longer",
+          file=sys.stderr)
 
 
 # --------------------------------------------------------------------------------------
