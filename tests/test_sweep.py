@@ -311,3 +311,9 @@ def test_cli_sweep_on_a_running_cluster(scene, tmp_path, client, capfd):
     rc = cli.render_main(["sweep", str(scene), "-D", "thickness=100:300:100", "--spp", "2",
                           "--size", "16x16", "--scheduler", "tcp://127.0.0.1:1", "--out-dir", str(out)])
     assert rc == 0 and "0 rendered, 3 already done" in capfd.readouterr().err
+    # other settings (here the sample count): the frames on disk do not count
+    rc = cli.render_main(["sweep", str(scene), "-D", "thickness=100:300:100", "--spp", "3",
+                          "--size", "16x16", "--scheduler", client.scheduler.address,
+                          "--out-dir", str(out), "--timeout", str(TIMEOUT)])
+    assert rc == 0 and "3 rendered, 0 already done" in capfd.readouterr().err
+    assert exr.read_exr(out / _manifest(out)[0]["exr"])[1]["spp"] == 3

@@ -186,6 +186,7 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
         prog=prog,
         description="Render a Mitsuba 3 scene with the thin-film BSDFs of thinfilm-mi "
                     "into a linear EXR and an sRGB PNG preview.",
+        epilog=f"Parameter grids on Dask worker processes or a cluster: {prog} sweep --help",
     )
     return add_render_arguments(parser)
 

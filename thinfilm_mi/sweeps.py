@@ -21,7 +21,8 @@ Axes of the grid:
   opaque Dr.Jit values, no kernel is compiled again.
 
 ``VALUES`` is a range ``START:STOP:STEP`` (``STOP`` included when it lies on
-the grid), a comma-separated list ``a,b,c`` or a single value.
+the grid), a comma-separated list ``a,b,c`` or a single value (on the command
+line a value cannot hold a comma; from Python, pass a list).
 
 Work is split into tasks of up to ``frames_per_task`` frames of the same ``-D``
 combination (by default about two tasks per worker, never mixing scenes). Each
@@ -898,11 +899,13 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
     rows: dict[int, dict[str, Any]] = _previous_rows(out, job, frames, names, log)
     skipped = len(rows)
     todo = [f for f in frames if f.index not in rows]
-    (out / SETTINGS).write_text(json.dumps(_settings(job), indent=1) + "\n")
     manifest = out / MANIFEST
 
     def flush() -> None:
+        # manifest first: a crash in between leaves old settings, which make
+        # the next run render everything again rather than trust rows wrongly
         _write_manifest(manifest, names, (rows[f.index] for f in frames if f.index in rows))
+        _write_atomic(out / SETTINGS, (json.dumps(_settings(job), indent=1) + "\n").encode())
 
     n_workers = 0
     if todo:
