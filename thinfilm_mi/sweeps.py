@@ -1070,7 +1070,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def summary(result: SweepResult) -> str:
-    where = f"{result.workers} worker(s)" if result.workers else "nothing to render"
+    where = f"{result.workers} worker(s)" if result.rendered else "nothing to render"
     text = (f"{PROG}: {len(result)} frames ({result.rendered} rendered, {result.skipped} already "
             f"done) in {result.seconds:.1f} s with {where}: {len(result.ok)} ok, "
             f"{len(result.failed)} failed -> {result.manifest}")
