@@ -24,7 +24,6 @@ else:
     register()
 
 
-
 def __getattr__(name: str):
     """``thinfilm_mi.sweep``: :func:`thinfilm_mi.sweeps.sweep`, imported on first
     use so that importing the package does not import Dask."""
