@@ -7,6 +7,9 @@ command does the same job from Python::
                     [--spp N] [--size WxH] [--variant V] [-D name=value ...]
                     [--seed S] [--verbose]
 
+Parameter grids (many frames of one scene, on Dask worker processes or a
+cluster) are ``thinfilm-render sweep``: see :mod:`thinfilm_mi.sweeps`.
+
 Several scenes are rendered one after the other in the same process (Mitsuba
 and the plugins are set up once), each into ``DIR/<scene-stem>.exr``; ``-o``
 names the output of a single scene only.
@@ -76,7 +79,7 @@ MIN_PASSES = 8
 
 __all__ = [
     "render_main", "run", "add_render_arguments", "setup_llvm_only", "setup_variant", "build_parser", "render_file", "load_scene",
-    "parse_defines", "parse_size", "plan_passes", "plan_outputs", "RenderResult", "CLIError",
+    "parse_defines", "parse_size", "plan_passes", "plan_outputs", "output_attributes", "RenderResult", "CLIError",
 ]
 
 
@@ -201,6 +204,7 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
         prog=prog,
         description="Render a Mitsuba 3 scene with the thin-film BSDFs of thinfilm-mi "
                     "into a linear EXR and an sRGB PNG preview.",
+        epilog=f"Parameter grids on Dask worker processes or a cluster: {prog} sweep --help",
     )
     return add_render_arguments(parser)
 
@@ -527,18 +531,7 @@ def render_file(scene_path: str | os.PathLike, output: str | os.PathLike | None 
     except Exception as e:
         raise RenderFailure(f"rendering {scene_file} failed: {one_line(root_cause(e))}") from e
 
-    import thinfilm_mi
-
-    attributes = {
-        "scene": str(scene_file.resolve()),
-        "variant": variant,
-        "spp": total_spp,
-        "renderTime": float(seconds),
-        "seed": int(seed),
-        "passes": int(passes),
-        "parameters": " ".join(f"{k}={v}" for k, v in (params or {}).items()),
-        "software": f"thinfilm-mi {thinfilm_mi.__version__}, Mitsuba {mi.__version__}",
-    }
+    attributes = output_attributes(scene_file, variant, total_spp, seconds, seed, passes, params)
     result = RenderResult(image=image, channels=channels, spp=total_spp, passes=passes,
                           render_time=seconds, load_time=load_time, attributes=attributes)
     try:
@@ -547,6 +540,25 @@ def render_file(scene_path: str | os.PathLike, output: str | os.PathLike | None 
     except Exception as e:
         raise RenderFailure(f"writing {out} failed: {one_line(e)}") from e
     return result
+
+
+def output_attributes(scene_file: str | os.PathLike, variant: str, spp: int, seconds: float,
+                      seed: int, passes: int, params: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The EXR header attributes of a render (shared with ``thinfilm-render sweep``)."""
+    import mitsuba as mi
+
+    import thinfilm_mi
+
+    return {
+        "scene": str(Path(scene_file).resolve()),
+        "variant": variant,
+        "spp": int(spp),
+        "renderTime": float(seconds),
+        "seed": int(seed),
+        "passes": int(passes),
+        "parameters": " ".join(f"{k}={v}" for k, v in (params or {}).items()),
+        "software": f"thinfilm-mi {thinfilm_mi.__version__}, Mitsuba {mi.__version__}",
+    }
 
 
 def summary(result: RenderResult) -> str:
@@ -624,8 +636,12 @@ def report_error(error: CLIError, verbose: bool = False) -> int:
 
 def render_main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``thinfilm-render`` console script."""
-    parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["sweep"]:  # thinfilm-render sweep ...: parameter grids on Dask
+        from .sweeps import sweep_main
+
+        return sweep_main(argv[1:])
+    parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except UsageError as e:
