@@ -38,3 +38,19 @@ def test_parallel_scene_loading_with_every_plugin_and_bitmaps_never_fails():
     kinds = set(results[0][1].split()[1:])
     assert {"ThinFilmConductor", "ThinFilmDielectric", "ThinFilmDiffuse",
             "ThinFilmRoughConductor", "ThinFilmRoughDielectric"} <= kinds
+
+
+def test_library_and_plugins_never_call_load_dict():
+    """The regression's root: no code that a plugin constructor can reach calls
+    ``mi.load_dict`` (or ``load_string``/``load_file``, which swap the resolver the
+    same way). Checked on the syntax tree, so docstrings and comments do not count."""
+    import ast
+
+    offenders = []
+    for folder in ("thinfilm_mi", "plugins"):
+        for path in sorted((ROOT / folder).glob("*.py")):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                        and node.func.attr in ("load_dict", "load_string", "load_file")):
+                    offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
+    assert not offenders, offenders
