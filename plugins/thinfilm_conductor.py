@@ -173,7 +173,7 @@ class ThinFilmConductor(mi.BSDF):
                          mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        self.guard.changed(self, self.stack.parameters_changed)
+        self.guard.changed(self, self.stack.parameters_changed, keys)
 
     def to_string(self):
         return (f"ThinFilmConductor[\n  layers = {self.stack.describe()},\n"

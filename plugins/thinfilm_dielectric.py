@@ -191,7 +191,7 @@ class ThinFilmDielectric(mi.BSDF):
                 callback.put(name, tex, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        self.guard.changed(self, self.stack.parameters_changed)
+        self.guard.changed(self, self.stack.parameters_changed, keys)
 
     def to_string(self):
         return (f"ThinFilmDielectric[\n  layers = {self.stack.describe()},\n"

@@ -418,7 +418,7 @@ class ThinFilmDiffuse(mi.BSDF):
                 dr.make_opaque(self.film_n_thickness)
             if not keys or any(k.startswith("layers.") for k in keys):
                 self._update_hemispherical()
-        self.guard.changed(self, refresh)
+        self.guard.changed(self, refresh, keys)
 
     def to_string(self):
         layers = self.coating.describe()

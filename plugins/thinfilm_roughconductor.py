@@ -240,7 +240,7 @@ def rough_bsdf_base():
                     callback.put(name, tex, mi.ParamFlags.Differentiable)
 
         def parameters_changed(self, keys):
-            self.guard.changed(self, self.stack.parameters_changed)
+            self.guard.changed(self, self.stack.parameters_changed, keys)
 
     return RoughBSDF
 

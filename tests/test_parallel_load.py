@@ -18,6 +18,8 @@ import sys
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
+import numpy as np
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 PROCESSES = 24
@@ -54,3 +56,57 @@ def test_library_and_plugins_never_call_load_dict():
                         and node.func.attr in ("load_dict", "load_string", "load_file")):
                     offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}")
     assert not offenders, offenders
+
+
+def test_no_plugin_constructor_swaps_the_file_resolver(monkeypatch):
+    """Deterministic companion of the stress test (whose failure rate before the fix
+    depended on machine load: ~25 % of processes on an idle 2-core machine, ~0-6 %
+    with both cores busy): every plugin type, with every kind of index, factor,
+    roughness and thickness texture, is built through Mitsuba's parser while
+    ``load_dict``/``load_string``/``load_file`` are spies; the constructors must not
+    call them (each installs and frees a FileResolver copy)."""
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_spectral")
+    import thinfilm_mi  # noqa: F401
+
+    calls = []
+    for name in ("load_dict", "load_string", "load_file"):
+        monkeypatch.setattr(mi, name, lambda *a, _n=name, **k: calls.append(_n))
+    uni = '<spectrum name="{}" value="{}"/>'
+    bsdfs = [
+        '<bsdf type="thinfilm_conductor"><string name="material" value="Au"/>'
+        '<string name="layers" value="SiO2 300; 1.5 20; 0.4+2.5j 5"/>'
+        '<float name="specular_reflectance" value="0.9"/>'
+        '<texture type="bitmap" name="thickness"><string name="filename" '
+        f'value="{ROOT}/scenes/textures/soap_film.exr"/><boolean name="raw" value="true"/>'
+        '</texture></bsdf>',
+        '<bsdf type="thinfilm_conductor"><float name="eta" value="1.2"/>'
+        '<float name="k" value="3"/><string name="layers" value="TiO2 80; SiO2 90"/></bsdf>',
+        '<bsdf type="thinfilm_dielectric"><string name="int_ior" value="BK7"/>'
+        '<string name="layers" value="MgF2 100; 2.3 50"/>'
+        '<float name="specular_transmittance" value="0.9"/></bsdf>',
+        '<bsdf type="thinfilm_diffuse"><string name="layers" value="SiO2 300; Au 20"/>'
+        '<rgb name="reflectance" value="0.5, 0.3, 0.2"/></bsdf>',
+        '<bsdf type="thinfilm_roughconductor"><string name="material" value="Cu"/>'
+        '<float name="alpha_u" value="0.1"/><float name="alpha_v" value="0.3"/>'
+        '<string name="layers" value="1.46 120"/></bsdf>',
+        '<bsdf type="thinfilm_roughdielectric"><float name="alpha" value="0.2"/>'
+        '<string name="thin_film_ior" value="TiO2"/><float name="thin_film_thickness" '
+        'value="90"/>' + uni.format("specular_reflectance", "0.8") + '</bsdf>',
+    ]
+    xml = '<scene version="3.0.0">' + "".join(
+        f'<shape type="sphere"><point name="center" value="{i}, 0, 0"/>{b}</shape>'
+        for i, b in enumerate(bsdfs)) + "</scene>"
+    config = mi.parser.ParserConfig("llvm_ad_spectral")
+    state = mi.parser.parse_string(config, xml)
+    mi.parser.transform_all(config, state)
+    scene = mi.parser.instantiate(config, state)
+    assert len(scene.shapes()) == len(bsdfs)
+    # edits go through the same code (parameters_changed rebuilds spectra)
+    params = mi.traverse(scene)
+    for key in list(params.keys()):
+        if key.endswith(".thickness") and "layers" in key:
+            params[key] = float(np.ravel(np.array(params[key]))[0]) * 1.1
+    params.update()
+    assert calls == []

@@ -131,3 +131,28 @@ def test_several_keys_in_one_update_are_all_undone():
         params.update()
     np.testing.assert_array_equal(weights(bsdf), before)
     assert float(np.ravel(np.array(mi.traverse(bsdf)["layers.0.thickness"]))[0]) == 200.0
+
+
+def test_textures_are_checked_on_their_values_not_their_stored_coefficients():
+    """An RGB albedo is stored as spectral-upsampling coefficients (some negative):
+    edits are judged on what the texture evaluates to. A bitmap thickness scale
+    edited to hold an infinity is refused and undone."""
+    bsdf = mi.load_dict({"type": "thinfilm_diffuse", "layers": LAYERS,
+                         "reflectance": {"type": "rgb", "value": [0.5, 0.3, 0.2]}})
+    params = mi.traverse(bsdf)
+    params["layers.0.thickness"] = 220.0      # a valid edit beside the RGB texture
+    params.update()
+    data = np.full((4, 4, 1), 1.0, np.float32)
+    cond = mi.load_dict({"type": "thinfilm_conductor", "layers": LAYERS,
+                         "thickness": {"type": "bitmap", "bitmap": mi.Bitmap(data),
+                                       "raw": True}})
+    before = weights(cond)
+    params = mi.traverse(cond)
+    key = next(k for k in params.keys() if k.startswith("thickness."))
+    bad = np.array(params[key])
+    bad.ravel()[5] = np.inf
+    with pytest.raises(ThinFilmError, match=rf"'{key}' \(a thickness scale\).*inf"):
+        params[key] = type(params[key])(bad)
+        params.update()
+    np.testing.assert_array_equal(weights(cond), before)
+    assert np.all(np.isfinite(np.array(mi.traverse(cond)[key])))

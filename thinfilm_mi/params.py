@@ -28,19 +28,18 @@ MAX_ALPHA = 100.0
 ALBEDO_SLACK = 1e-3
 
 #: (pattern on the key relative to the BSDF, lower bound, lower bound excluded,
-#: upper bound, what the value is). The first match decides; every other key must
-#: only be finite.
+#: upper bound, what the value is, read as one channel). The first match decides;
+#: every other key must only be finite. Keys of a texture are checked on the
+#: texture's values (:func:`thinfilm_mi.textures.texture_range`), not on its raw
+#: parameters: an RGB spectrum's or a bitmap's stored coefficients may be negative.
 RULES = [
-    (r"^layers\.\d+\.thickness$", 0.0, False, math.inf, "a film thickness (nm)"),
-    (r"^(layers\.\d+\.)?eta\.(value|values|data)$", MIN_INDEX, False, MAX_INDEX,
-     "a refractive index n"),
-    (r"^(layers\.\d+\.)?k\.(value|values|data)$", 0.0, False, MAX_INDEX,
-     "an extinction coefficient k"),
-    (r"\.wavelengths$", 0.0, True, math.inf, "wavelengths (nm)"),
-    (r"^alpha(_u|_v)?\.", 0.0, True, MAX_ALPHA, "a roughness"),
-    (r"^specular_(reflectance|transmittance)\.", 0.0, False, math.inf, "a factor"),
-    (r"^reflectance\.", 0.0, False, 1.0 + ALBEDO_SLACK, "an albedo"),
-    (r"^thickness\.", 0.0, False, math.inf, "a thickness scale"),
+    (r"^layers\.\d+\.thickness$", 0.0, False, math.inf, "a film thickness (nm)", False),
+    (r"^(layers\.\d+\.)?eta\.", MIN_INDEX, False, MAX_INDEX, "a refractive index n", False),
+    (r"^(layers\.\d+\.)?k\.", 0.0, False, MAX_INDEX, "an extinction coefficient k", False),
+    (r"^alpha(_u|_v)?\.", 0.0, True, MAX_ALPHA, "a roughness", True),
+    (r"^specular_(reflectance|transmittance)\.", 0.0, False, math.inf, "a factor", False),
+    (r"^reflectance\.", 0.0, False, 1.0 + ALBEDO_SLACK, "an albedo", False),
+    (r"^thickness\.", 0.0, False, math.inf, "a thickness scale", True),
 ]
 
 
@@ -60,27 +59,33 @@ def _values(value) -> np.ndarray | None:
     return arr.ravel()
 
 
-def _shown(arr: np.ndarray) -> str:
+def _shown(arr: np.ndarray, what: str = "an array") -> str:
     """The value(s) as stored (float32: 7 significant digits)."""
     bad = arr[~np.isfinite(arr)]
-    if arr.size == 1:
+    if arr.size == 1 or (not bad.size and arr.min() == arr.max()):
         return f"{arr[0]:.7g}"
     if bad.size:
-        return f"an array holding {bad[0]:.7g}"
-    return f"an array with values in [{arr.min():.7g}, {arr.max():.7g}]"
+        return f"{what} holding {bad[0]:.7g}"
+    return f"{what} with values in [{arr.min():.7g}, {arr.max():.7g}]"
 
 
-def check_value(key: str, value, plugin: str) -> None:
+def check_value(key: str, value, plugin: str, texture=None) -> None:
     """:class:`ThinFilmError` naming ``key`` and the value unless it is finite and
-    within the range :data:`RULES` gives for ``key``."""
-    arr = _values(value)
+    within the range :data:`RULES` gives for ``key``; with ``texture`` (the object
+    that owns the key), the texture's values are checked instead of ``value``."""
+    lo, lo_open, hi, what, mono = -math.inf, False, math.inf, "a value", False
+    for pattern, a, a_open, b, w, m in RULES:
+        if re.search(pattern, key):
+            lo, lo_open, hi, what, mono = a, a_open, b, w, m
+            break
+    if texture is not None:
+        from .textures import texture_range
+        rng = texture_range(texture, mono)
+        arr = None if rng is None else np.asarray(rng, dtype=np.float64)
+    else:
+        arr = _values(value)
     if arr is None or arr.size == 0:
         return
-    lo, lo_open, hi, what = -math.inf, False, math.inf, "a value"
-    for pattern, a, a_open, b, w in RULES:
-        if re.search(pattern, key):
-            lo, lo_open, hi, what = a, a_open, b, w
-            break
     finite = bool(np.all(np.isfinite(arr)))
     if finite and arr.min() >= lo and not (lo_open and arr.min() <= lo) and arr.max() <= hi:
         return
@@ -90,7 +95,8 @@ def check_value(key: str, value, plugin: str) -> None:
     if math.isfinite(hi):
         parts.append(f"<= {hi:g}")
     want = "finite" + (" and " + " and ".join(parts) if parts else "")
-    raise ThinFilmError(f"{plugin}: '{key}' ({what}) must be {want}, got {_shown(arr)}; "
+    shown = _shown(arr, "an array" if texture is None else "a texture")
+    raise ThinFilmError(f"{plugin}: '{key}' ({what}) must be {want}, got {shown}; "
                         "the edit was undone and the BSDF keeps its last valid parameters")
 
 
@@ -113,16 +119,28 @@ class ParameterGuard:
         params = _mi().traverse(bsdf)
         self._valid = {k: _copy(params[k]) for k in params.keys()}
 
-    def changed(self, bsdf, refresh) -> None:
-        """Validate the current values of ``bsdf``, then ``refresh()``; on a bad
-        value (or a failing refresh) restore the last valid values and raise."""
+    def changed(self, bsdf, refresh, keys=None) -> None:
+        """Validate the current values of ``bsdf`` (those under the changed
+        ``keys`` that ``parameters_changed`` received; all without), then
+        ``refresh()``; on a bad value (or a failing refresh) restore the last valid
+        values and raise."""
         if self._restoring:
             refresh()
             return
-        params = _mi().traverse(bsdf)
+        mi = _mi()
+        params = mi.traverse(bsdf)
         try:
+            seen = set()
             for key in params.keys():
-                check_value(key, params[key], self.plugin)
+                if keys and not any(key == k or key.startswith(k + ".") for k in keys):
+                    continue
+                node = params.properties[key][2]
+                texture = node if isinstance(node, mi.Texture) else None
+                if texture is not None:
+                    if id(texture) in seen:
+                        continue
+                    seen.add(id(texture))
+                check_value(key, params[key], self.plugin, texture)
             refresh()
         except Exception:
             self._restore(params)
