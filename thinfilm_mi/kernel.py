@@ -37,9 +37,6 @@ from .textures import (GRID, _mi, check_texture_range, irregular, scalar, textur
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
 DEFAULT_EXT_IOR = 1.000277
 
-_GRID = GRID
-_scalar = scalar
-
 
 def check_variant(plugin: str) -> None:
     """Raise if the current Mitsuba variant cannot run the thin-film plugins.
@@ -111,7 +108,7 @@ class SpectralIndex:
         # dataset's own knots, so tabulated data are reproduced exactly.
         knots = getattr(mat, "knots", lambda: np.empty(0))()
         grid = np.unique(np.concatenate(
-            [_GRID, knots[(knots > _GRID[0]) & (knots < _GRID[-1])]]))
+            [GRID, knots[(knots > GRID[0]) & (knots < GRID[-1])]]))
         try:
             values = mat.index(grid)
         except ValueError as e:
@@ -136,7 +133,7 @@ class SpectralIndex:
         if self.material is None:
             return np.empty(0)
         knots = getattr(self.material, "knots", lambda: np.empty(0))()
-        return knots[(knots > _GRID[0]) & (knots < _GRID[-1])]
+        return knots[(knots > GRID[0]) & (knots < GRID[-1])]
 
     @classmethod
     def from_textures(cls, eta_tex, k_tex, label: str) -> "SpectralIndex":
@@ -153,7 +150,7 @@ class SpectralIndex:
         if self.constant is not None:
             return float(self.constant.real)
         if self.material is not None:
-            return float(np.mean(self.material.index(_GRID).real))
+            return float(np.mean(self.material.index(GRID).real))
         return float(self.eta.mean())
 
     def traverse(self, callback, prefix: str) -> None:
@@ -171,7 +168,7 @@ def _check_real_medium(index: SpectralIndex, name: str) -> SpectralIndex:
         if c.imag > AMBIENT_K_TOL or c.real <= 0:
             raise ThinFilmError(f"{name}: must be a real index > 0 (a non-absorbing medium), got {c!r}")
         return index
-    k = mat.index(_GRID).imag
+    k = mat.index(GRID).imag
     if np.any(k > AMBIENT_K_TOL):
         raise ThinFilmError(f"{name}: must be a non-absorbing medium, got {mat.name!r} "
                             f"(k up to {k.max():.3g} in 360-830 nm)")
@@ -243,10 +240,10 @@ class _LoopFilms:
     def __init__(self, films: list, n0: SpectralIndex):
         mi = _mi()
         from ._backend import aligned_array
-        grid = np.unique(np.concatenate([_GRID[[0, -1]]] + [ix.knots for ix, _, _ in films]))
+        grid = np.unique(np.concatenate([GRID[[0, -1]]] + [ix.knots for ix, _, _ in films]))
         self.g0 = float(grid[0])
         self.cells = grid.size - 1
-        self.uniform = bool(np.array_equal(grid, _GRID))
+        self.uniform = bool(np.array_equal(grid, GRID))
         eta = np.stack([texture_on_grid(ix.eta, grid) for ix, _, _ in films])
         k = np.stack([texture_on_grid(ix.k, grid) for ix, _, _ in films])
         self.real = bool(np.all(k == 0))
@@ -271,7 +268,7 @@ class _LoopFilms:
             cols = [eta[:, :-1], k[:, :-1], eta[:, 1:], k[:, 1:]]
         self.buffer = aligned_array(np.stack(cols, axis=-1), np.float32, mi.Float)
         self.grid = aligned_array(grid, np.float32, mi.Float)
-        self.thickness = aligned_array([_scalar(d) for _, d, _ in films], np.float32, mi.Float)
+        self.thickness = aligned_array([scalar(d) for _, d, _ in films], np.float32, mi.Float)
         self.n_films = len(films)
         self.count = mi.UInt32(len(films))
         for v in (self.buffer, self.grid, self.thickness, self.count):
@@ -402,13 +399,13 @@ class KernelStack:
 
     # -- planning (load time and after parameter changes) ---------------------
     def _thickness_values(self) -> list[float]:
-        return [_scalar(d) for d in self.thickness]
+        return [scalar(d) for d in self.thickness]
 
     def _opaque(self, index: SpectralIndex, d: float) -> bool:
         if self.thickness_texture is not None or d <= 0:
             return False   # a texture may thin the film anywhere
         k = texture_on_grid(index.k)
-        return bool(np.max(np.exp(-2.0 * math.pi * k * d / _GRID)) < OPAQUE_AMPLITUDE)
+        return bool(np.max(np.exp(-2.0 * math.pi * k * d / GRID)) < OPAQUE_AMPLITUDE)
 
     def _side(self, inside: bool, transmission: bool, films: list, opaque: list) -> _Side:
         """The plan of one side from the non-zero ``films`` ``(index, thickness,
@@ -479,7 +476,7 @@ class KernelStack:
         return "mixed" if any(tabled) else "exact"
 
     def describe(self) -> str:
-        films = "; ".join(f"{ix.label} {_scalar(d):g} nm"
+        films = "; ".join(f"{ix.label} {scalar(d):g} nm"
                           for ix, d in zip(self.indices, self.thickness))
         return f"[{films}]" if films else "[no films]"
 
@@ -495,9 +492,9 @@ class KernelStack:
         for i, d in enumerate(self.thickness):
             if dr.is_jit_v(d):
                 dr.make_opaque(d)
-            if not math.isfinite(_scalar(d)) or _scalar(d) < 0:
+            if not math.isfinite(scalar(d)) or scalar(d) < 0:
                 raise ThinFilmError(f"{self.plugin}: layers.{i}.thickness must be a finite "
-                                    f"number >= 0 (nm), got {_scalar(d)!r}")
+                                    f"number >= 0 (nm), got {scalar(d)!r}")
         self._plan()
 
     def thickness_scale_at(self, si, active=True):
@@ -611,7 +608,7 @@ def _tables_cache(stack: KernelStack, side: _Side):
             values[id(ix)] = (texture_on_grid(ix.eta), texture_on_grid(ix.k))
         for v in values[id(ix)]:
             h.update(v.tobytes())
-    h.update(repr([(_scalar(d), inc) for _, d, inc in side.films]).encode())
+    h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
     transmission = side.transmission and not side.opaque
     max_texels = (AUTO_MAX_TEXELS // (2 if transmission else 1) if stack.tabulate == "auto"
                   else _tables.MAX_TEXELS)
@@ -643,12 +640,12 @@ def _tables_cache(stack: KernelStack, side: _Side):
         return _rt(n0_, cos0, films, n_exit, wl, incoherent, transmission)
 
     data = _tables.SideData(
-        n0=n0, films=[(on(ix), _scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
+        n0=n0, films=[(on(ix), scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
         transmission=transmission, rt=rt,
         rt_loop=None if any(incoherent) else unpolarised_rt_loop,
         kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
-    table = _tables.build_table(data, stack.table_error, _GRID, max_texels)
+    table = _tables.build_table(data, stack.table_error, GRID, max_texels)
     _TABLE_CACHE.put(key, table)
     return table
 
