@@ -141,7 +141,8 @@ both components). Mitsuba's ``prb`` family samples detached and re-evaluates
 ``eval`` at the sampled direction for the derivative; ``eval`` holds only the
 diffuse part, so for paths that took the delta specular component ``prb`` uses
 the diffuse term's derivative where ``k_r``'s belongs (a thickness gradient of
-+2.75e-3 against a finite difference of -1.58e-4, measured), as it does for
++5.4e-4 where ``path`` and a finite difference give -1.5e-4, in
+``tests/test_render_gradients.py``'s scene), as it does for
 Mitsuba's own ``plastic``. A BSDF cannot tell ``prb`` from ``path`` (both trace
 ``sample`` with gradients suspended in their primal pass and ``eval`` with
 gradients later), so there is no run-time warning.
