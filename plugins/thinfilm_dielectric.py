@@ -85,18 +85,13 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
-                                stack_from_props)
+                                spectral_mean, stack_from_props)
 from thinfilm_mi.params import ParameterGuard
 
 NAME = "thinfilm_dielectric"
 
 #: Mitsuba's default interior index of ``dielectric`` (BK7 at 589 nm).
 DEFAULT_INT_IOR = 1.5046
-
-
-def spectral_mean(x):
-    """Average of a spectrum over its wavelengths (a Float)."""
-    return sum(x[i] for i in range(len(x))) * (1.0 / len(x))
 
 
 class ThinFilmDielectric(mi.BSDF):

@@ -168,7 +168,7 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.hemispherical import GRID, hemispherical_factors, texture_on_grid
-from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant,
+from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
                                 ext_ior_from_props, films_from_props, opaque_float,
                                 stack_options_from_props)
 from thinfilm_mi.optics import film_attenuation
@@ -177,11 +177,6 @@ from thinfilm_mi.textures import check_texture_range, regular, uniform
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple")
-
-def spectral_mean(x):
-    """Average of a spectrum over its wavelengths (a Float)."""
-    return dr.mean(x, axis=0) if dr.depth_v(x) > 1 else x
-
 
 def _absorbs(index) -> bool:
     mat = index.material
@@ -216,11 +211,12 @@ def _reflectance_from_props(props):
 def _spectrum(tex, values):
     """``values`` on the 1 nm grid as a ``regular`` spectrum, updating ``tex`` in place
     when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
-    ``regular`` spectrum refuses a zero integral)."""
+    ``regular`` spectrum refuses a zero integral). In scalar variants a new one is
+    made (their ``mi.Float`` holds one number, not the values)."""
     values = np.asarray(values, dtype=np.float64)
     if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
         return uniform(0.0)
-    params = mi.traverse(tex) if tex is not None else None
+    params = mi.traverse(tex) if tex is not None and dr.is_jit_v(mi.Float) else None
     if params is not None and "values" in params:
         params["values"] = mi.Float(values.astype(np.float32))
         params.update()
@@ -344,7 +340,7 @@ class ThinFilmDiffuse(mi.BSDF):
         else:
             prob_spec = mi.Float(1.0 if has_spec else 0.0)
         sel_spec = active & (sample1 < prob_spec)
-        sel_diff = active & ~sel_spec
+        sel_diff = active & (sample1 >= prob_spec)   # not ~sel_spec: a Python bool in scalar variants
 
         wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
         bs.wo = dr.select(sel_spec, mi.reflect(si.wi), wo_diff)

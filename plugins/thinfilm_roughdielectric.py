@@ -103,9 +103,9 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
-                                stack_from_props)
+                                spectral_mean, stack_from_props)
 from thinfilm_mi.params import ParameterGuard
-from thinfilm_mi.plugins.thinfilm_dielectric import DEFAULT_INT_IOR, spectral_mean
+from thinfilm_mi.plugins.thinfilm_dielectric import DEFAULT_INT_IOR
 from thinfilm_mi.plugins.thinfilm_roughconductor import Microfacet, rough_bsdf_base
 
 NAME = "thinfilm_roughdielectric"

@@ -680,6 +680,12 @@ def unpolarised_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = 
     return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
 
 
+def spectral_mean(x):
+    """Average of a spectrum over its wavelengths (a Float), in every variant (a
+    scalar variant's spectrum is one array of four numbers)."""
+    return sum(x[i] for i in range(len(x))) * (1.0 / len(x))
+
+
 def optional_texture(props, name: str, plugin: str):
     """The factor texture ``name`` of a plugin's properties (``specular_reflectance``,
     ``specular_transmittance``), or ``None`` if it was not given. Its values must be
