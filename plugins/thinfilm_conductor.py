@@ -92,8 +92,11 @@ import mitsuba as mi
 
 from thinfilm_mi import modes
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.kernel import (SpectralIndex, check_texture_at_least, check_unqueried,
-                                check_variant, optional_texture, stack_from_props)
+from thinfilm_mi.kernel import (SpectralIndex, check_unqueried, check_variant, optional_texture,
+                                stack_from_props)
+from thinfilm_mi.materials import MAX_INDEX, MIN_INDEX
+from thinfilm_mi.params import ParameterGuard
+from thinfilm_mi.textures import check_texture_range, uniform
 
 NAME = "thinfilm_conductor"
 
@@ -111,18 +114,20 @@ def substrate_from_props(props, plugin: str) -> SpectralIndex:
         values = {}
         for name in ("eta", "k"):
             v = props.get(name)
+            if isinstance(v, bool) or isinstance(v, str):
+                raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
+                                    f"spectrum/texture, got {v!r}")
             if isinstance(v, (int, float)):
-                if not (v == v) or (name == "eta" and v <= 0) or (name == "k" and v < 0):
-                    raise ThinFilmError(f"{plugin}: '{name}' must be "
-                                        f"{'> 0' if name == 'eta' else '>= 0'}, got {v!r}")
-                v = mi.load_dict({"type": "uniform", "value": float(v)})
+                v = uniform(v)
             else:
                 try:
                     v = props.get_unbounded_texture(name)
                 except Exception as e:
                     raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
                                         f"spectrum/texture, got {v!r} ({e})") from None
-                check_texture_at_least(v, 0.0, f"{plugin}: '{name}'", strict=(name == "eta"))
+            # the range of every index (thinfilm_mi.materials.MIN_INDEX/MAX_INDEX)
+            check_texture_range(v, f"{plugin}: '{name}'", MIN_INDEX if name == "eta" else 0.0,
+                                MAX_INDEX)
             values[name] = v
         return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
     return SpectralIndex.from_material(props.get("material", "Au"), "material")
@@ -134,11 +139,12 @@ class ThinFilmConductor(mi.BSDF):
         mi.BSDF.__init__(self, props)
         self.mode = modes.current()
         self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
-        self.specular_reflectance = optional_texture(props, "specular_reflectance")
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
         check_unqueried(props, NAME)
         flags = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide
         self.m_components = [flags]
         self.m_flags = flags
+        self.guard = ParameterGuard(self, NAME)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         bs = dr.zeros(mi.BSDFSample3f)
@@ -174,7 +180,7 @@ class ThinFilmConductor(mi.BSDF):
                          mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        self.stack.parameters_changed()
+        self.guard.changed(self, self.stack.parameters_changed, keys)
 
     def to_string(self):
         return (f"ThinFilmConductor[\n  layers = {self.stack.describe()},\n"

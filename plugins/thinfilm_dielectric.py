@@ -94,17 +94,13 @@ import mitsuba as mi
 
 from thinfilm_mi import modes
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
-                                stack_from_props)
+                                spectral_mean, stack_from_props)
+from thinfilm_mi.params import ParameterGuard
 
 NAME = "thinfilm_dielectric"
 
 #: Mitsuba's default interior index of ``dielectric`` (BK7 at 589 nm).
 DEFAULT_INT_IOR = 1.5046
-
-
-def spectral_mean(x):
-    """Average of a spectrum over its wavelengths (a Float)."""
-    return sum(x[i] for i in range(len(x))) * (1.0 / len(x))
 
 
 class ThinFilmDielectric(mi.BSDF):
@@ -115,8 +111,8 @@ class ThinFilmDielectric(mi.BSDF):
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
         self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
         self.eta = interior.mean_real() / self.stack.ambient.mean_real()
-        self.specular_reflectance = optional_texture(props, "specular_reflectance")
-        self.specular_transmittance = optional_texture(props, "specular_transmittance")
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
+        self.specular_transmittance = optional_texture(props, "specular_transmittance", NAME)
         check_unqueried(props, NAME)
         self.m_components = [
             mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide,
@@ -124,6 +120,7 @@ class ThinFilmDielectric(mi.BSDF):
             | mi.BSDFFlags.NonSymmetric,
         ]
         self.m_flags = self.m_components[0] | self.m_components[1]
+        self.guard = ParameterGuard(self, NAME)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         has_r = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
@@ -149,7 +146,11 @@ class ThinFilmDielectric(mi.BSDF):
             total = pr + pt
             prob_r = dr.select(total > 0, pr / dr.select(total > 0, total, 1.0), 1.0)
             selected_r = (sample1 <= prob_r) & active
-            bs.pdf = dr.detach(dr.select(selected_r, prob_r, 1.0 - prob_r))
+            # The choice is a detached sampling decision: its probability divides
+            # the weight as a constant, so the weight's gradient is dR/p (dT/(1-p))
+            # per wavelength and its expectation d(R + T).
+            prob_r = dr.detach(prob_r)
+            bs.pdf = dr.select(selected_r, prob_r, 1.0 - prob_r)
             weight = dr.select(selected_r, R / dr.select(prob_r > 0, prob_r, 1.0),
                                T / dr.select(prob_r < 1, 1.0 - prob_r, 1.0))
         elif has_r:
@@ -198,7 +199,7 @@ class ThinFilmDielectric(mi.BSDF):
                 callback.put(name, tex, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        self.stack.parameters_changed()
+        self.guard.changed(self, self.stack.parameters_changed, keys)
 
     def to_string(self):
         return (f"ThinFilmDielectric[\n  layers = {self.stack.describe()},\n"

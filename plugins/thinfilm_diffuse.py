@@ -139,6 +139,17 @@ stack work is skipped. Thicknesses (``layers.N.thickness``) are opaque and
 exposed to ``mi.traverse``; ``R_dh`` and ``T_hemi`` are recomputed (and not
 differentiated) when they change.
 
+**Gradients.** Differentiate with ``path`` (the whole sample is differentiated,
+both components). Mitsuba's ``prb`` family samples detached and re-evaluates
+``eval`` at the sampled direction for the derivative; ``eval`` holds only the
+diffuse part, so for paths that took the delta specular component ``prb`` uses
+the diffuse term's derivative where ``k_r``'s belongs (a thickness gradient of
++5.4e-4 where ``path`` and a finite difference give -1.5e-4, in
+``tests/test_render_gradients.py``'s scene), as it does for
+Mitsuba's own ``plastic``. A BSDF cannot tell ``prb`` from ``path`` (both trace
+``sample`` with gradients suspended in their primal pass and ``eval`` with
+gradients later), so there is no run-time warning.
+
 .. tabs::
     .. code-tab:: xml
 
@@ -161,23 +172,15 @@ import numpy as np
 from thinfilm_mi import modes
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.hemispherical import GRID, hemispherical_factors, texture_on_grid
-from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant,
+from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
                                 ext_ior_from_props, films_from_props, opaque_float,
                                 stack_options_from_props)
 from thinfilm_mi.optics import film_attenuation
+from thinfilm_mi.params import ALBEDO_SLACK, ParameterGuard
+from thinfilm_mi.textures import check_texture_range, regular, uniform
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple")
-
-#: Tolerance on ``reflectance <= 1``: sRGB white upsampled to a spectrum peaks
-#: a hair above 1; anything larger would let ``1 - k_d R_dh`` approach 0.
-_ALBEDO_SLACK = 1e-3
-
-
-def spectral_mean(x):
-    """Average of a spectrum over its wavelengths (a Float)."""
-    return dr.mean(x, axis=0) if dr.depth_v(x) > 1 else x
-
 
 def _absorbs(index) -> bool:
     mat = index.material
@@ -189,39 +192,40 @@ def _absorbs(index) -> bool:
 
 
 def _reflectance_from_props(props):
+    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
+    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
+    ``1 - k_d R_dh`` approach 0)."""
     if "reflectance" not in props:
-        return mi.load_dict({"type": "uniform", "value": 0.5})
+        return uniform(0.5)
     value = props.get("reflectance")
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         if not (0.0 <= value <= 1.0):
             raise ThinFilmError(f"{NAME}: 'reflectance' must be in [0, 1] (an albedo), "
                                 f"got {value!r}")
-    tex = props.get_texture("reflectance")
     try:
-        top = float(dr.ravel(tex.max())[0]) if dr.is_array_v(tex.max()) else float(tex.max())
-    except RuntimeError:  # textures without max() (e.g. checkerboard): not checkable
-        top = None
-    if top is not None and top > 1.0 + _ALBEDO_SLACK:
-        raise ThinFilmError(f"{NAME}: 'reflectance' must not exceed 1 (energy conservation), "
-                            f"got a maximum of {top:.6g}")
+        tex = props.get_texture("reflectance")
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{NAME}: 'reflectance' must be a number, a spectrum or a texture, "
+                            f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{NAME}: 'reflectance' (an albedo, energy conservation)", 0.0,
+                        1.0 + ALBEDO_SLACK)
     return tex
 
 
 def _spectrum(tex, values):
     """``values`` on the 1 nm grid as a ``regular`` spectrum, updating ``tex`` in place
     when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
-    ``regular`` spectrum refuses a zero integral)."""
+    ``regular`` spectrum refuses a zero integral). In scalar variants a new one is
+    made (their ``mi.Float`` holds one number, not the values)."""
     values = np.asarray(values, dtype=np.float64)
     if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
-        return mi.load_dict({"type": "uniform", "value": 0.0})
-    params = mi.traverse(tex) if tex is not None else None
+        return uniform(0.0)
+    params = mi.traverse(tex) if tex is not None and dr.is_jit_v(mi.Float) else None
     if params is not None and "values" in params:
         params["values"] = mi.Float(values.astype(np.float32))
         params.update()
         return tex
-    return mi.load_dict({"type": "regular", "wavelength_min": float(GRID[0]),
-                         "wavelength_max": float(GRID[-1]),
-                         "values": ", ".join(f"{v:.9g}" for v in values)})
+    return regular(values, GRID[0], GRID[-1])
 
 
 class ThinFilmDiffuse(mi.BSDF):
@@ -261,6 +265,7 @@ class ThinFilmDiffuse(mi.BSDF):
             mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide,
         ]
         self.m_flags = self.m_components[0] | self.m_components[1]
+        self.guard = ParameterGuard(self, NAME)
 
     # -- load-time tables ----------------------------------------------------
     def _update_hemispherical(self) -> None:
@@ -337,11 +342,13 @@ class ThinFilmDiffuse(mi.BSDF):
             kd = self.reflectance.eval(si, active)
             series = self._series(si, kd, active)
         if has_spec and has_diff:
-            prob_spec = self._prob_specular(si, k_r, t_i, kd, series, active)
+            # detached: a sampling decision divides the weight as a constant
+            # (the weight's gradient is then that of k_r, resp. the diffuse term)
+            prob_spec = dr.detach(self._prob_specular(si, k_r, t_i, kd, series, active))
         else:
             prob_spec = mi.Float(1.0 if has_spec else 0.0)
         sel_spec = active & (sample1 < prob_spec)
-        sel_diff = active & ~sel_spec
+        sel_diff = active & (sample1 >= prob_spec)   # not ~sel_spec: a Python bool in scalar variants
 
         wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
         bs.wo = dr.select(sel_spec, mi.reflect(si.wi), wo_diff)
@@ -350,7 +357,7 @@ class ThinFilmDiffuse(mi.BSDF):
         bs.sampled_type = dr.select(sel_spec, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
                                     mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
         pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo_diff)
-        bs.pdf = dr.detach(dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff))
+        bs.pdf = dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff)
 
         weight = mi.UnpolarizedSpectrum(0.0)
         if has_spec:
@@ -415,11 +422,13 @@ class ThinFilmDiffuse(mi.BSDF):
         callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        self.coating.parameters_changed()
-        if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
-            dr.make_opaque(self.film_n_thickness)
-        if not keys or any(k.startswith("layers.") for k in keys):
-            self._update_hemispherical()
+        def refresh():
+            self.coating.parameters_changed()
+            if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
+                dr.make_opaque(self.film_n_thickness)
+            if not keys or any(k.startswith("layers.") for k in keys):
+                self._update_hemispherical()
+        self.guard.changed(self, refresh, keys)
 
     def to_string(self):
         layers = self.coating.describe()

@@ -110,6 +110,8 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture,
                                 stack_from_props)
 from thinfilm_mi.plugins.thinfilm_conductor import substrate_from_props
+from thinfilm_mi.params import MAX_ALPHA, ParameterGuard
+from thinfilm_mi.textures import check_texture_range, uniform
 
 NAME = "thinfilm_roughconductor"
 
@@ -124,15 +126,19 @@ def _alpha_texture(props, name: str, plugin: str):
         raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0 or a texture, "
                             f"got {value!r}")
     if isinstance(value, (int, float)):
-        if not math.isfinite(value) or value <= 0:
-            raise ThinFilmError(f"{plugin}: '{name}' (roughness) must be a finite number > 0, "
-                                f"got {value!r} (for a smooth surface use the smooth plugin)")
-        return mi.load_dict({"type": "uniform", "value": float(value)})
+        if not math.isfinite(value) or not 0 < value <= MAX_ALPHA:
+            raise ThinFilmError(f"{plugin}: '{name}' (roughness) must be a finite number > 0 "
+                                f"and <= {MAX_ALPHA:g}, got {value!r} (for a smooth surface "
+                                "use the smooth plugin)")
+        return uniform(value)
     try:
-        return props.get_texture(name)
+        tex = props.get_texture(name)
     except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
         raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0 or a texture, "
                             f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{plugin}: '{name}' (roughness)", 0.0, MAX_ALPHA, mono=True,
+                        strict=True)
+    return tex
 
 
 class Microfacet:
@@ -238,7 +244,7 @@ def rough_bsdf_base():
                     callback.put(name, tex, mi.ParamFlags.Differentiable)
 
         def parameters_changed(self, keys):
-            self.stack.parameters_changed()
+            self.guard.changed(self, self.stack.parameters_changed, keys)
 
     return RoughBSDF
 
@@ -250,11 +256,12 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
         self.mode = modes.current()
         self.microfacet = Microfacet(props, NAME)
         self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
-        self.specular_reflectance = optional_texture(props, "specular_reflectance")
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
         check_unqueried(props, NAME)
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | self.microfacet.flags
         self.m_components = [flags]
         self.m_flags = flags
+        self.guard = ParameterGuard(self, NAME)
 
     def _reflectance(self, si, cos_theta_m, active):
         """Composite reflectance of the films at the microfacet angle (times the factor),
@@ -285,7 +292,10 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
             weight = distr.G(si.wi, bs.wo, m) * cos_m / (cos_i * mi.Frame3f.cos_theta(m))
         # Jacobian of the half-direction mapping
         bs.pdf = dr.select(active, bs.pdf / (4.0 * dr.dot(bs.wo, m)), 0.0)
-        bs.wo = dr.select(active, bs.wo, mi.reflect(si.wi))  # finite where no sample
+        # A rejected sample has no direction (wo = 0, as Mitsuba's roughdielectric
+        # leaves it): a blendbsdf re-weighting by the other lobe's eval/pdf at wo
+        # then finds 0 there, as it finds 0 below the horizon for roughconductor.
+        bs.wo = dr.select(active, bs.wo, 0.0)
         R, lobe = self._reflectance(si, cos_m, active)
         value = self.mode.value(R * weight, lobe, ctx, si.wi, bs.wo, m)
         return bs, dr.select(active, value, 0.0)

@@ -109,8 +109,9 @@ import mitsuba as mi
 from thinfilm_mi import modes
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
-                                stack_from_props)
-from thinfilm_mi.plugins.thinfilm_dielectric import DEFAULT_INT_IOR, spectral_mean
+                                spectral_mean, stack_from_props)
+from thinfilm_mi.params import ParameterGuard
+from thinfilm_mi.plugins.thinfilm_dielectric import DEFAULT_INT_IOR
 from thinfilm_mi.plugins.thinfilm_roughconductor import Microfacet, rough_bsdf_base
 
 NAME = "thinfilm_roughdielectric"
@@ -137,12 +138,13 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
                                 "refraction is undefined; use thinfilm_dielectric)")
         #: Relative index for directions (mean real indices, as thinfilm_dielectric).
         self.eta = n_int / n_ext
-        self.specular_reflectance = optional_texture(props, "specular_reflectance")
-        self.specular_transmittance = optional_texture(props, "specular_transmittance")
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
+        self.specular_transmittance = optional_texture(props, "specular_transmittance", NAME)
         check_unqueried(props, NAME)
         sides = mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide | self.microfacet.flags
         self.m_components = [GLOSSY_R | sides, GLOSSY_T | sides | mi.BSDFFlags.NonSymmetric]
         self.m_flags = self.m_components[0] | self.m_components[1]
+        self.guard = ParameterGuard(self, NAME)
 
     def _rt(self, si, dot_wi_m, cos_i, active, transmission: bool):
         """``R`` and ``T`` (or ``None``) of the films at the microfacet angle, and the
@@ -191,10 +193,12 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         R, T, resp = self._rt(si, dot_wi_m, cos_i, active, transmission=has_t)
 
         if has_r and has_t:
-            prob_r = self._prob_r(R, T)
+            # detached: a sampling decision divides the weight as a constant
+            # (see thinfilm_dielectric)
+            prob_r = dr.detach(self._prob_r(R, T))
             selected_r = (sample1 <= prob_r) & active
             selected_t = (sample1 > prob_r) & active
-            bs.pdf *= dr.detach(dr.select(selected_r, prob_r, 1.0 - prob_r))
+            bs.pdf *= dr.select(selected_r, prob_r, 1.0 - prob_r)
             weight = dr.select(selected_r, R / dr.select(prob_r > 0, prob_r, 1.0),
                                T / dr.select(prob_r < 1, 1.0 - prob_r, 1.0))
         elif has_r:
@@ -231,8 +235,9 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
             weight *= distr.eval(m) * distr.G(si.wi, bs.wo, m) * dr.abs(dot_wi_m) \
                 / (dr.select(pdf_m > 0, pdf_m, 1.0) * dr.abs(cos_i))
         active &= selected_r | selected_t
-        # Lanes without a sample keep finite fields (a unit wo, eta = 1, pdf = 0).
-        bs.wo = dr.select(active, bs.wo, mi.reflect(si.wi))
+        # Lanes without a sample: wo = 0 (Mitsuba's convention: no lobe of a
+        # blendbsdf evaluates there), eta = 1, pdf = 0, weight 0.
+        bs.wo = dr.select(active, bs.wo, 0.0)
         bs.pdf = dr.select(active, bs.pdf, 0.0)
         lobe = resp.reflection if not has_t else \
             self.mode.select(selected_r, resp.reflection, resp.transmission)

@@ -439,3 +439,36 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     ref = tf.Stack(layers, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
     err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
     assert err <= 1.5 * table.error + F32, err
+
+
+def test_table_cache_is_bounded_in_bytes_least_recently_used_first_out(monkeypatch):
+    """Thousands of distinct tables (a sweep, an optimisation) must not pile up: the
+    shared cache holds at most ``max_bytes`` of texture data (here 100 kB instead of
+    32 MiB, so that a few small tables exceed it) and evicts the least recently used.
+    Tables still used by a BSDF stay valid (the BSDF holds them)."""
+    from thinfilm_mi import tables
+    cache = tables.TableCache(max_bytes=100_000)
+    monkeypatch.setattr(K, "_TABLE_CACHE", cache)
+    bsdfs = []
+    for i in range(12):
+        bsdfs.append(mi.load_dict({"type": "thinfilm_conductor", "material": "Al",
+                                   "layers": f"1.46 {150 + 7 * i}; 2.3 60",
+                                   "tabulate": True}))
+        assert bsdfs[-1].stack.mode() == "table"
+        assert cache.nbytes <= cache.max_bytes
+        assert cache.nbytes == sum(t.nbytes for t in cache._items.values() if t is not None)
+    sizes = [b.stack.plan[False].table.nbytes for b in bsdfs]
+    assert sum(sizes) > cache.max_bytes, "the test needs more tables than the bound holds"
+    assert len(cache) < len(bsdfs)
+    # the newest table is kept; an identical stack shares it
+    again = mi.load_dict({"type": "thinfilm_conductor", "material": "Al",
+                          "layers": f"1.46 {150 + 7 * 11}; 2.3 60", "tabulate": True})
+    assert again.stack.plan[False].table is bsdfs[-1].stack.plan[False].table
+    # the evicted first table still evaluates through its BSDF
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.wavelengths = mi.Spectrum([450.0, 520.0, 610.0, 700.0])
+    R = np.array(bsdfs[0].stack.reflectance(si, mi.Float(0.8)), dtype=np.float64)
+    ref = tf.Stack("1.46 150; 2.3 60", substrate="Al", ambient=K.DEFAULT_EXT_IOR)
+    np.testing.assert_allclose(R.ravel(), ref.rt(np.array([450.0, 520.0, 610.0, 700.0]),
+                                                 np.arccos(0.8)).R,
+                               atol=1.5 * bsdfs[0].stack.plan[False].table.error + 1e-5)

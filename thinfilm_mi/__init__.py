@@ -23,7 +23,18 @@ except ImportError:  # pragma: no cover
 else:
     register()
 
+
+def __getattr__(name: str):
+    """``thinfilm_mi.sweep``: :func:`thinfilm_mi.sweeps.sweep`, imported on first
+    use so that importing the package does not import Dask."""
+    if name == "sweep":
+        from .sweeps import sweep
+
+        return sweep
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 __all__ = [
-    "Stack", "Layer", "RTResult", "parse_layers", "Material", "refractive_index",
+    "sweep", "Stack", "Layer", "RTResult", "parse_layers", "Material", "refractive_index",
     "resolve_material", "register", "PLUGINS", "ThinFilmError", "MaterialError", "LLVMVersionError", "require_llvm",
 ]

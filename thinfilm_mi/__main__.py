@@ -97,6 +97,11 @@ def parse_angles(text: str) -> np.ndarray:
     return np.array(values, dtype=np.float64)
 
 
+#: Most wavelengths ``spectrum`` evaluates (0.001 nm steps over 360-830 nm); more
+#: would only exhaust memory (``360:830:1e-7`` asked for 35 GiB).
+MAX_WAVELENGTHS = 1_000_000
+
+
 def parse_wavelengths(text: str) -> np.ndarray:
     """``"START:STOP:STEP"`` (nm, STOP included when on the grid), ``"START:STOP"``
     (5 nm steps) or a comma-separated list."""
@@ -112,6 +117,9 @@ def parse_wavelengths(text: str) -> np.ndarray:
             if not (step > 0 and stop >= start):
                 raise cli.UsageError(f"--wl {text!r}: need STOP >= START and STEP > 0")
             n = int(math.floor((stop - start) / step + 1e-9)) + 1
+            if n > MAX_WAVELENGTHS:
+                raise cli.UsageError(f"--wl {text!r}: {n} wavelengths; at most "
+                                     f"{MAX_WAVELENGTHS} (use a larger STEP)")
             wl = start + step * np.arange(n)
         else:
             wl = np.array([float(t) for t in re.split(r"[,\s]+", text) if t])

@@ -7,6 +7,9 @@ command does the same job from Python::
                     [--spp N] [--size WxH] [--variant V] [-D name=value ...]
                     [--seed S] [--verbose]
 
+Parameter grids (many frames of one scene, on Dask worker processes or a
+cluster) are ``thinfilm-render sweep``: see :mod:`thinfilm_mi.sweeps`.
+
 Several scenes are rendered one after the other in the same process (Mitsuba
 and the plugins are set up once), each into ``DIR/<scene-stem>.exr``; ``-o``
 names the output of a single scene only.
@@ -67,12 +70,16 @@ DEFAULT_VARIANT = "llvm_ad_spectral"
 DEFAULT_OUT_DIR = "out"
 #: samples (pixels x spp) rendered by one mi.render call at most
 DEFAULT_MAX_PASS_SAMPLES = 1 << 22
+#: largest film accepted by --size: 2^28 pixels (16384 x 16384) already need ~10 GiB
+#: of film and image buffers in a spectral variant; 100000x100000 failed deep in
+#: Mitsuba's film allocation with no message
+MAX_PIXELS = 1 << 28
 #: a render is split into at least this many passes (when spp allows)
 MIN_PASSES = 8
 
 __all__ = [
     "render_main", "run", "add_render_arguments", "setup_llvm_only", "setup_variant", "build_parser", "render_file", "load_scene",
-    "parse_defines", "parse_size", "plan_passes", "plan_outputs", "RenderResult", "CLIError",
+    "parse_defines", "parse_size", "plan_passes", "plan_outputs", "output_attributes", "RenderResult", "CLIError",
 ]
 
 
@@ -123,6 +130,16 @@ def one_line(message: str) -> str:
     return text or "unknown error"
 
 
+def root_cause(e: BaseException) -> BaseException:
+    """The innermost exception of a chain: Dr.Jit's custom operations (``mi.render``)
+    wrap the real error in one that only says "(see above)"."""
+    seen = set()
+    while (e.__cause__ or e.__context__) is not None and id(e) not in seen:
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return e
+
+
 # --------------------------------------------------------------------------------------
 # argument parsing
 
@@ -149,7 +166,11 @@ def parse_size(text: str | None) -> tuple[int, int] | None:
     m = re.fullmatch(r"\s*(\d+)\s*[xX*,]\s*(\d+)\s*", text)
     if not m or int(m.group(1)) <= 0 or int(m.group(2)) <= 0:
         raise UsageError(f"--size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. --size 640x480")
-    return int(m.group(1)), int(m.group(2))
+    w, h = int(m.group(1)), int(m.group(2))
+    if w * h > MAX_PIXELS:
+        raise UsageError(f"--size {text!r}: {w * h} pixels; at most {MAX_PIXELS} "
+                         f"(e.g. {int(math.isqrt(MAX_PIXELS))}x{int(math.isqrt(MAX_PIXELS))})")
+    return w, h
 
 
 def add_render_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
@@ -183,6 +204,7 @@ def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
         prog=prog,
         description="Render a Mitsuba 3 scene with the thin-film BSDFs of thinfilm-mi "
                     "into a linear EXR and an sRGB PNG preview.",
+        epilog=f"Parameter grids on Dask worker processes or a cluster: {prog} sweep --help",
     )
     return add_render_arguments(parser)
 
@@ -300,13 +322,10 @@ def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
         raise UsageError(f"scene file not found: {path}")
     if not path.is_file():
         raise UsageError(f"scene file is not a file: {path}")
+    # Mitsuba's default, parallel instantiation: the thin-film constructors make
+    # no nested mi.load_dict (see thinfilm_mi.textures), so they are safe beside
+    # C++ plugins resolving files on other loader threads.
     config = mi.parser.ParserConfig(variant or mi.variant())
-    # Instantiate sequentially. In parallel loading the thin-film plugins'
-    # constructors (float64 table builds) run beside C++ plugins in Mitsuba's
-    # loader threads; after the cubic-table change the full test suite failed
-    # intermittently (~1 load in 3) with "basic_string::_M_create" from hdrfilm
-    # or bitmap. Cause not found; the Python constructors hold the GIL anyway.
-    config.parallel = False
     # Like mi.load_file: files named in the scene (meshes, textures, data) are
     # looked up next to the scene file first; the search path is restored after.
     resolver = mi.file_resolver()
@@ -510,20 +529,9 @@ def render_file(scene_path: str | os.PathLike, output: str | os.PathLike | None 
     except CLIError:
         raise
     except Exception as e:
-        raise RenderFailure(f"rendering {scene_file} failed: {one_line(e)}") from e
+        raise RenderFailure(f"rendering {scene_file} failed: {one_line(root_cause(e))}") from e
 
-    import thinfilm_mi
-
-    attributes = {
-        "scene": str(scene_file.resolve()),
-        "variant": variant,
-        "spp": total_spp,
-        "renderTime": float(seconds),
-        "seed": int(seed),
-        "passes": int(passes),
-        "parameters": " ".join(f"{k}={v}" for k, v in (params or {}).items()),
-        "software": f"thinfilm-mi {thinfilm_mi.__version__}, Mitsuba {mi.__version__}",
-    }
+    attributes = output_attributes(scene_file, variant, total_spp, seconds, seed, passes, params)
     result = RenderResult(image=image, channels=channels, spp=total_spp, passes=passes,
                           render_time=seconds, load_time=load_time, attributes=attributes)
     try:
@@ -532,6 +540,25 @@ def render_file(scene_path: str | os.PathLike, output: str | os.PathLike | None 
     except Exception as e:
         raise RenderFailure(f"writing {out} failed: {one_line(e)}") from e
     return result
+
+
+def output_attributes(scene_file: str | os.PathLike, variant: str, spp: int, seconds: float,
+                      seed: int, passes: int, params: Mapping[str, Any] | None) -> dict[str, Any]:
+    """The EXR header attributes of a render (shared with ``thinfilm-render sweep``)."""
+    import mitsuba as mi
+
+    import thinfilm_mi
+
+    return {
+        "scene": str(Path(scene_file).resolve()),
+        "variant": variant,
+        "spp": int(spp),
+        "renderTime": float(seconds),
+        "seed": int(seed),
+        "passes": int(passes),
+        "parameters": " ".join(f"{k}={v}" for k, v in (params or {}).items()),
+        "software": f"thinfilm-mi {thinfilm_mi.__version__}, Mitsuba {mi.__version__}",
+    }
 
 
 def summary(result: RenderResult) -> str:
@@ -609,8 +636,12 @@ def report_error(error: CLIError, verbose: bool = False) -> int:
 
 def render_main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``thinfilm-render`` console script."""
-    parser = build_parser()
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv[:1] == ["sweep"]:  # thinfilm-render sweep ...: parameter grids on Dask
+        from .sweeps import sweep_main
+
+        return sweep_main(argv[1:])
+    parser = build_parser()
     try:
         args = parser.parse_args(argv)
     except UsageError as e:

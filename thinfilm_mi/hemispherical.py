@@ -24,12 +24,13 @@ from typing import Sequence
 
 import drjit as dr
 import numpy as np
-from drjit.llvm import Float64
+from drjit.llvm import Float64, UInt32
 
 from ._backend import float64_array, repeated
 from ._llvm import require_llvm
 from .optics import Cx, film_attenuation
-from .kernel import texture_on_grid, unpolarised_rt
+from .kernel import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
+from .textures import texture_on_grid
 from .stack import SPECTRAL_RANGE
 
 __all__ = ["GRID", "texture_on_grid", "unpolarised_rt", "hemispherical_factors"]
@@ -69,13 +70,23 @@ def hemispherical_factors(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray,
     wl = repeated(wavelengths, nm)
     cos0 = float64_array(np.tile(mu, nw))
     n0 = repeated(n_amb, nm)
-    # opaque thicknesses: a thickness edit reuses the kernel
-    films = [(repeated(n, nm, complex_=True), dr.opaque(Float64, float(d))) for n, d in coating]
     exit_ = repeated(n_exit, nm, complex_=True)
-    R, T = unpolarised_rt(n0, cos0, films, exit_, wl)
+    if len(coating) >= LOOP_MIN_FILMS:
+        # deep coatings: a loop over the films, so the kernel does not grow with them
+        def rt(n0_, films, n_exit_, transmission=True):
+            count, film = _film_loop(films, nw, nm)
+            return unpolarised_rt_loop(n0_, cos0, count, film, n_exit_, wl, transmission)
+        films = list(coating)
+    else:
+        def rt(n0_, films, n_exit_, transmission=True):
+            return unpolarised_rt(n0_, cos0, films, n_exit_, wl, transmission)
+        # opaque thicknesses: a thickness edit reuses the kernel
+        films = [(repeated(n, nm, complex_=True), dr.opaque(Float64, float(d)))
+                 for n, d in coating]
+    R, T = rt(n0, films, exit_)
     if film_n is None:
         t = T
-        R_up = unpolarised_rt(exit_.re, cos0, films[::-1], Cx(n0, 0.0), wl, transmission=False)
+        R_up = rt(exit_.re, films[::-1], Cx(n0, 0.0), transmission=False)
     else:
         k_a = film_attenuation(n0, cos0, repeated(film_n[0], nm, complex_=True),
                                dr.opaque(Float64, float(film_n[1])), wl)
@@ -88,3 +99,20 @@ def hemispherical_factors(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray,
     T_hemi = np.clip(t @ weight, 0.0, 1.0)
     R_dh = np.clip(R_up @ weight, 0.0, 1.0 - T_hemi)
     return T_hemi, R_dh
+
+
+def _film_loop(coating, nw: int, nm: int):
+    """``(count, film)`` for :func:`kernel.unpolarised_rt_loop` over ``coating``
+    (``[(index over the nw wavelengths, thickness)]``) on lanes laid out as
+    ``nw`` wavelengths x ``nm`` angles: each film's index is gathered per lane
+    from one buffer of ``films x nw`` entries (padded: a gather needs a source)."""
+    n = np.concatenate([np.asarray(ix, np.complex128) for ix, _ in coating] + [np.zeros(1)])
+    eta, k = float64_array(n.real), float64_array(n.imag)
+    thickness = float64_array(np.r_[[float(d) for _, d in coating], 0.0])
+    lane_wl = UInt32(np.repeat(np.arange(nw, dtype=np.uint32), nm))
+
+    def film(j):
+        i = j * nw + lane_wl
+        return (Cx(dr.gather(Float64, eta, i), dr.gather(Float64, k, i)),
+                dr.gather(Float64, thickness, j))
+    return UInt32(len(coating)), film

@@ -30,18 +30,12 @@ from ._llvm import require_llvm
 from .errors import ThinFilmError
 from .optics import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
                      transmittance_factor_s)
-from .stack import AMBIENT_K_TOL, SPECTRAL_RANGE, check_thickness, parse_layers
+from .stack import AMBIENT_K_TOL, check_thickness, parse_layers
+from .textures import (GRID, _mi, check_texture_range, irregular, scalar, texture_on_grid,
+                       uniform)
 
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
 DEFAULT_EXT_IOR = 1.000277
-
-_GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
-                    int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)
-
-
-def _mi():
-    import mitsuba as mi
-    return mi
 
 
 def check_variant(plugin: str) -> None:
@@ -101,7 +95,6 @@ class SpectralIndex:
         with the dataset's own knots: tabulated data are reproduced exactly and
         formulas to better than 1e-7.
         """
-        mi = _mi()
         try:
             mat = _materials.resolve(spec)
         except ValueError as e:
@@ -111,14 +104,13 @@ class SpectralIndex:
             raise ThinFilmError(msg if msg.startswith(name) else f"{name}: {msg}") from None
         if mat.constant is not None:
             c = mat.constant
-            return cls(mi.load_dict({"type": "uniform", "value": float(c.real)}),
-                       mi.load_dict({"type": "uniform", "value": float(c.imag)}),
+            return cls(uniform(c.real), uniform(c.imag),
                        mat.name, c, mat, np.empty(0))
         # A 1 nm grid (enough for formulas: error ~ h^2 n''/8 < 1e-7) plus the
         # dataset's own knots, so tabulated data are reproduced exactly.
         knots = getattr(mat, "knots", lambda: np.empty(0))()
         grid = np.unique(np.concatenate(
-            [_GRID, knots[(knots > _GRID[0]) & (knots < _GRID[-1])]]))
+            [GRID, knots[(knots > GRID[0]) & (knots < GRID[-1])]]))
         try:
             values = mat.index(grid)
         except ValueError as e:
@@ -129,10 +121,8 @@ class SpectralIndex:
 
         def spectrum(v):
             if np.all(v == v[0]):  # e.g. k = 0 everywhere (Mitsuba's spectra need mass)
-                return mi.load_dict({"type": "uniform", "value": float(v[0])})
-            return mi.load_dict({"type": "irregular",
-                                 "wavelengths": ", ".join(f"{x:.12g}" for x in grid),
-                                 "values": ", ".join(f"{x:.9g}" for x in v)})
+                return uniform(v[0])
+            return irregular(grid, v)
 
         return cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat, grid)
 
@@ -145,7 +135,7 @@ class SpectralIndex:
         if self.material is None:
             return np.empty(0)
         knots = getattr(self.material, "knots", lambda: np.empty(0))()
-        return knots[(knots > _GRID[0]) & (knots < _GRID[-1])]
+        return knots[(knots > GRID[0]) & (knots < GRID[-1])]
 
     @classmethod
     def from_textures(cls, eta_tex, k_tex, label: str) -> "SpectralIndex":
@@ -162,7 +152,7 @@ class SpectralIndex:
         if self.constant is not None:
             return float(self.constant.real)
         if self.material is not None:
-            return float(np.mean(self.material.index(_GRID).real))
+            return float(np.mean(self.material.index(GRID).real))
         return float(self.eta.mean())
 
     def traverse(self, callback, prefix: str) -> None:
@@ -180,7 +170,7 @@ def _check_real_medium(index: SpectralIndex, name: str) -> SpectralIndex:
         if c.imag > AMBIENT_K_TOL or c.real <= 0:
             raise ThinFilmError(f"{name}: must be a real index > 0 (a non-absorbing medium), got {c!r}")
         return index
-    k = mat.index(_GRID).imag
+    k = mat.index(GRID).imag
     if np.any(k > AMBIENT_K_TOL):
         raise ThinFilmError(f"{name}: must be a non-absorbing medium, got {mat.name!r} "
                             f"(k up to {k.max():.3g} in 360-830 nm)")
@@ -220,41 +210,6 @@ AUTO_MAX_TEXELS = 1 << 19
 OPAQUE_AMPLITUDE = 1e-9
 
 
-def texture_on_grid(tex, wavelengths: np.ndarray = _GRID) -> np.ndarray:
-    """A Mitsuba spectral texture evaluated at ``wavelengths`` (float64 numpy).
-
-    Evaluated through the texture itself (not its source data), so values edited
-    through ``mi.traverse`` are seen exactly as the render kernel sees them. A
-    uniform spectrum's one value is read as its mean, without a kernel launch
-    (~40 us each; a stack's constant films have two such textures apiece).
-    """
-    mi = _mi()
-    wl = np.asarray(wavelengths, dtype=np.float64).ravel()
-    n = wl.size
-    if tex.class_name() == "UniformSpectrum":
-        return np.full(n, _scalar(tex.mean()))
-    if not dr.is_jit_v(mi.Float):   # scalar variants: four wavelengths per call
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        padded = np.concatenate([wl, np.full((-n) % 4, wl[-1] if n else 500.0)])
-        out = []
-        for i in range(0, padded.size, 4):
-            si.wavelengths = mi.UnpolarizedSpectrum(*[float(x) for x in padded[i:i + 4]])
-            out.extend(float(v) for v in tex.eval(si))
-        return np.asarray(out[:n], dtype=np.float64)
-    from ._backend import aligned_array
-
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    # an aligned buffer: Dr.Jit compiles a kernel per alignment of its inputs
-    w = aligned_array(wl, np.float32, mi.Float)
-    si.wavelengths = mi.UnpolarizedSpectrum(w, w, w, w)
-    value = tex.eval(si)
-    return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
-
-
-def _scalar(d) -> float:
-    return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
-
-
 #: Exact evaluation of a side with at least this many films runs the recursion
 #: as a symbolic Dr.Jit loop over buffers of the films (:class:`_LoopFilms`):
 #: one loop body in the kernel whatever the depth, so the kernel compiles as fast
@@ -287,10 +242,10 @@ class _LoopFilms:
     def __init__(self, films: list, n0: SpectralIndex):
         mi = _mi()
         from ._backend import aligned_array
-        grid = np.unique(np.concatenate([_GRID[[0, -1]]] + [ix.knots for ix, _, _ in films]))
+        grid = np.unique(np.concatenate([GRID[[0, -1]]] + [ix.knots for ix, _, _ in films]))
         self.g0 = float(grid[0])
         self.cells = grid.size - 1
-        self.uniform = bool(np.array_equal(grid, _GRID))
+        self.uniform = bool(np.array_equal(grid, GRID))
         eta = np.stack([texture_on_grid(ix.eta, grid) for ix, _, _ in films])
         k = np.stack([texture_on_grid(ix.k, grid) for ix, _, _ in films])
         self.real = bool(np.all(k == 0))
@@ -315,7 +270,7 @@ class _LoopFilms:
             cols = [eta[:, :-1], k[:, :-1], eta[:, 1:], k[:, 1:]]
         self.buffer = aligned_array(np.stack(cols, axis=-1), np.float32, mi.Float)
         self.grid = aligned_array(grid, np.float32, mi.Float)
-        self.thickness = aligned_array([_scalar(d) for _, d, _ in films], np.float32, mi.Float)
+        self.thickness = aligned_array([scalar(d) for _, d, _ in films], np.float32, mi.Float)
         self.n_films = len(films)
         self.count = mi.UInt32(len(films))
         for v in (self.buffer, self.grid, self.thickness, self.count):
@@ -447,13 +402,13 @@ class KernelStack:
 
     # -- planning (load time and after parameter changes) ---------------------
     def _thickness_values(self) -> list[float]:
-        return [_scalar(d) for d in self.thickness]
+        return [scalar(d) for d in self.thickness]
 
     def _opaque(self, index: SpectralIndex, d: float) -> bool:
         if self.thickness_texture is not None or d <= 0:
             return False   # a texture may thin the film anywhere
         k = texture_on_grid(index.k)
-        return bool(np.max(np.exp(-2.0 * math.pi * k * d / _GRID)) < OPAQUE_AMPLITUDE)
+        return bool(np.max(np.exp(-2.0 * math.pi * k * d / GRID)) < OPAQUE_AMPLITUDE)
 
     def _side(self, inside: bool, transmission: bool, films: list, opaque: list) -> _Side:
         """The plan of one side from the non-zero ``films`` ``(index, thickness,
@@ -529,7 +484,7 @@ class KernelStack:
         return "mixed" if any(tabled) else "exact"
 
     def describe(self) -> str:
-        films = "; ".join(f"{ix.label} {_scalar(d):g} nm"
+        films = "; ".join(f"{ix.label} {scalar(d):g} nm"
                           for ix, d in zip(self.indices, self.thickness))
         return f"[{films}]" if films else "[no films]"
 
@@ -545,9 +500,9 @@ class KernelStack:
         for i, d in enumerate(self.thickness):
             if dr.is_jit_v(d):
                 dr.make_opaque(d)
-            if not math.isfinite(_scalar(d)) or _scalar(d) < 0:
+            if not math.isfinite(scalar(d)) or scalar(d) < 0:
                 raise ThinFilmError(f"{self.plugin}: layers.{i}.thickness must be a finite "
-                                    f"number >= 0 (nm), got {_scalar(d)!r}")
+                                    f"number >= 0 (nm), got {scalar(d)!r}")
         self._plan()
 
     def thickness_scale_at(self, si, active=True):
@@ -643,7 +598,8 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
     return unpolarised_rt(n0, cos0, films, n_exit, wl, transmission)
 
 
-_TABLE_CACHE: dict = {}
+#: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).
+_TABLE_CACHE = _tables.TableCache()
 
 
 def _tables_cache(stack: KernelStack, side: _Side):
@@ -667,15 +623,16 @@ def _tables_cache(stack: KernelStack, side: _Side):
             values[id(ix)] = (texture_on_grid(ix.eta), texture_on_grid(ix.k))
         for v in values[id(ix)]:
             h.update(v.tobytes())
-    h.update(repr([(_scalar(d), inc) for _, d, inc in side.films]).encode())
+    h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
     transmission = side.transmission and not side.opaque
     max_texels = (AUTO_MAX_TEXELS // (2 if transmission else 1) if stack.tabulate == "auto"
                   else _tables.MAX_TEXELS)
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
                    stack.table_error, max_texels)).encode())
     key = h.hexdigest()
-    if key in _TABLE_CACHE:
-        return _TABLE_CACHE[key]
+    found, table = _TABLE_CACHE.get(key)
+    if found:
+        return table
 
     def on(ix, real=False):
         memo = {}
@@ -698,15 +655,13 @@ def _tables_cache(stack: KernelStack, side: _Side):
         return _rt(n0_, cos0, films, n_exit, wl, incoherent, transmission)
 
     data = _tables.SideData(
-        n0=n0, films=[(on(ix), _scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
+        n0=n0, films=[(on(ix), scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
         transmission=transmission, rt=rt,
         rt_loop=None if any(incoherent) else unpolarised_rt_loop,
         kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
-    table = _tables.build_table(data, stack.table_error, _GRID, max_texels)
-    if len(_TABLE_CACHE) > 256:
-        _TABLE_CACHE.clear()
-    _TABLE_CACHE[key] = table
+    table = _tables.build_table(data, stack.table_error, GRID, max_texels)
+    _TABLE_CACHE.put(key, table)
     return table
 
 
@@ -745,9 +700,26 @@ def unpolarised_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = 
     return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
 
 
-def optional_texture(props, name: str):
-    """The texture ``name`` of a plugin's properties, or ``None`` if it was not given."""
-    return props.get_texture(name) if name in props else None
+def spectral_mean(x):
+    """Average of a spectrum over its wavelengths (a Float), in every variant (a
+    scalar variant's spectrum is one array of four numbers)."""
+    return sum(x[i] for i in range(len(x))) * (1.0 / len(x))
+
+
+def optional_texture(props, name: str, plugin: str):
+    """The factor texture ``name`` of a plugin's properties (``specular_reflectance``,
+    ``specular_transmittance``), or ``None`` if it was not given. Its values must be
+    finite and >= 0 (a negative or infinite factor renders black or NaN)."""
+    if name not in props:
+        return None
+    value = props.get(name)
+    try:
+        tex = props.get_texture(name)
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{plugin}: '{name}' must be a number, a spectrum or a texture, "
+                            f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{plugin}: '{name}'", 0.0)
+    return tex
 
 
 def films_from_props(props, plugin: str) -> list[tuple[SpectralIndex, float]]:
@@ -789,67 +761,9 @@ def thickness_texture_from_props(props, plugin: str):
     except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
         raise ThinFilmError(f"{plugin}: 'thickness' must be a number or a texture, "
                             f"got {value!r} ({e})") from None
-    check_texture_at_least(tex, 0.0, f"{plugin}: 'thickness' (a scale on every film's "
-                           "thickness)", mono=True)
+    check_texture_range(tex, f"{plugin}: 'thickness' (a scale on every film's thickness)", 0.0,
+                        mono=True)
     return tex
-
-
-def texture_minimum(tex, mono: bool = False):
-    """The smallest value of a texture at load time, or ``None`` if it cannot be evaluated
-    without a shape (e.g. ``mesh_attribute``).
-
-    Evaluated on Mitsuba's spectral grid (360-830 nm, 1 nm) and, for a spatially
-    varying texture, at every texel centre of its resolution (at least a 64 x 64
-    UV grid; 16 x 16 and a 10 nm grid in scalar variants): exact for bitmaps
-    (bilinear interpolation is a convex combination of texels) and uniform or
-    tabulated spectra, a dense sample for procedural textures. ``mono``:
-    evaluate ``eval_1`` (as the thickness scale is read) instead of ``eval``.
-    """
-    mi = _mi()
-    jit = dr.is_jit_v(mi.Float)
-    wl = _GRID if jit else _GRID[::10]
-    if tex.is_spatially_varying():
-        res = [int(r) for r in tex.resolution()]
-        nu, nv = (max(res[0], 64), max(res[1], 64)) if jit else (16, 16)
-        nu, nv = min(nu, 4096), min(nv, 4096)
-        u, v = np.meshgrid((np.arange(nu) + 0.5) / nu, (np.arange(nv) + 0.5) / nv)
-        u, v = u.ravel(), v.ravel()
-    else:
-        u = v = np.full(1, 0.5)
-    n = max(u.size, -(-wl.size // 4))
-    i = np.arange(n)
-    uu, vv = u[i % u.size], v[i % v.size]
-    lam = [wl[(4 * i + c) % wl.size] for c in range(4)]
-    try:
-        if jit:
-            si = dr.zeros(mi.SurfaceInteraction3f, n)
-            si.uv = mi.Point2f(mi.Float(uu), mi.Float(vv))
-            si.wavelengths = mi.UnpolarizedSpectrum(*[mi.Float(x) for x in lam])
-            val = tex.eval_1(si) if mono else tex.eval(si)
-            arr = np.array(val, dtype=np.float64)
-            return float(np.min(arr)) if arr.size else None
-        lo = math.inf
-        for j in range(n):
-            si = dr.zeros(mi.SurfaceInteraction3f)
-            si.uv = mi.Point2f(float(uu[j]), float(vv[j]))
-            si.wavelengths = mi.UnpolarizedSpectrum(*[float(x[j]) for x in lam])
-            val = tex.eval_1(si) if mono else tex.eval(si)
-            lo = min(lo, float(val) if mono else min(float(val[c]) for c in range(4)))
-        return lo
-    except Exception:  # noqa: BLE001 - textures that need a shape cannot be checked here
-        return None
-
-
-def check_texture_at_least(tex, bound: float, what: str, mono: bool = False,
-                           strict: bool = False) -> None:
-    """Raise :class:`ThinFilmError` naming ``what`` if the texture goes below ``bound``
-    (or reaches it, with ``strict``) anywhere :func:`texture_minimum` looks."""
-    lo = texture_minimum(tex, mono)
-    if lo is None:
-        return
-    if not math.isfinite(lo) or lo < bound or (strict and lo <= bound):
-        raise ThinFilmError(f"{what} must be {'>' if strict else '>='} {bound:g} everywhere, "
-                            f"got a texture with minimum {lo!r}")
 
 
 def tabulate_from_props(props, plugin: str) -> bool | str:

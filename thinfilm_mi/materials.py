@@ -70,6 +70,29 @@ _RANGE_RTOL = 1e-9
 
 _DATA_DIR = Path(__file__).parent / "data"
 
+#: Range of a refractive index accepted anywhere (films, substrates, media): the
+#: real part n in [MIN_INDEX, MAX_INDEX] and k in [0, MAX_INDEX]. Every material
+#: in the visible lies well inside (n ~ 0.03-10, k <= ~100); far outside it the
+#: float32 recursion overflows or divides by ~0 (NaN weights at n <= 1e-10 or
+#: k >= 1e10, measured) instead of rendering a physically meaningless limit.
+MIN_INDEX = 1e-3
+MAX_INDEX = 1e3
+
+
+def check_index_range(value: complex, what: str = "refractive index") -> None:
+    """:class:`MaterialError` unless ``value`` (``n + ik``) is finite, with ``n`` in
+    ``[MIN_INDEX, MAX_INDEX]`` and ``k`` in ``[0, MAX_INDEX]``."""
+    if not (math.isfinite(value.real) and math.isfinite(value.imag)):
+        raise MaterialError(f"{what} must be finite, got {value!r}")
+    if value.real <= 0:
+        raise MaterialError(f"{what}: real part n must be > 0, got n = {value.real!r}")
+    if value.imag < 0:
+        raise MaterialError(
+            f"{what}: k must be >= 0 (gain media are not supported), got k = {value.imag!r}")
+    if not (MIN_INDEX <= value.real <= MAX_INDEX) or value.imag > MAX_INDEX:
+        raise MaterialError(f"{what}: n must be in [{MIN_INDEX:g}, {MAX_INDEX:g}] and k in "
+                            f"[0, {MAX_INDEX:g}], got {value!r}")
+
 
 # ---------------------------------------------------------------------------
 # Material classes
@@ -104,14 +127,7 @@ class ConstantMaterial(Material):
 
     def __init__(self, value: complex, name: str | None = None, reference: str = "constant"):
         value = complex(value)
-        if not (math.isfinite(value.real) and math.isfinite(value.imag)):
-            raise MaterialError(f"refractive index must be finite, got {value!r}")
-        if value.real <= 0:
-            raise MaterialError(f"refractive index: real part n must be > 0, got n = {value.real!r}")
-        if value.imag < 0:
-            raise MaterialError(
-                f"refractive index: k must be >= 0 (gain media are not supported), got k = {value.imag!r}"
-            )
+        check_index_range(value)
         self.constant = value
         self.name = name or _format_complex(value)
         self.reference = reference

@@ -348,6 +348,8 @@ class Table:
         self.channels = channels
         #: the verified max abs interpolation error (sum of both axes' maxima)
         self.error = error
+        #: bytes of the texture's float32 data
+        self.nbytes = int(values.size) * 4
         tensor = mi.TensorXf(np.ascontiguousarray(values, dtype=np.float32))
         self.texture = mi.Texture2f(tensor, use_accel=False, migrate=False,
                                     filter_mode=dr.FilterMode.Linear,
@@ -836,3 +838,61 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         nu = int(math.ceil((nu - 1) * factors["u"])) + 1
         nv = int(math.ceil((nv - 1) * factors["v"])) + 1
     return None
+
+
+class TableCache:
+    """Built tables (or ``None`` for a stack that cannot be tabulated) by key, shared
+    between BSDFs with identical optics; least recently used first out.
+
+    Bounded in bytes as well as in entries: a sweep or an optimisation that builds
+    thousands of distinct tables would otherwise keep hundreds of tables of up to
+    2-32 MiB each alive (RSS grew from 116 to 641 MB over 2500 rebuilds with a
+    count bound of 257 alone). With 32 MiB, 1200 rebuilds of random 1-3-film
+    tables stayed at 225-250 MB from a 122 MB start, and clearing the cache,
+    ``dr.flush_malloc_cache()`` and the C library's ``malloc_trim`` gave back all
+    of it (no leak). Tables still used by a BSDF stay alive through it.
+    Thread-safe: plugin constructors run on several threads under Mitsuba's
+    parallel scene loading.
+    """
+
+    def __init__(self, max_bytes: int = 32 << 20, max_entries: int = 1024):
+        import threading
+        from collections import OrderedDict
+
+        self.max_bytes = max_bytes
+        self.max_entries = max_entries
+        self._items: "OrderedDict[str, Table | None]" = OrderedDict()
+        self._lock = threading.Lock()
+        self.nbytes = 0
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __contains__(self, key: str) -> bool:
+        return key in self._items
+
+    def get(self, key: str):
+        """``(True, table)`` for a cached key (now the most recently used), else
+        ``(False, None)``."""
+        with self._lock:
+            if key not in self._items:
+                return False, None
+            self._items.move_to_end(key)
+            return True, self._items[key]
+
+    def put(self, key: str, table) -> None:
+        size = table.nbytes if table is not None else 0
+        with self._lock:
+            if key in self._items:
+                return
+            self._items[key] = table
+            self.nbytes += size
+            while self._items and (self.nbytes > self.max_bytes
+                                   or len(self._items) > self.max_entries):
+                _, old = self._items.popitem(last=False)
+                self.nbytes -= old.nbytes if old is not None else 0
+
+    def clear(self) -> None:
+        with self._lock:
+            self._items.clear()
+            self.nbytes = 0
