@@ -65,7 +65,7 @@ from .errors import ThinFilmError
 __all__ = [
     "ILLUMINANTS", "OBSERVERS", "POLARIZATIONS", "RECORD_KEYS", "Illuminant", "ColourValues",
     "ColourRecord", "ColourReport", "resolve_illuminant", "resolve_observer", "check_angles",
-    "spectrum_colour", "colour_report",
+    "integration_wavelengths", "spectrum_colour", "colour_report",
 ]
 
 #: Named illuminants -> colour-science's ``SDS_ILLUMINANTS`` keys.
