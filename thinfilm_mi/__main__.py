@@ -259,19 +259,10 @@ def find_demo_scene() -> Path | None:
 
 def reflectance_colours(wavelengths: np.ndarray, R: np.ndarray) -> np.ndarray:
     """sRGB (clipped, display-encoded) colour of ``R`` (wavelength x angle)
-    under D65 for the CIE 1931 2° observer."""
-    import colour
+    under D65 for the CIE 1931 2° observer (:func:`colorimetry.spectrum_colour`)."""
+    from .colorimetry import spectrum_colour
 
-    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
-    d65 = colour.SDS_ILLUMINANTS["D65"]
-    xyz_bar = np.stack([np.interp(wavelengths, cmfs.wavelengths, cmfs.values[:, i], left=0, right=0)
-                        for i in range(3)], axis=1)
-    illum = np.interp(wavelengths, d65.wavelengths, d65.values, left=0, right=0)
-    weights = xyz_bar * illum[:, None]
-    norm = weights[:, 1].sum()
-    XYZ = np.einsum("wa,wc->ac", R, weights) / norm
-    rgb = colour.XYZ_to_sRGB(XYZ, apply_cctf_encoding=True)
-    return np.clip(rgb, 0.0, 1.0)
+    return spectrum_colour(np.asarray(R, dtype=np.float64).T, wavelengths).rgb
 
 
 def write_reflectance_image(path: str | Path) -> Path:
