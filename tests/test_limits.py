@@ -81,7 +81,7 @@ def test_spectrum_with_too_many_wavelengths_is_one_clear_line(capsys):
     rc = module_main(["spectrum", "--layers", "1.46 100", "--wl", "360:830:1e-7"])
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1
-    assert "--wl" in err[0] and "4700000001 wavelengths" in err[0] and "at most" in err[0]
+    assert "--wl" in err[0] and "4700000001 values" in err[0] and "at most" in err[0]
 
 
 def test_render_with_a_huge_size_is_one_clear_line(capsys, tmp_path):

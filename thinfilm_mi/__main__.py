@@ -5,6 +5,8 @@ Subcommands::
     render     render one or more scenes (the same options as ``thinfilm-render``)
     materials  list the named materials
     spectrum   print (or plot) R and T of a stack against wavelength at given angles
+    colour     colour of a stack at given angles: XYZ, xy, L*a*b*, sRGB swatch, luminous Y
+               (table, --json, --csv, --plot), under D65, A, F11 or blackbody:T
     demo       render scenes/demo.xml into OUT/demo.exr and OUT/demo.png
 
 Examples::
@@ -12,6 +14,8 @@ Examples::
     python -m thinfilm_mi render scenes/demo.xml --spp 64 --size 640x480
     python -m thinfilm_mi spectrum --layers "1.46 500; 0.42+2.47j 20" --substrate 1.6 \\
         --angles 0,30,60 --wl 360:830:5 --plot rt.png
+    python -m thinfilm_mi colour --layers "MgF2 99.6" --substrate 1.52 --angles 0:80:10 \\
+        --illuminant D65 --plot colour.png
     python -m thinfilm_mi demo --out out
 """
 from __future__ import annotations
@@ -83,49 +87,55 @@ def cmd_materials(args: argparse.Namespace) -> int:
 # spectrum
 
 
-def parse_angles(text: str) -> np.ndarray:
-    """``"0,30,60"`` (degrees) -> array of degrees."""
-    try:
-        values = [float(t) for t in re.split(r"[,\s]+", text.strip()) if t]
-    except ValueError:
-        raise cli.UsageError(f"--angles {text!r}: expected degrees separated by commas, e.g. 0,30,60") from None
-    if not values:
-        raise cli.UsageError(f"--angles {text!r}: no angle given")
-    for v in values:
-        if not (math.isfinite(v) and 0.0 <= v <= 90.0):
-            raise cli.UsageError(f"--angles {text!r}: angles must be in [0, 90] degrees, got {v:g}")
-    return np.array(values, dtype=np.float64)
+#: Most values a START:STOP:STEP grid may hold (0.001 nm steps over 360-830 nm);
+#: more would only exhaust memory (``--wl 360:830:1e-7`` asked for 35 GiB).
+MAX_GRID_POINTS = 1_000_000
 
 
-#: Most wavelengths ``spectrum`` evaluates (0.001 nm steps over 360-830 nm); more
-#: would only exhaust memory (``360:830:1e-7`` asked for 35 GiB).
-MAX_WAVELENGTHS = 1_000_000
-
-
-def parse_wavelengths(text: str) -> np.ndarray:
-    """``"START:STOP:STEP"`` (nm, STOP included when on the grid), ``"START:STOP"``
-    (5 nm steps) or a comma-separated list."""
+def _parse_grid(text: str, option: str, default_step: float, example: str) -> np.ndarray:
+    """``"START:STOP:STEP"`` (STOP included when on the grid), ``"START:STOP"``
+    (``default_step``) or a list separated by commas or spaces -> float array;
+    a malformed string (or a grid of more than :data:`MAX_GRID_POINTS` values)
+    raises :class:`cli.UsageError` naming ``option``."""
     text = text.strip()
     try:
         if ":" in text:
             parts = [float(p) for p in text.split(":")]
             if len(parts) == 2:
-                parts.append(5.0)
-            if len(parts) != 3:
+                parts.append(default_step)
+            if len(parts) != 3 or not all(math.isfinite(p) for p in parts):
                 raise ValueError
             start, stop, step = parts
             if not (step > 0 and stop >= start):
-                raise cli.UsageError(f"--wl {text!r}: need STOP >= START and STEP > 0")
+                raise cli.UsageError(f"{option} {text!r}: need STOP >= START and STEP > 0")
             n = int(math.floor((stop - start) / step + 1e-9)) + 1
-            if n > MAX_WAVELENGTHS:
-                raise cli.UsageError(f"--wl {text!r}: {n} wavelengths; at most "
-                                     f"{MAX_WAVELENGTHS} (use a larger STEP)")
-            wl = start + step * np.arange(n)
-        else:
-            wl = np.array([float(t) for t in re.split(r"[,\s]+", text) if t])
+            if n > MAX_GRID_POINTS:
+                raise cli.UsageError(f"{option} {text!r}: {n} values; at most "
+                                     f"{MAX_GRID_POINTS} (use a larger STEP)")
+            return start + step * np.arange(n)
+        return np.array([float(t) for t in re.split(r"[,\s]+", text) if t], dtype=np.float64)
     except ValueError:
-        raise cli.UsageError(f"--wl {text!r}: expected START:STOP:STEP in nm, e.g. 360:830:5, "
-                             "or a list 450,550,650") from None
+        raise cli.UsageError(f"{option} {text!r}: expected {example}") from None
+
+
+def parse_angles(text: str, below_90: bool = False) -> np.ndarray:
+    """``"0,30,60"`` or ``"0:80:10"`` (degrees) -> array of degrees, each in
+    [0, 90], or in [0, 90) with ``below_90`` (a colour needs light to arrive)."""
+    values = _parse_grid(text, "--angles", 10.0, "degrees separated by commas, e.g. 0,30,60, "
+                         "or START:STOP:STEP, e.g. 0:80:10")
+    if values.size == 0:
+        raise cli.UsageError(f"--angles {text!r}: no angle given")
+    top = "90)" if below_90 else "90]"
+    for v in values:
+        if not (math.isfinite(v) and 0.0 <= v and (v < 90.0 if below_90 else v <= 90.0)):
+            raise cli.UsageError(f"--angles {text!r}: angles must be in [0, {top} degrees, got {v:g}")
+    return values
+
+
+def parse_wavelengths(text: str) -> np.ndarray:
+    """``"START:STOP:STEP"`` (nm, STOP included when on the grid), ``"START:STOP"``
+    (5 nm steps) or a comma-separated list."""
+    wl = _parse_grid(text, "--wl", 5.0, "START:STOP:STEP in nm, e.g. 360:830:5, or a list 450,550,650")
     if wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
         raise cli.UsageError(f"--wl {text!r}: wavelengths must be positive numbers of nm")
     return wl
@@ -198,6 +208,43 @@ def cmd_spectrum(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------------
+# colour
+
+
+def cmd_colour(args: argparse.Namespace) -> int:
+    prog = f"{PROG} colour"
+    from . import Stack
+    from .errors import ThinFilmError
+
+    try:
+        angles = parse_angles(args.angles, below_90=True)
+        cli.setup_llvm_only()
+        from .colorimetry import colour_report
+
+        stack = Stack(args.layers, substrate=args.substrate, ambient=args.ambient)
+        report = colour_report(stack, angles, illuminant=args.illuminant, observer=args.observer,
+                               polarizations=args.polarization.split(","))
+    except (cli.CLIError, ThinFilmError, ValueError) as e:
+        return _error(prog, str(e), 2, e, args.verbose)
+    if args.json:
+        print(report.to_json(indent=1))
+    else:
+        print(f"# {report.describe()}; angles in degrees in the ambient medium")
+        print("# X, Y, Z and the photopic Yv (V(λ)-weighted) in % of the perfect reflector; "
+              "L*a*b* relative to the illuminant's white; sRGB adapted (CAT02) to D65")
+        print(report.table())
+    for option, path, write in (("--csv", args.csv, report.write_csv),
+                                ("--plot", args.plot, lambda p: _save_figure(report.figure(), p))):
+        if path:
+            try:
+                written = write(path)
+            except Exception as e:
+                return _error(prog, f"cannot write {option} {path}: {e}", 1, e, args.verbose)
+            print(f"{prog}: wrote {written}", file=sys.stderr)
+    return 0
+
+
+# --------------------------------------------------------------------------------------
 # demo
 
 
@@ -212,19 +259,10 @@ def find_demo_scene() -> Path | None:
 
 def reflectance_colours(wavelengths: np.ndarray, R: np.ndarray) -> np.ndarray:
     """sRGB (clipped, display-encoded) colour of ``R`` (wavelength x angle)
-    under D65 for the CIE 1931 2° observer."""
-    import colour
+    under D65 for the CIE 1931 2° observer (:func:`colorimetry.spectrum_colour`)."""
+    from .colorimetry import spectrum_colour
 
-    cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"]
-    d65 = colour.SDS_ILLUMINANTS["D65"]
-    xyz_bar = np.stack([np.interp(wavelengths, cmfs.wavelengths, cmfs.values[:, i], left=0, right=0)
-                        for i in range(3)], axis=1)
-    illum = np.interp(wavelengths, d65.wavelengths, d65.values, left=0, right=0)
-    weights = xyz_bar * illum[:, None]
-    norm = weights[:, 1].sum()
-    XYZ = np.einsum("wa,wc->ac", R, weights) / norm
-    rgb = colour.XYZ_to_sRGB(XYZ, apply_cctf_encoding=True)
-    return np.clip(rgb, 0.0, 1.0)
+    return spectrum_colour(np.asarray(R, dtype=np.float64).T, wavelengths).rgb
 
 
 def write_reflectance_image(path: str | Path) -> Path:
@@ -285,6 +323,15 @@ def cmd_demo(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------------------
 
 
+def _add_stack_arguments(p: argparse.ArgumentParser, angles_help: str) -> None:
+    """The options that describe a stack and its angles (``spectrum``, ``colour``)."""
+    p.add_argument("--layers", required=True, metavar="'MAT NM; ...'",
+                   help="films from the ambient side inwards, e.g. '1.46 500; 0.42+2.47j 20'")
+    p.add_argument("--substrate", default="1.0", help="substrate material (default 1.0)")
+    p.add_argument("--ambient", default="1.0", help="ambient material (default 1.0)")
+    p.add_argument("--angles", default="0", help=f"{angles_help} (default 0)")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = cli._ArgumentParser(prog=PROG, description="thinfilm-mi command-line tools")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
@@ -302,16 +349,30 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("spectrum", help="R and T of a stack against wavelength",
                        description="Print (and optionally plot) the unpolarised reflectance R "
                                    "and transmittance T of a thin-film stack.")
-    p.add_argument("--layers", required=True, metavar="'MAT NM; ...'",
-                   help="films from the ambient side inwards, e.g. '1.46 500; 0.42+2.47j 20'")
-    p.add_argument("--substrate", default="1.0", help="substrate material (default 1.0)")
-    p.add_argument("--ambient", default="1.0", help="ambient material (default 1.0)")
-    p.add_argument("--angles", default="0", help="angles of incidence in degrees, e.g. 0,30,60")
+    _add_stack_arguments(p, "angles of incidence in degrees, e.g. 0,30,60 or 0:90:15")
     p.add_argument("--wl", default="360:830:5", help="wavelengths START:STOP:STEP in nm "
                                                      "(default 360:830:5)")
     p.add_argument("--plot", metavar="OUT.png", help="also plot R and T into this image")
     p.add_argument("--verbose", action="store_true")
     p.set_defaults(func=cmd_spectrum)
+
+    p = sub.add_parser("colour", aliases=["color"], help="colour of a stack: XYZ, xy, L*a*b*, sRGB, luminous Y",
+                       description="CIE XYZ, xy, L*a*b*, an sRGB swatch and the photopic (V(λ)) Y "
+                                   "of a stack in reflection and transmission at each angle, "
+                                   "computed with colour-science (thinfilm_mi.colorimetry).")
+    _add_stack_arguments(p, "angles of incidence in degrees, each below 90, e.g. 0,30,60 or 0:80:10")
+    p.add_argument("--illuminant", default="D65",
+                   help="D65, A, F11 or blackbody:T (T in kelvin, e.g. blackbody:2856); default D65")
+    p.add_argument("--observer", default="2", choices=["2", "10"],
+                   help="CIE 1931 2° or CIE 1964 10° standard observer (default 2)")
+    p.add_argument("--polarization", default="unpolarized", metavar="unpolarized|s|p|both",
+                   help="light of these polarisations, comma-separated (default unpolarized); "
+                        "with s or p the records gain a 'polarization' key")
+    p.add_argument("--json", action="store_true", help="print a JSON list of records instead of the table")
+    p.add_argument("--csv", metavar="FILE.csv", help="also write the records to this CSV file")
+    p.add_argument("--plot", metavar="FIG.png", help="also draw spectra, chromaticity path and swatches")
+    p.add_argument("--verbose", action="store_true")
+    p.set_defaults(func=cmd_colour)
 
     p = sub.add_parser("demo", help="render scenes/demo.xml into OUT/demo.exr and OUT/demo.png")
     p.add_argument("--out", default="out", help="output folder (default out)")
