@@ -58,8 +58,11 @@ A perfectly smooth conductor (metal or semiconductor substrate) under a stack of
 thin films, each of which may be dielectric, metallic or semiconducting (complex
 index). The reflectance is the exact composite reflectance of the multilayer
 (Rouard's recursion, Hirayama et al. eq. 1-5), evaluated at the path's
-wavelengths in the render kernel, for unpolarised light. Only spectral,
-unpolarised variants are supported.
+wavelengths in the render kernel, for unpolarised light in ``*_spectral``
+variants. In ``*_spectral_polarized`` variants it returns the Mueller matrix of
+the stack's exact complex amplitudes ``r_s``, ``r_p`` (never a table), rotated
+into Mitsuba's Stokes bases as Mitsuba's ``conductor`` does; with no films it
+equals ``conductor``'s matrix. RGB and mono variants are refused.
 
 The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
 (``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``
@@ -87,6 +90,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from thinfilm_mi import modes
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (SpectralIndex, check_unqueried, check_variant, optional_texture,
                                 stack_from_props)
@@ -133,6 +137,7 @@ class ThinFilmConductor(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
         self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
         self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
         check_unqueried(props, NAME)
@@ -147,7 +152,8 @@ class ThinFilmConductor(mi.BSDF):
             return bs, mi.Spectrum(0.0)
         cos_i = mi.Frame3f.cos_theta(si.wi)
         active = mi.Bool(active) & (cos_i > 0)
-        value = self.stack.reflectance(si, cos_i, active)
+        resp = self.mode.response(self.stack, si, cos_i, active)
+        value = resp.R
         if self.specular_reflectance is not None:
             value *= self.specular_reflectance.eval(si, active)
         bs.wo = mi.reflect(si.wi)
@@ -155,7 +161,8 @@ class ThinFilmConductor(mi.BSDF):
         bs.pdf = 1.0
         bs.sampled_component = mi.UInt32(0)
         bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DeltaReflection)
-        return bs, dr.select(active, value, 0.0)
+        return bs, dr.select(active, self.mode.value(value, resp.reflection, ctx, si.wi, bs.wo),
+                             0.0)
 
     def eval(self, ctx, si, wo, active=True):
         return mi.Spectrum(0.0)

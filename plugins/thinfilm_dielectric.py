@@ -67,6 +67,14 @@ reciprocal). Refraction directions and ``bs.eta`` follow Mitsuba's
 mean index over 360-830 nm (a path has one direction for all its wavelengths)
 while ``R`` and ``T`` use the exact index at each wavelength.
 
+In ``*_spectral_polarized`` variants the weights are Mueller matrices of the
+stack's exact complex amplitudes (``r_s, r_p`` and ``t_s, t_p`` with the
+``n cos θ`` power factor), from the side the ray arrives on, rotated into
+Mitsuba's Stokes bases as Mitsuba's ``dielectric`` does (the transmission
+matrix is the same from both sides by reciprocity); lobe choice and radiance
+scaling are as above, with ``R`` and ``T`` the matrices' ``M00``. With no films
+they equal ``dielectric``'s matrices.
+
 .. tabs::
     .. code-tab:: xml
 
@@ -84,6 +92,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from thinfilm_mi import modes
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
                                 spectral_mean, stack_from_props)
 from thinfilm_mi.params import ParameterGuard
@@ -98,6 +107,7 @@ class ThinFilmDielectric(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
         self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
         self.eta = interior.mean_real() / self.stack.ambient.mean_real()
@@ -124,12 +134,12 @@ class ThinFilmDielectric(mi.BSDF):
         # Directions only (Mitsuba's real-index Fresnel is not used for amplitudes).
         _, cos_t, eta_it, eta_ti = mi.fresnel(cos_i, mi.Float(self.eta))
         tir = cos_t == 0
+        # (no transmission work when only reflection is enabled)
+        resp = self.mode.response(self.stack, si, dr.abs(cos_i), active, inside=inside,
+                                  transmission=has_t)
+        R = resp.R
         if has_t:
-            R, T = self.stack.reflectance(si, dr.abs(cos_i), active, inside=inside,
-                                          transmission=True)
-            T = dr.select(tir, 0.0, T)
-        else:  # reflection only: no transmission work
-            R = self.stack.reflectance(si, dr.abs(cos_i), active, inside=inside)
+            T = dr.select(tir, 0.0, resp.T)
 
         if has_r and has_t:
             pr, pt = spectral_mean(R), spectral_mean(T)
@@ -167,7 +177,10 @@ class ThinFilmDielectric(mi.BSDF):
                                weight)
         if ctx.mode == mi.TransportMode.Radiance:
             weight = dr.select(selected_t, weight * dr.square(eta_ti), weight)
-        return bs, dr.select(active & (selected_r | ~tir), weight, 0.0)
+        lobe = resp.reflection if not has_t else \
+            self.mode.select(selected_r, resp.reflection, resp.transmission)
+        return bs, dr.select(active & (selected_r | ~tir),
+                             self.mode.value(weight, lobe, ctx, si.wi, bs.wo), 0.0)
 
     def eval(self, ctx, si, wo, active=True):
         return mi.Spectrum(0.0)

@@ -48,7 +48,10 @@ Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
 A perfectly diffuse (Lambertian) base under a stack of thin films, after
 Hirayama et al. section 2.4. Component 0 is the delta reflection of the
 coating, component 1 the diffuse lobe; the thin films are evaluated at the
-path's wavelengths in the render kernel (float32), for unpolarised light.
+path's wavelengths in the render kernel (float32), for unpolarised light. In
+``*_spectral_polarized`` variants component 0 is the Mueller matrix of the
+coating's exact amplitudes (rotated as Mitsuba's ``conductor`` does) and
+component 1 is Mitsuba's ``depolarizer`` of the value below, as ``diffuse``.
 
 **The two parts of the stack.** With films ``1..N`` (outside in) and an
 *absorbing* innermost film ``N`` (``k > 0`` somewhere in 360-830 nm), the
@@ -166,6 +169,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
+from thinfilm_mi import modes
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.hemispherical import GRID, hemispherical_factors, texture_on_grid
 from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
@@ -228,6 +232,7 @@ class ThinFilmDiffuse(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
         model = props.get("model", "multiple")
         if model not in MODELS:
             raise ThinFilmError(f"{NAME}: 'model' must be 'single' or 'multiple', got {model!r}")
@@ -288,15 +293,17 @@ class ThinFilmDiffuse(mi.BSDF):
 
     # -- kernel helpers ------------------------------------------------------
     def _factors(self, si, cos_theta, active, transmission: bool):
-        """``k_r`` and (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side)."""
+        """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
+        and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
+        resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
         if not transmission:
-            return self.coating.reflectance(si, cos_theta, active), None
-        k_r, k_t = self.coating.reflectance(si, cos_theta, active, transmission=True)
+            return resp.R, None, resp.reflection
+        k_r, k_t = resp.R, resp.T
         if self.film_n is not None:
             n0 = self.coating.ambient.eval_real(si, active)
             k_t = k_t * film_attenuation(n0, cos_theta, self.film_n.eval(si, active),
                                          self.film_n_thickness, si.wavelengths)
-        return k_r, k_t
+        return k_r, k_t, resp.reflection
 
     def _series(self, si, kd, active):
         """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
@@ -326,10 +333,11 @@ class ThinFilmDiffuse(mi.BSDF):
             bs.eta = 1.0
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
             bs.sampled_component = mi.UInt32(1)
-            value = self.reflectance.eval(si, active)
+            value = self.mode.value(self.reflectance.eval(si, active), self.mode.depolarized,
+                                    ctx, si.wi, bs.wo)
             return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
 
-        k_r, t_i = self._factors(si, cos_i, active, transmission=has_diff)
+        k_r, t_i, spec_lobe = self._factors(si, cos_i, active, transmission=has_diff)
         if has_diff:
             kd = self.reflectance.eval(si, active)
             series = self._series(si, kd, active)
@@ -351,16 +359,19 @@ class ThinFilmDiffuse(mi.BSDF):
         pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo_diff)
         bs.pdf = dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff)
 
-        weight = mi.Spectrum(0.0)
+        weight = mi.UnpolarizedSpectrum(0.0)
         if has_spec:
             weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
         if has_diff:
             cos_o = mi.Frame3f.cos_theta(wo_diff)
-            _, t_o = self._factors(si, cos_o, sel_diff, transmission=True)
+            _, t_o, _ = self._factors(si, cos_o, sel_diff, transmission=True)
             # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
             w_diff = kd * t_i * t_o * series / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0)
             weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
-        return bs, dr.select(active & (bs.pdf > 0), weight, 0.0)
+        # the film's reflection is polarized, the light through the base depolarized
+        lobe = self.mode.select(sel_spec, spec_lobe, self.mode.depolarized)
+        return bs, dr.select(active & (bs.pdf > 0),
+                             self.mode.value(weight, lobe, ctx, si.wi, bs.wo), 0.0)
 
     def _eval_pdf(self, ctx, si, wo, active, want_value: bool, want_pdf: bool):
         has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
@@ -374,7 +385,8 @@ class ThinFilmDiffuse(mi.BSDF):
 
         if self.no_films:  # exactly Mitsuba's diffuse
             value = (self.reflectance.eval(si, active) * dr.inv_pi * cos_o) if want_value \
-                else mi.Spectrum(0.0)
+                else mi.UnpolarizedSpectrum(0.0)
+            value = self.mode.value(value, self.mode.depolarized, ctx, si.wi, wo)
             return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
         need_prob = want_pdf and has_spec
@@ -382,10 +394,11 @@ class ThinFilmDiffuse(mi.BSDF):
         if want_value or need_prob:
             kd = self.reflectance.eval(si, active)
             series = self._series(si, kd, active)
-            k_r, t_i = self._factors(si, cos_i, active, transmission=True)
+            k_r, t_i, _ = self._factors(si, cos_i, active, transmission=True)
         if want_value:
-            _, t_o = self._factors(si, cos_o, active, transmission=True)
-            value = kd * t_i * t_o * series * dr.inv_pi * cos_o
+            _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
+            value = self.mode.value(kd * t_i * t_o * series * dr.inv_pi * cos_o,
+                                    self.mode.depolarized, ctx, si.wi, wo)
         if need_prob:
             pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)

@@ -78,7 +78,10 @@ with ``m`` the half vector. ``D``, ``G``, the sampling routine and its density
 are Mitsuba's ``MicrofacetDistribution``; ``R`` is the thin-film recursion
 (Hirayama et al. eq. 1-5) for unpolarised light, evaluated at the path's
 wavelengths in the render kernel. The layer parameters appear in
-``mi.traverse`` as for ``thinfilm_conductor``.
+``mi.traverse`` as for ``thinfilm_conductor``. In ``*_spectral_polarized``
+variants ``R`` becomes the Mueller matrix of the stack's exact amplitudes at the
+microfacet, rotated about ``m`` as Mitsuba's ``roughconductor`` does (with no
+films: its matrix).
 
 .. tabs::
     .. code-tab:: xml
@@ -102,6 +105,7 @@ import math
 import drjit as dr
 import mitsuba as mi
 
+from thinfilm_mi import modes
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture,
                                 stack_from_props)
@@ -249,6 +253,7 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
         self.microfacet = Microfacet(props, NAME)
         self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
         self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
@@ -259,11 +264,13 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
         self.guard = ParameterGuard(self, NAME)
 
     def _reflectance(self, si, cos_theta_m, active):
-        """Composite reflectance of the films at the microfacet angle (times the factor)."""
-        value = self.stack.reflectance(si, dr.clip(cos_theta_m, 0.0, 1.0), active)
+        """Composite reflectance of the films at the microfacet angle (times the factor),
+        and its lobe for :meth:`modes.SpectralMode.value`."""
+        resp = self.mode.response(self.stack, si, dr.clip(cos_theta_m, 0.0, 1.0), active)
+        value = resp.R
         if self.specular_reflectance is not None:
             value *= self.specular_reflectance.eval(si, active)
-        return value
+        return value, resp.reflection
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         bs = dr.zeros(mi.BSDFSample3f)
@@ -289,7 +296,8 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
         # leaves it): a blendbsdf re-weighting by the other lobe's eval/pdf at wo
         # then finds 0 there, as it finds 0 below the horizon for roughconductor.
         bs.wo = dr.select(active, bs.wo, 0.0)
-        value = self._reflectance(si, cos_m, active) * weight
+        R, lobe = self._reflectance(si, cos_m, active)
+        value = self.mode.value(R * weight, lobe, ctx, si.wi, bs.wo, m)
         return bs, dr.select(active, value, 0.0)
 
     def _eval_pdf(self, ctx, si, wo, active, want_value: bool):
@@ -312,8 +320,9 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
         if not want_value:
             return None, pdf
         active &= D != 0
-        value = self._reflectance(si, dr.dot(si.wi, m), active) \
-            * (D * distr.G(si.wi, wo, m) / (4.0 * cos_i))
+        R, lobe = self._reflectance(si, dr.dot(si.wi, m), active)
+        value = self.mode.value(R * (D * distr.G(si.wi, wo, m) / (4.0 * cos_i)), lobe, ctx,
+                                si.wi, wo, m)
         return dr.select(active, value, 0.0), pdf
 
     def to_string(self):

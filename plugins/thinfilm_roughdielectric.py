@@ -81,6 +81,11 @@ the path's wavelengths), as in ``thinfilm_dielectric``; the weights are then
 radiance) and ``pdf()`` includes the same ``P``. Refraction directions use the
 mean real indices over 360-830 nm, as in ``thinfilm_dielectric``.
 
+In ``*_spectral_polarized`` variants ``R`` and ``T`` become the Mueller matrices
+of the stack's exact amplitudes at the microfacet, rotated about ``m`` as
+Mitsuba's ``roughconductor`` rotates its reflection. Unlike Mitsuba's
+``roughdielectric``, which depolarizes, this plugin keeps the polarization.
+
 .. tabs::
     .. code-tab:: xml
 
@@ -101,6 +106,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from thinfilm_mi import modes
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.kernel import (check_unqueried, check_variant, optional_texture, real_index,
                                 spectral_mean, stack_from_props)
@@ -120,6 +126,7 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
         self.microfacet = Microfacet(props, NAME)
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
         self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
@@ -140,7 +147,8 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         self.guard = ParameterGuard(self, NAME)
 
     def _rt(self, si, dot_wi_m, cos_i, active, transmission: bool):
-        """``R`` and ``T`` (or ``None``) of the films at the microfacet angle.
+        """``R`` and ``T`` (or ``None``) of the films at the microfacet angle, and the
+        :class:`modes.Response` they come from (its lobes).
 
         ``dot_wi_m`` has the sign of ``cos θ_i`` on every valid configuration;
         from inside (``cos θ_i < 0``) the reversed stack is used. ``T`` is set to
@@ -149,11 +157,12 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         """
         cos_m = dr.clip(dr.abs(dot_wi_m), 0.0, 1.0)
         inside = cos_i < 0
+        resp = self.mode.response(self.stack, si, cos_m, active, inside=inside,
+                                  transmission=transmission)
         if not transmission:
-            return self.stack.reflectance(si, cos_m, active, inside=inside), None
-        R, T = self.stack.reflectance(si, cos_m, active, inside=inside, transmission=True)
+            return resp.R, None, resp
         _, cos_t, _, _ = mi.fresnel(dot_wi_m, mi.Float(self.eta))
-        return R, dr.select(cos_t == 0, 0.0, T)
+        return resp.R, dr.select(cos_t == 0, 0.0, resp.T), resp
 
     @staticmethod
     def _prob_r(R, T):
@@ -181,7 +190,7 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         dot_wi_m = dr.dot(si.wi, m)
         active &= (bs.pdf != 0) & (dot_wi_m * cos_i > 0)
         _, cos_t, eta_it, eta_ti = mi.fresnel(dot_wi_m, mi.Float(self.eta))
-        R, T = self._rt(si, dot_wi_m, cos_i, active, transmission=has_t)
+        R, T, resp = self._rt(si, dot_wi_m, cos_i, active, transmission=has_t)
 
         if has_r and has_t:
             # detached: a sampling decision divides the weight as a constant
@@ -230,7 +239,9 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         # blendbsdf evaluates there), eta = 1, pdf = 0, weight 0.
         bs.wo = dr.select(active, bs.wo, 0.0)
         bs.pdf = dr.select(active, bs.pdf, 0.0)
-        return bs, dr.select(active, weight, 0.0)
+        lobe = resp.reflection if not has_t else \
+            self.mode.select(selected_r, resp.reflection, resp.transmission)
+        return bs, dr.select(active, self.mode.value(weight, lobe, ctx, si.wi, bs.wo, m), 0.0)
 
     def _eval_pdf(self, ctx, si, wo, active, want_value: bool):
         has_r = ctx.is_enabled(GLOSSY_R, 0)
@@ -257,7 +268,7 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         # The films are needed for the value, and for the density when R and T compete.
         if not (want_value or (has_r and has_t)):
             return None, dr.select(active, pdf, 0.0)
-        R, T = self._rt(si, dot_wi_m, cos_i, active, transmission=has_t)
+        R, T, resp = self._rt(si, dot_wi_m, cos_i, active, transmission=has_t)
         if has_r and has_t:
             prob_r = self._prob_r(R, T)
             pdf *= dr.select(reflect, prob_r, 1.0 - prob_r)
@@ -276,9 +287,10 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
                 scale * DG * eta * eta * dot_wi_m * dot_wo_m
                 / (cos_i * dr.square(dot_wi_m + eta * dot_wo_m)))
             value = dr.select(reflect, value_r, value_t)
+            lobe = self.mode.select(reflect, resp.reflection, resp.transmission)
         else:
-            value = value_r
-        return dr.select(active, value, 0.0), pdf
+            value, lobe = value_r, resp.reflection
+        return dr.select(active, self.mode.value(value, lobe, ctx, si.wi, wo, m), 0.0), pdf
 
     def to_string(self):
         return (f"ThinFilmRoughDielectric[\n{self.microfacet.describe()}"

@@ -339,8 +339,8 @@ def test_dataset_not_covering_360_830_is_refused(plugin, make, needles, valid, f
 # ---------------------------------------------------------------------------
 # Unsupported variants
 # ---------------------------------------------------------------------------
-UNSUPPORTED = [v for v in ("scalar_rgb", "llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_mono_polarized",
-                           "scalar_spectral_polarized", "llvm_ad_spectral_polarized")
+UNSUPPORTED = [v for v in ("scalar_rgb", "llvm_ad_rgb", "llvm_ad_mono",
+                           "llvm_ad_mono_polarized")
                if v in mi.variants()]
 
 

@@ -247,7 +247,7 @@ def test_load_from_xml_and_to_string(tmp_path):
 
 
 @pytest.mark.parametrize("variant_name", ["llvm_ad_rgb", "scalar_rgb", "llvm_ad_mono",
-                                          "llvm_ad_spectral_polarized"])
+                                          "llvm_ad_mono_polarized"])
 def test_unsupported_variants_raise_clearly(variant_name):
     mi.set_variant(variant_name)
     try:

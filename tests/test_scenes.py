@@ -4,7 +4,10 @@ One ``python -m thinfilm_mi render scenes/*.xml`` subprocess renders all of
 them (the CLI takes several scenes and sets Mitsuba up once), so scenes added
 later are covered without editing this file. Each EXR must read back with the
 requested size, RGB channels, finite pixels that are not all black and have
-no negative luminance, and its metadata (scene path, variant, spp, seed, no parameters). The
+no negative luminance, and its metadata (scene path, variant, spp, seed, no parameters).
+Scenes that use Mitsuba's ``stokes`` integrator (which refuses unpolarized variants) are
+rendered in a second subprocess in ``llvm_ad_spectral_polarized`` and must also carry the
+S0..S3 channels, with S0 equal to the RGB image. The
 error paths of the CLI (bad -D, missing file, unknown plugin) are in
 tests/test_cli.py.
 """
@@ -25,18 +28,36 @@ from thinfilm_mi.exr import read_exr  # noqa: E402
 REPO = Path(__file__).resolve().parent.parent
 SCENES = sorted((REPO / "scenes").glob("*.xml"))
 WIDTH, HEIGHT, SPP, SEED = 24, 16, 1, 3
+POLARIZED_VARIANT = "llvm_ad_spectral_polarized"
+STOKES = ["S0", "S1", "S2", "S3"]
+
+
+def needs_polarized(scene: Path) -> bool:
+    """Scenes with Mitsuba's ``stokes`` integrator render in polarized variants only."""
+    return 'type="stokes"' in scene.read_text()
+
+
+def variant_of(scene: Path) -> str:
+    return POLARIZED_VARIANT if needs_polarized(scene) else cli.DEFAULT_VARIANT
 
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
     """Render every scene once; returns (output folder, the CLI's stderr)."""
     out = tmp_path_factory.mktemp("scenes")
-    proc = subprocess.run(
-        [sys.executable, "-m", "thinfilm_mi", "render", *map(str, SCENES), "--out-dir", str(out),
-         "--size", f"{WIDTH}x{HEIGHT}", "--spp", str(SPP), "--seed", str(SEED)],
-        capture_output=True, text=True, cwd=out, timeout=900)
-    assert proc.returncode == 0, proc.stderr[-4000:]
-    return out, proc.stderr
+    err = ""
+    for variant in (cli.DEFAULT_VARIANT, POLARIZED_VARIANT):
+        scenes = [str(p) for p in SCENES if variant_of(p) == variant]
+        if not scenes:
+            continue
+        proc = subprocess.run(
+            [sys.executable, "-m", "thinfilm_mi", "render", *scenes, "--out-dir", str(out),
+             "--size", f"{WIDTH}x{HEIGHT}", "--spp", str(SPP), "--seed", str(SEED),
+             "--variant", variant],
+            capture_output=True, text=True, cwd=out, timeout=900)
+        assert proc.returncode == 0, proc.stderr[-4000:]
+        err += proc.stderr
+    return out, err
 
 
 def test_scenes_exist():
@@ -54,8 +75,16 @@ def test_scene_renders(scene, rendered):
     exr = out / f"{scene.stem}.exr"
     assert exr.is_file(), err[-4000:]
     channels, header = read_exr(exr)
-    assert sorted(channels) == ["B", "G", "R"]
+    stokes = [f"{s}.{c}" for s in STOKES for c in "RGB"] if needs_polarized(scene) else []
+    assert sorted(channels) == sorted(["B", "G", "R", *stokes])
     image = np.stack([channels[c] for c in "RGB"], axis=-1)
+    if stokes:
+        S = np.stack([np.stack([channels[f"{s}.{c}"] for c in "RGB"], -1) for s in STOKES])
+        assert np.all(np.isfinite(S))
+        # the film's RGB is the intensity S0 (up to float32 rounding of the conversions);
+        # the degree of polarization is checked per wavelength in tests/test_polarized.py
+        assert np.allclose(S[0], image, rtol=1e-4, atol=1e-5)
+        assert np.abs(S[1:]).max() > 0   # the stokes channels are filled
     assert image.shape == (HEIGHT, WIDTH, 3)
     assert np.all(np.isfinite(image)), f"{scene.name}: NaN/inf pixels"
     # single spectral samples can fall outside the sRGB gamut (a negative channel),
@@ -64,7 +93,7 @@ def test_scene_renders(scene, rendered):
     assert luminance.min() >= -1e-4, f"{scene.name}: negative luminance {luminance.min()}"
     assert image.mean() > 1e-3, f"{scene.name}: black image"
     assert header["scene"] == str(scene.resolve())
-    assert header["variant"] == cli.DEFAULT_VARIANT
+    assert header["variant"] == variant_of(scene)
     assert header["spp"] == SPP
     assert header["seed"] == SEED
     assert header["parameters"] == ""

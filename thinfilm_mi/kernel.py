@@ -41,18 +41,20 @@ DEFAULT_EXT_IOR = 1.000277
 def check_variant(plugin: str) -> None:
     """Raise if the current Mitsuba variant cannot run the thin-film plugins.
 
-    Interference needs wavelengths: RGB and monochrome variants are refused,
-    and so are polarised ones (the plugins return unpolarised Mueller weights
-    only). LLVM variants also pass through :func:`require_llvm`.
+    Interference needs wavelengths: RGB and monochrome variants (polarized or
+    not) are refused. ``*_spectral`` variants return spectra and
+    ``*_spectral_polarized`` ones Mueller matrices (:mod:`thinfilm_mi.modes`).
+    LLVM variants also pass through :func:`require_llvm`.
     """
     mi = _mi()
     variant = mi.variant()
-    if variant is None or "spectral" not in variant or "polarized" in variant:
+    if variant is None or not (variant.endswith("_spectral")
+                               or variant.endswith("_spectral_polarized")):
         raise ThinFilmError(
             f"{plugin}: the Mitsuba variant {variant!r} is not supported; thin-film "
-            "interference needs wavelengths and unpolarised transport: use a *_spectral "
-            "variant such as 'llvm_ad_spectral' or 'scalar_spectral' (RGB, mono and "
-            "polarized variants are not supported yet)"
+            "interference needs wavelengths: use a *_spectral or *_spectral_polarized "
+            "variant such as 'llvm_ad_spectral' or 'scalar_spectral' (RGB and mono "
+            "variants are not supported yet)"
         )
     if variant.startswith("llvm"):
         require_llvm()
@@ -312,7 +314,8 @@ class _LoopFilms:
                 else:
                     eta.append(dr.lerp(v[0], v[2], t))
                     k.append(dr.lerp(v[1], v[3], t))
-            index = Cx(mi.Spectrum(*eta), 0.0 if self.real else mi.Spectrum(*k))
+            U = mi.UnpolarizedSpectrum
+            index = Cx(U(*eta), 0.0 if self.real else U(*k))
             d = dr.gather(mi.Float, self.thickness, j)
             return index, (d if thickness_scale is None else d * thickness_scale)
 
@@ -428,6 +431,11 @@ class KernelStack:
         opaque = [self._opaque(ix, dv) for ix, _, dv in kept]
         self.plan = {inside: self._side(inside, t, films, opaque)
                      for inside, t in self.sides.items()}
+        self.table_failed = []
+        if _mi().is_polarized:
+            # Polarized variants evaluate the amplitudes exactly (thinfilm_mi.amplitudes);
+            # tables and film loops hold powers only: none is built.
+            return
         self._plan_tables()
         if dr.is_jit_v(_mi().Float):
             for side in self.plan.values():
@@ -512,12 +520,20 @@ class KernelStack:
         films = [(ix, d, False) for ix, d in zip(self.indices, self.thickness)]
         return self._side(inside, transmission, films, [False] * len(films))
 
-    def _eval_side(self, side: _Side | None, inside: bool, si, cos_theta, active,
-                   transmission: bool, thickness_scale):
-        mi = _mi()
-        wl = si.wavelengths
+    def evaluation_side(self, inside: bool, transmission: bool) -> _Side:
+        """The plan of the side lit from the ambient (``inside`` false) or the
+        substrate, as evaluated now: every film, without skips or table, when a
+        thickness carries gradients or the side was not planned."""
+        side = self.plan.get(inside)
         if side is None or self._differentiating():
             side = self._full_side(inside, transmission)
+        return side
+
+    def _eval_side(self, inside: bool, si, cos_theta, active, transmission: bool,
+                   thickness_scale):
+        mi = _mi()
+        wl = si.wavelengths
+        side = self.evaluation_side(inside, transmission)
         n0 = side.n0.eval_real(si, active)
         table = side.table
         if table is not None and thickness_scale is None and (
@@ -526,7 +542,7 @@ class KernelStack:
             res = table.lookup(cos_theta, n0, n_exit, wl, active)
             if not transmission:
                 return res[0]
-            return res[0], (mi.Spectrum(0.0) if side.opaque else res[1])
+            return res[0], (mi.UnpolarizedSpectrum(0.0) if side.opaque else res[1])
         exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
             else side.exit.eval(si, active)
         if side.loop is not None and not _index_grads(side, si, active):
@@ -536,7 +552,7 @@ class KernelStack:
                      for ix, d, _ in side.films]
             out = _rt(n0, cos_theta, films, exit_, wl, side.incoherent, transmission)
         if transmission and side.opaque:
-            return out[0], mi.Spectrum(0.0)
+            return out[0], mi.UnpolarizedSpectrum(0.0)
         return out
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
@@ -553,8 +569,7 @@ class KernelStack:
             thickness_scale = self.thickness_scale_at(si, active)
 
         def side(flag: bool):
-            return self._eval_side(self.plan.get(flag), flag, si, cos_theta, active,
-                                   transmission, thickness_scale)
+            return self._eval_side(flag, si, cos_theta, active, transmission, thickness_scale)
 
         if isinstance(inside, bool):
             return side(inside)
@@ -657,6 +672,11 @@ def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
     incidence ``T = 0``. Shared by the kernels and the float64 hemispherical terms.
     """
     a = stack_amplitudes(n0, cos0, films, n_exit, wl, transmission=transmission)
+    return unpolarised_powers(a, transmission)
+
+
+def unpolarised_powers(a, transmission: bool = True):
+    """:func:`unpolarised_rt` from the amplitudes ``a`` (:class:`optics.StackAmplitudes`)."""
     R = dr.minimum(0.5 * (a.rs.abs2() + a.rp.abs2()), 1.0)
     if not transmission:
         return R

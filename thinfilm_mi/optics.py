@@ -34,6 +34,16 @@ Conventions (those of Born & Wolf and of tmm's ``tmm_core.py``):
 * ``T`` is the time-averaged power flux (Poynting vector, z component) entering
   the exit medium, divided by the incident flux.
 
+Mitsuba's polarized Fresnel code (``fresnel_polarized``, ``mueller.h``) works with
+``n - ik`` and the root ``Im cos(theta_t) <= 0`` (time dependence ``exp(+i w t)``),
+with the same s/p signs (its "Verdet convention" ``a_p`` is tmm's ``r_p``). A field
+``Re(a exp(-i w t))`` is ``Re(conj(a) exp(+i w t))``, so **Mitsuba's amplitudes are
+the complex conjugates of ours**: ``A_s = conj(r_s)``, ``A_p = conj(r_p)`` (and the
+same for ``t``), which flips the sign of the s-p phase difference and hence of
+``S3``. :mod:`thinfilm_mi.amplitudes` applies this map; tests/test_polarized.py checks
+it on bare interfaces (a conductor, glass from both sides, TIR) against
+``mueller.specular_reflection`` and ``specular_transmission``.
+
 Reference: H. Hirayama, K. Kaneda, H. Yamashita, Y. Monden, "Visualization of
 optical phenomena of objects coated with multilayer films" (eq. 1-6 and
 appendix A), and M. Born, E. Wolf, *Principles of Optics*, sec. 1.6.

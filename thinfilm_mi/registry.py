@@ -3,8 +3,8 @@
 :func:`register` registers every plugin of :mod:`thinfilm_mi.plugins` for the
 current Mitsuba variant and installs a variant callback so that they are
 registered again whenever ``mi.set_variant`` switches variant. Plugins are
-registered in every variant; in a variant they do not support (RGB, mono,
-polarized) their constructor raises a clear error at scene load time.
+registered in every variant; in a variant they do not support (RGB, mono)
+their constructor raises a clear error at scene load time.
 """
 from __future__ import annotations
 

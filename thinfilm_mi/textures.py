@@ -85,7 +85,7 @@ def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
         padded = np.concatenate([wl, np.full((-n) % 4, wl[-1] if n else 500.0)])
         out = []
         for i in range(0, padded.size, 4):
-            si.wavelengths = mi.Spectrum(*[float(x) for x in padded[i:i + 4]])
+            si.wavelengths = mi.UnpolarizedSpectrum(*[float(x) for x in padded[i:i + 4]])
             out.extend(float(v) for v in tex.eval(si))
         return np.asarray(out[:n], dtype=np.float64)
     from ._backend import aligned_array
@@ -93,7 +93,7 @@ def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
     si = dr.zeros(mi.SurfaceInteraction3f, n)
     # an aligned buffer: Dr.Jit compiles a kernel per alignment of its inputs
     w = aligned_array(wl, np.float32, mi.Float)
-    si.wavelengths = mi.Spectrum(w, w, w, w)
+    si.wavelengths = mi.UnpolarizedSpectrum(w, w, w, w)
     value = tex.eval(si)
     return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
 
@@ -132,7 +132,7 @@ def texture_range(tex, mono: bool = False):
         if jit:
             si = dr.zeros(mi.SurfaceInteraction3f, n)
             si.uv = mi.Point2f(mi.Float(uu), mi.Float(vv))
-            si.wavelengths = mi.Spectrum(*[mi.Float(x) for x in lam])
+            si.wavelengths = mi.UnpolarizedSpectrum(*[mi.Float(x) for x in lam])
             val = tex.eval_1(si) if mono else tex.eval(si)
             arr = np.array(val, dtype=np.float64)
         else:
@@ -140,7 +140,7 @@ def texture_range(tex, mono: bool = False):
             for j in range(n):
                 si = dr.zeros(mi.SurfaceInteraction3f)
                 si.uv = mi.Point2f(float(uu[j]), float(vv[j]))
-                si.wavelengths = mi.Spectrum(*[float(x[j]) for x in lam])
+                si.wavelengths = mi.UnpolarizedSpectrum(*[float(x[j]) for x in lam])
                 val = tex.eval_1(si) if mono else tex.eval(si)
                 vals.extend([float(val)] if mono else [float(val[c]) for c in range(4)])
             arr = np.asarray(vals)
