@@ -752,8 +752,25 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     What the build did is left in :data:`last_build`.
     """
     global last_build
+    if resolution > 0 and band_limits(side):
+        # the exact values first: a stack whose table resolves them keeps it
+        # (1-3 films: the same tables as without band-limiting)
+        table = build_table(side, error, wavelengths, max_texels, 0.0)
+        if table is not None or last_build["result"] == "critical angle varies":
+            return table
+        before = last_build
+        table = _build(side, error, wavelengths, max_texels, resolution)
+        last_build["exact_attempt"] = before
+        return table
+    return _build(side, error, wavelengths, max_texels, 0.0)
+
+
+def _build(side: SideData, error: float, wavelengths: np.ndarray, max_texels: int,
+           resolution: float) -> Table | None:
+    """:func:`build_table` of the exact values (``resolution`` 0) or band-limited ones."""
+    global last_build
     kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
-    band = resolution > 0 and band_limits(side)
+    band = resolution > 0
     last_build = stats = {"kind": kind, "probe_points": 0, "rounds": 0, "points": 0,
                           "result": "critical angle varies",
                           "resolution": resolution if band else 0.0, "colour_error": None,
@@ -831,6 +848,7 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         err_u = float(np.max(np.where(cos_u >= GRAZING_COS, dev, 0.0)))
         dev = np.abs(mid_v - approx_v).max(axis=-1)
         err_v = float(np.max(np.where(cos_v >= GRAZING_COS, dev, 0.0)))
+        stats.setdefault("errors", []).append((nu, nv, err_u, err_v))
         if err_u + err_v <= error:
             stats["result"] = "table"
             return Table(coeffs, kind, err_u + err_v, nodes.shape[-1],
@@ -882,7 +900,10 @@ BAND_STEP_MAX = 2.0
 BAND_POINTS_PER_POLE = 1.0
 #: At most this many sub-points per coarse interval (a resonance narrower than
 #: 1/(2 x 512) of the coarse step, ~4e-4 nm: its area is below ~1e-4 of the bin's).
-BAND_MAX_SUB = 512
+BAND_MAX_SUB = 32
+#: The same within the grazing sliver (cos < GRAZING_COS), which builds do not
+#: verify and where cavity resonances are narrowest.
+BAND_MAX_SUB_GRAZING = 2
 #: Coarse intervals within this many intervals of a resonance's pole are
 #: integrated on exact values (elsewhere on the splines, whose small relative
 #: error in ``D`` would be magnified by ``1 / |D|^2`` near the pole).
@@ -899,7 +920,7 @@ BAND_MAX_FILMS = 250
 #: (and ``T``, ``T_σ``) over the table's angle rows under D65, A and F11 a
 #: band-limited table may show; otherwise the build gives up (``auto`` then
 #: evaluates exactly).
-BAND_COLOUR_TOLERANCE = 0.1
+BAND_COLOUR_TOLERANCE = 0.5
 
 
 def _smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
@@ -1205,7 +1226,10 @@ class _BandPoints:
         rows_n, _, C = bins.shape
         smooth = (W @ np.moveaxis(bins, 1, 0).reshape(nb, rows_n * C)).reshape(
             uwl.size, rows_n, C).swapaxes(0, 1)                   # (rows, outs, C)
-        self.colour_error = self._colour_check(bins, lam, sig)
+        # the colour check, over the rows outside the grazing sliver (as the
+        # verification)
+        keep = cos.min(axis=1) >= GRAZING_COS
+        self.colour_error = self._colour_check(bins[keep], lam, sig) if keep.any() else 0.0
         # cos at the outputs (for the grazing mask): the rows' angle at each output λ
         oidx = _indices(side, uwl)
         cos_o = np.empty((s_u.size, uwl.size))
@@ -1233,8 +1257,9 @@ class _BandPoints:
         rows, nb, C = terms.shape
         coef = bspline_coefficients(terms, axis=1)
         d = _pole_distance(coef, (2, 6))
-        n_sub = np.clip(np.ceil(BAND_POINTS_PER_POLE / np.maximum(d, 1e-300)), 1,
-                        BAND_MAX_SUB).astype(np.int64).ravel()
+        cap = np.where(cos[:, :-1] < GRAZING_COS, BAND_MAX_SUB_GRAZING, BAND_MAX_SUB)
+        n_sub = np.minimum(np.ceil(BAND_POINTS_PER_POLE / np.maximum(d, 1e-300)),
+                           cap).astype(np.int64).ravel()
         exact_iv = (d < BAND_EXACT_DISTANCE).ravel()
         # 3-point Gauss-Legendre on each of an interval's n_sub sub-intervals
         n_pts = 3 * n_sub
