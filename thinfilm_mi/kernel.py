@@ -202,12 +202,14 @@ AUTO_MIN_FILMS = 2
 #: of 3-10 films (benchmarks/SPEED.md). ``tabulate=true`` allows
 #: :data:`tables.MAX_TEXELS` per channel.
 AUTO_MAX_TEXELS = 1 << 19
-#: Default ``spectral_resolution`` (nm): tables hold ``R`` and ``T`` convolved
-#: along λ with a Gaussian of this standard deviation (``0``: the exact values).
-#: Chosen from measurements (benchmarks/SPEED.md): it lets every benchmark stack
-#: (1-30 films on Al) be tabulated within ``table_error`` 1e-3 and changes the
-#: rendered colour by ΔE2000 <= 0.1 under D65, A and F11.
-DEFAULT_SPECTRAL_RESOLUTION = 1.0
+#: Default ``spectral_resolution`` (nm): tables may hold ``R`` and ``T`` convolved
+#: along λ with a Gaussian of this standard deviation (``0``: the exact values
+#: only). Off by default for now: the band-limited build is accurate (R_σ within
+#: 5e-6 of a brute-force convolution) and 1 nm changes the D65 colour of the
+#: 30-film benchmark stack by ΔE2000 <= 0.009, but it is slow: 3.6 s for the
+#: 10-film stack (271x1168 texels), and the 30-film stack runs over the build
+#: budget (benchmarks/SPEED.md, issue 21).
+DEFAULT_SPECTRAL_RESOLUTION = 0.0
 #: A film is optically opaque when the amplitude of light crossing it once,
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
 #: is below this: what lies beneath then changes r by less than ~1e-9.
