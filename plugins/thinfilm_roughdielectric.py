@@ -58,6 +58,16 @@ Thin-film coated rough dielectric (:monosp:`thinfilm_roughdielectric`)
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - spectral_resolution
+   - |float|
+   - Standard deviation (nm) of a Gaussian along λ that tables may convolve ``R``
+     and ``T`` with, for stacks whose exact values no table resolves (10 films or
+     more on a metal: cavity resonances ~0.1 nm wide). Such a table is verified
+     within ``table_error`` against the convolved values, and kept only if the
+     colours of the exact and the convolved values under D65, A and F11 differ by
+     ΔE2000 <= 0.5 (default: 0, tables of the exact values only: the band-limited
+     build still takes seconds). Keep it 0, or pass ``tabulate=false``, under lasers
+     or line-spectrum emitters narrower than the resolution.
  * - coherence_thickness
    - |float|
    - Films thicker than this (nm) are averaged incoherently, as tmm's

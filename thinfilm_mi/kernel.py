@@ -204,6 +204,14 @@ AUTO_MIN_FILMS = 2
 #: of 3-10 films (benchmarks/SPEED.md). ``tabulate=true`` allows
 #: :data:`tables.MAX_TEXELS` per channel.
 AUTO_MAX_TEXELS = 1 << 19
+#: Default ``spectral_resolution`` (nm): tables may hold ``R`` and ``T`` convolved
+#: along λ with a Gaussian of this standard deviation (``0``: the exact values
+#: only). Off by default for now: the band-limited build is accurate (R_σ within
+#: 5e-6 of a brute-force convolution) and 1 nm changes the D65 colour of the
+#: 30-film benchmark stack by ΔE2000 <= 0.009, but it is slow: 3.6 s for the
+#: 10-film stack (271x1168 texels), and the 30-film stack runs over the build
+#: budget (benchmarks/SPEED.md, issue 21).
+DEFAULT_SPECTRAL_RESOLUTION = 0.0
 #: A film is optically opaque when the amplitude of light crossing it once,
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
 #: is below this: what lies beneath then changes r by less than ~1e-9.
@@ -376,6 +384,7 @@ class KernelStack:
     def __init__(self, films: Sequence[tuple[SpectralIndex, float]], ambient: SpectralIndex,
                  substrate: SpectralIndex, thickness_texture=None, *,
                  tabulate: bool | str = "auto", table_error: float = DEFAULT_TABLE_ERROR,
+                 spectral_resolution: float = DEFAULT_SPECTRAL_RESOLUTION,
                  coherence_thickness: float = DEFAULT_COHERENCE_THICKNESS,
                  sides: dict | None = None, plugin: str = "thin-film BSDF"):
         self.indices = [f[0] for f in films]
@@ -387,6 +396,7 @@ class KernelStack:
         self.thickness_texture = thickness_texture
         self.tabulate = tabulate
         self.table_error = table_error
+        self.spectral_resolution = spectral_resolution
         self.coherence_thickness = coherence_thickness
         self.sides = dict(sides) if sides is not None else {False: False}
         self.plugin = plugin
@@ -628,7 +638,7 @@ def _tables_cache(stack: KernelStack, side: _Side):
     max_texels = (AUTO_MAX_TEXELS // (2 if transmission else 1) if stack.tabulate == "auto"
                   else _tables.MAX_TEXELS)
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
-                   stack.table_error, max_texels)).encode())
+                   stack.table_error, stack.spectral_resolution, max_texels)).encode())
     key = h.hexdigest()
     found, table = _TABLE_CACHE.get(key)
     if found:
@@ -660,7 +670,8 @@ def _tables_cache(stack: KernelStack, side: _Side):
         rt_loop=None if any(incoherent) else unpolarised_rt_loop,
         kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
-    table = _tables.build_table(data, stack.table_error, GRID, max_texels)
+    table = _tables.build_table(data, stack.table_error, GRID, max_texels,
+                                stack.spectral_resolution)
     _TABLE_CACHE.put(key, table)
     return table
 
@@ -786,6 +797,20 @@ def _positive_float(props, name: str, default: float, plugin: str, upper: float 
     return float(value)
 
 
+#: Largest ``spectral_resolution`` (nm) accepted: a Gaussian wider than this
+#: would wash out the colours of single films.
+MAX_SPECTRAL_RESOLUTION = 20.0
+
+
+def _nonnegative_float(props, name: str, default: float, plugin: str, upper: float) -> float:
+    value = props.get(name, default)
+    if (isinstance(value, bool) or not isinstance(value, (int, float))
+            or not math.isfinite(value) or not 0 <= value <= upper):
+        raise ThinFilmError(f"{plugin}: '{name}' must be a number >= 0 and <= {upper:g}, "
+                            f"got {value!r}")
+    return float(value)
+
+
 def stack_from_props(props, plugin: str, substrate: SpectralIndex,
                      ambient: SpectralIndex | None = None, *,
                      sides: dict | None = None) -> KernelStack:
@@ -811,6 +836,9 @@ def stack_options_from_props(props, plugin: str, thickness_texture: bool = True)
     options = dict(
         tabulate=tabulate_from_props(props, plugin),
         table_error=_positive_float(props, "table_error", DEFAULT_TABLE_ERROR, plugin, 0.5),
+        spectral_resolution=_nonnegative_float(props, "spectral_resolution",
+                                               DEFAULT_SPECTRAL_RESOLUTION, plugin,
+                                               MAX_SPECTRAL_RESOLUTION),
         coherence_thickness=_positive_float(props, "coherence_thickness",
                                             DEFAULT_COHERENCE_THICKNESS, plugin),
         plugin=plugin)
