@@ -30,14 +30,9 @@ from ._backend import float64_array, repeated
 from ._llvm import require_llvm
 from .optics import Cx, film_attenuation
 from .kernel import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
-from .textures import texture_on_grid
-from .stack import SPECTRAL_RANGE
+from .textures import GRID, texture_on_grid  # GRID: where the factors are tabulated
 
 __all__ = ["GRID", "texture_on_grid", "unpolarised_rt", "hemispherical_factors"]
-
-#: The wavelengths (nm) at which the hemispherical factors are tabulated.
-GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
-                   int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)
 
 #: Gauss-Legendre nodes in μ = cos θ. A 500 nm SiO2 film changes its phase by
 #: about one wave over the hemisphere; 128 nodes integrate such oscillations
