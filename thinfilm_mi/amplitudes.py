@@ -30,6 +30,7 @@ import drjit as dr
 
 from .kernel import KernelStack, unpolarised_powers
 from .optics import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
+from .textures import _mi
 
 
 @dataclass
@@ -133,7 +134,3 @@ def polarised_response(stack: KernelStack, si, cos_theta, active=True, *,
     out = _side(stack, False, si, cos_theta, active, transmission, scale)
     return _side(stack, True, si, cos_theta, active, transmission, scale).select(inside, out)
 
-
-def _mi():
-    import mitsuba as mi
-    return mi

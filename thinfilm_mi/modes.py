@@ -35,11 +35,8 @@ import drjit as dr
 
 from .amplitudes import Shape, depolarizing_shape, polarised_response
 from .kernel import KernelStack
+from .textures import _mi
 
-
-def _mi():
-    import mitsuba as mi
-    return mi
 
 
 @dataclass

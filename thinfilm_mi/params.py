@@ -18,6 +18,7 @@ import numpy as np
 
 from .errors import ThinFilmError
 from .materials import MAX_INDEX, MIN_INDEX
+from .textures import _mi, texture_range
 
 #: Largest microfacet roughness accepted (``alpha``, ``alpha_u``, ``alpha_v``):
 #: beyond ~1 a Beckmann/GGX surface is already near-uniform; 100 leaves room
@@ -41,11 +42,6 @@ RULES = [
     (r"^reflectance\.", 0.0, False, 1.0 + ALBEDO_SLACK, "an albedo", False),
     (r"^thickness\.", 0.0, False, math.inf, "a thickness scale", True),
 ]
-
-
-def _mi():
-    import mitsuba as mi
-    return mi
 
 
 def _values(value) -> np.ndarray | None:
@@ -79,7 +75,6 @@ def check_value(key: str, value, plugin: str, texture=None) -> None:
             lo, lo_open, hi, what, mono = a, a_open, b, w, m
             break
     if texture is not None:
-        from .textures import texture_range
         rng = texture_range(texture, mono)
         arr = None if rng is None else np.asarray(rng, dtype=np.float64)
     else:
