@@ -180,14 +180,16 @@ import mitsuba as mi
 import numpy as np
 
 from thinfilm_mi import modes
+from thinfilm_mi.coated_diffuse import ColourDiffuse, DiffuseFactors
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.hemispherical import GRID, hemispherical_factors, texture_on_grid
+from thinfilm_mi.hemispherical import GRID, hemispherical_factors
+from thinfilm_mi.colour_tables import colour_channels
 from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
                                 ext_ior_from_props, films_from_props, opaque_float,
                                 stack_options_from_props)
 from thinfilm_mi.optics import film_attenuation
 from thinfilm_mi.params import ALBEDO_SLACK, ParameterGuard
-from thinfilm_mi.textures import check_texture_range, regular, uniform
+from thinfilm_mi.textures import check_texture_range, regular, scalar, uniform
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple")
@@ -268,6 +270,8 @@ class ThinFilmDiffuse(mi.BSDF):
 
         self.t_hemi = None
         self.r_dh = None
+        #: RGB/mono variants: the diffuse term integrated as a product (coated_diffuse)
+        self.colour = None
         self._update_hemispherical()
 
         self.m_components = [
@@ -278,15 +282,31 @@ class ThinFilmDiffuse(mi.BSDF):
         self.guard = ParameterGuard(self, NAME)
 
     # -- load-time tables ----------------------------------------------------
+    def _constant_albedo(self) -> np.ndarray | None:
+        """The base albedo per colour channel where it does not vary over the
+        surface (the colour tables then integrate the series with it), else ``None``."""
+        if self.reflectance.is_spatially_varying():
+            return None
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        return np.array(dr.ravel(self.reflectance.eval(si)), np.float64).reshape(-1)
+
     def _update_hemispherical(self) -> None:
-        """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters."""
+        """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
+        in RGB/mono variants the integrated diffuse tables instead."""
+        if self.mode.integrated:
+            if not self.no_films:
+                thickness = None if self.film_n is None else scalar(self.film_n_thickness)
+                self.colour = ColourDiffuse(
+                    DiffuseFactors(self.coating, self.film_n, thickness), self.model,
+                    colour_channels(), self._constant_albedo())
+            return
         if self.no_films:
             t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
         else:
-            n_amb = texture_on_grid(self.coating.ambient.eta)
+            n_amb = self.coating.ambient.spectral_values(GRID, real=True)
 
             def index(ix):
-                return texture_on_grid(ix.eta) + 1j * texture_on_grid(ix.k)
+                return ix.spectral_values(GRID)
 
             def thickness(d):
                 return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
@@ -321,9 +341,20 @@ class ThinFilmDiffuse(mi.BSDF):
             return mi.Spectrum(1.0)
         return dr.rcp(1.0 - kd * self.r_dh.eval(si, active))
 
-    def _prob_specular(self, si, k_r, t_i, kd, series, active):
+    def _diffuse(self, si, kd, cos_i, cos_o, t_i, series, active):
+        """``π f`` at ``cos_o``: ``k_d t_i t_o S`` per wavelength, or its integral
+        over wavelengths in RGB/mono variants."""
+        if self.colour is not None:
+            return self.colour.value(cos_i, cos_o, kd, active)
+        _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
+        return kd * t_i * t_o * series
+
+    def _prob_specular(self, si, k_r, t_i, kd, series, active, cos_i):
         spec = spectral_mean(k_r)
-        diff = spectral_mean(t_i * kd * self.t_hemi.eval(si, active) * series)
+        if self.colour is not None:
+            diff = spectral_mean(self.colour.albedo(cos_i, kd, active))
+        else:
+            diff = spectral_mean(t_i * kd * self.t_hemi.eval(si, active) * series)
         total = spec + diff
         return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
 
@@ -347,14 +378,17 @@ class ThinFilmDiffuse(mi.BSDF):
                                     ctx, si.wi, bs.wo)
             return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
 
-        k_r, t_i, spec_lobe = self._factors(si, cos_i, active, transmission=has_diff)
+        spectral = self.colour is None
+        k_r, t_i, spec_lobe = self._factors(si, cos_i, active,
+                                            transmission=has_diff and spectral)
+        kd = series = None
         if has_diff:
             kd = self.reflectance.eval(si, active)
-            series = self._series(si, kd, active)
+            series = self._series(si, kd, active) if spectral else None
         if has_spec and has_diff:
             # detached: a sampling decision divides the weight as a constant
             # (the weight's gradient is then that of k_r, resp. the diffuse term)
-            prob_spec = dr.detach(self._prob_specular(si, k_r, t_i, kd, series, active))
+            prob_spec = dr.detach(self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
         else:
             prob_spec = mi.Float(1.0 if has_spec else 0.0)
         sel_spec = active & (sample1 < prob_spec)
@@ -374,9 +408,9 @@ class ThinFilmDiffuse(mi.BSDF):
             weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
         if has_diff:
             cos_o = mi.Frame3f.cos_theta(wo_diff)
-            _, t_o, _ = self._factors(si, cos_o, sel_diff, transmission=True)
             # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
-            w_diff = kd * t_i * t_o * series / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0)
+            w_diff = (self._diffuse(si, kd, cos_i, cos_o, t_i, series, sel_diff)
+                      / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0))
             weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
         # the film's reflection is polarized, the light through the base depolarized
         lobe = self.mode.select(sel_spec, spec_lobe, self.mode.depolarized)
@@ -402,15 +436,16 @@ class ThinFilmDiffuse(mi.BSDF):
         need_prob = want_pdf and has_spec
         value = mi.Spectrum(0.0)
         if want_value or need_prob:
+            spectral = self.colour is None
             kd = self.reflectance.eval(si, active)
-            series = self._series(si, kd, active)
-            k_r, t_i, _ = self._factors(si, cos_i, active, transmission=True)
+            series = self._series(si, kd, active) if spectral else None
+            k_r, t_i, _ = self._factors(si, cos_i, active, transmission=spectral)
         if want_value:
-            _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
-            value = self.mode.value(kd * t_i * t_o * series * dr.inv_pi * cos_o,
-                                    self.mode.depolarized, ctx, si.wi, wo)
+            value = self.mode.value(
+                self._diffuse(si, kd, cos_i, cos_o, t_i, series, active) * dr.inv_pi * cos_o,
+                self.mode.depolarized, ctx, si.wi, wo)
         if need_prob:
-            pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active))
+            pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
     def eval(self, ctx, si, wo, active=True):
@@ -436,7 +471,10 @@ class ThinFilmDiffuse(mi.BSDF):
             self.coating.parameters_changed()
             if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
                 dr.make_opaque(self.film_n_thickness)
-            if not keys or any(k.startswith("layers.") for k in keys):
+            colour_albedo = self.colour is not None and self.colour.fixed
+            if not keys or any(k.startswith("layers.") or (colour_albedo and
+                                                           k.startswith("reflectance"))
+                               for k in keys):
                 self._update_hemispherical()
         self.guard.changed(self, refresh, keys)
 

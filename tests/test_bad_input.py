@@ -339,8 +339,9 @@ def test_dataset_not_covering_360_830_is_refused(plugin, make, needles, valid, f
 # ---------------------------------------------------------------------------
 # Unsupported variants
 # ---------------------------------------------------------------------------
-UNSUPPORTED = [v for v in ("scalar_rgb", "llvm_ad_rgb", "llvm_ad_mono",
-                           "llvm_ad_mono_polarized")
+# RGB and mono variants are supported (colour tables, issue 19); polarized ones
+# need wavelengths.
+UNSUPPORTED = [v for v in ("llvm_ad_mono_polarized",)
                if v in mi.variants()]
 
 

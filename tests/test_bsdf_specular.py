@@ -246,8 +246,7 @@ def test_load_from_xml_and_to_string(tmp_path):
     assert "1.46 500 nm" in desc and "0.42+2.47j 20 nm" in desc and "1.6" in desc
 
 
-@pytest.mark.parametrize("variant_name", ["llvm_ad_rgb", "scalar_rgb", "llvm_ad_mono",
-                                          "llvm_ad_mono_polarized"])
+@pytest.mark.parametrize("variant_name", ["llvm_ad_mono_polarized"])
 def test_unsupported_variants_raise_clearly(variant_name):
     mi.set_variant(variant_name)
     try:

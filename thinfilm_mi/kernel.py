@@ -27,6 +27,9 @@ import numpy as np
 from . import materials as _materials
 from . import tables as _tables
 from ._llvm import require_llvm
+from .colour_tables import (GradientSampler, attach_gradient, channel_mean_texture,
+                            colour_channels, colour_table, index_on_wavelengths,
+                            with_absorbing)
 from .errors import ThinFilmError
 from .optics import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
                      transmittance_factor_s)
@@ -41,22 +44,22 @@ DEFAULT_EXT_IOR = 1.000277
 def check_variant(plugin: str) -> None:
     """Raise if the current Mitsuba variant cannot run the thin-film plugins.
 
-    Interference needs wavelengths: RGB and monochrome variants (polarized or
-    not) are refused. ``*_spectral`` variants return spectra and
-    ``*_spectral_polarized`` ones Mueller matrices (:mod:`thinfilm_mi.modes`).
-    LLVM variants also pass through :func:`require_llvm`.
+    ``*_spectral`` variants return spectra, ``*_spectral_polarized`` ones
+    Mueller matrices, RGB and mono variants colours integrated against colour
+    matching (:mod:`thinfilm_mi.modes`). Polarized RGB or mono variants are
+    refused: a Mueller matrix integrated over wavelengths is not the product of
+    integrated amplitudes. LLVM variants, and every variant that builds colour
+    tables (float64 on the LLVM backend), pass through :func:`require_llvm`.
     """
     mi = _mi()
     variant = mi.variant()
-    if variant is None or not (variant.endswith("_spectral")
-                               or variant.endswith("_spectral_polarized")):
+    if variant is None or (mi.is_polarized and not mi.is_spectral):
         raise ThinFilmError(
-            f"{plugin}: the Mitsuba variant {variant!r} is not supported; thin-film "
-            "interference needs wavelengths: use a *_spectral or *_spectral_polarized "
-            "variant such as 'llvm_ad_spectral' or 'scalar_spectral' (RGB and mono "
-            "variants are not supported yet)"
+            f"{plugin}: the Mitsuba variant {variant!r} is not supported; polarized "
+            "thin films need wavelengths: use a *_spectral_polarized variant such as "
+            "'llvm_ad_spectral_polarized' (or an unpolarized RGB, mono or spectral one)"
         )
-    if variant.startswith("llvm"):
+    if variant.startswith("llvm") or not mi.is_spectral:
         require_llvm()
 
 
@@ -119,9 +122,16 @@ class SpectralIndex:
             raise ThinFilmError(f"{name}: material {mat.name!r} has non-finite, n <= 0 or k < 0 "
                                 "values in 360-830 nm")
 
+        channels = colour_channels()
+
         def spectrum(v):
             if np.all(v == v[0]):  # e.g. k = 0 everywhere (Mitsuba's spectra need mass)
                 return uniform(v[0])
+            if channels is not None:
+                # RGB/mono variants: the colour tables read the material itself
+                # (spectral_values); the textures hold its channel means, for the
+                # plugins' per-channel evaluation (no films over an rgb eta/k)
+                return channel_mean_texture(grid, v, channels)
             return irregular(grid, v)
 
         return cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat, grid)
@@ -154,6 +164,44 @@ class SpectralIndex:
         if self.material is not None:
             return float(np.mean(self.material.index(GRID).real))
         return float(self.eta.mean())
+
+    def spectral_values(self, wavelengths: np.ndarray, real: bool = False) -> np.ndarray | None:
+        """The index at ``wavelengths`` (float64; complex unless ``real``), read as the
+        render kernel of a spectral variant reads it: through the textures (so
+        ``mi.traverse`` edits are seen), except a dataset's in RGB and mono variants,
+        whose textures hold channel means (read from the material). ``None`` for
+        textures given per channel (an ``rgb`` ``eta``/``k`` in an RGB variant)."""
+        wl = np.asarray(wavelengths, np.float64)
+        channels = colour_channels()
+
+        def part(tex, name):
+            if (channels is not None and self.material is not None
+                    and self.material.constant is None):
+                # a dataset (its textures hold channel means: a uniform one in mono)
+                v = self.material.index(np.clip(wl, GRID[0], GRID[-1]))
+                return v.real if name == "eta" else v.imag
+            if channels is None or tex.class_name() == "UniformSpectrum":
+                return texture_on_grid(tex, wl)
+            return None
+        eta = part(self.eta, "eta")
+        if real or eta is None:
+            return eta
+        k = part(self.k, "k")
+        return None if k is None else eta + 1j * k
+
+    def channel_values(self) -> np.ndarray | None:
+        """RGB/mono variants: the index per channel (complex, one per channel) of
+        textures given per channel that do not vary over the surface; else ``None``."""
+        mi = _mi()
+        if self.eta.is_spatially_varying() or self.k.is_spatially_varying():
+            return None
+        si = dr.zeros(mi.SurfaceInteraction3f)
+
+        def channels(tex):
+            return np.array(dr.ravel(tex.eval(si)), np.float64).reshape(-1)
+        eta, k = channels(self.eta), channels(self.k)
+        n = max(eta.size, k.size)
+        return np.broadcast_to(eta, (n,)) + 1j * np.broadcast_to(k, (n,))
 
     def traverse(self, callback, prefix: str) -> None:
         mi = _mi()
@@ -354,6 +402,9 @@ class _Side:
         self.transmission = transmission
         self.table = None
         self.loop = None   # a _LoopFilms where the films are evaluated in a loop
+        #: RGB/mono variants: the side's integrated.ColourTable, or None where the
+        #: plugin evaluates per channel (no films over an index given per channel)
+        self.colour = None
 
     @property
     def incoherent(self) -> list[bool]:
@@ -417,7 +468,8 @@ class KernelStack:
     def _opaque(self, index: SpectralIndex, d: float) -> bool:
         if self.thickness_texture is not None or d <= 0:
             return False   # a texture may thin the film anywhere
-        k = texture_on_grid(index.k)
+        n = index.spectral_values(GRID)
+        k = n.imag if n is not None else texture_on_grid(index.k)
         return bool(np.max(np.exp(-2.0 * math.pi * k * d / GRID)) < OPAQUE_AMPLITUDE)
 
     def _side(self, inside: bool, transmission: bool, films: list, opaque: list) -> _Side:
@@ -442,6 +494,11 @@ class KernelStack:
         self.plan = {inside: self._side(inside, t, films, opaque)
                      for inside, t in self.sides.items()}
         self.table_failed = []
+        if colour_channels() is not None:
+            # RGB and mono variants read integrated colour tables (thinfilm_mi.integrated)
+            for side in self.plan.values():
+                side.colour = colour_table(self, side, _side_data)
+            return
         if _mi().is_polarized:
             # Polarized variants evaluate the amplitudes exactly (thinfilm_mi.amplitudes);
             # tables and film loops hold powers only: none is built.
@@ -540,9 +597,14 @@ class KernelStack:
         return side
 
     def _eval_side(self, inside: bool, si, cos_theta, active, transmission: bool,
-                   thickness_scale):
+                   thickness_scale, wavelengths=None):
         mi = _mi()
-        wl = si.wavelengths
+        if wavelengths is not None:
+            return self._eval_at_wavelengths(inside, si, cos_theta, active, transmission,
+                                             thickness_scale, wavelengths)
+        # RGB/mono variants come here only for a side without films (no phase):
+        # any wavelength will do for the Fresnel terms
+        wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
         side = self.evaluation_side(inside, transmission)
         n0 = side.n0.eval_real(si, active)
         table = side.table
@@ -565,6 +627,71 @@ class KernelStack:
             return out[0], mi.UnpolarizedSpectrum(0.0)
         return out
 
+    def _eval_at_wavelengths(self, inside: bool, si, cos_theta, active, transmission: bool,
+                             thickness_scale, wl):
+        """Exact ``R`` [, ``T``] at the wavelengths ``wl`` (``mi.Spectrum``) in an
+        RGB/mono variant, through every film (the colour gradients)."""
+        mi = _mi()
+        side = self._full_side(inside, transmission)
+
+        def index(ix):
+            return Cx(*index_on_wavelengths(ix, si, wl, active))
+        n0 = index(side.n0).re
+        exit_ = index(side.exit)
+        if side.exit_real:
+            exit_ = Cx(exit_.re, 0.0)
+        films = [(index(ix), d if thickness_scale is None else d * thickness_scale)
+                 for ix, d, _ in side.films]
+        out = _rt(n0, cos_theta, films, exit_, wl, side.incoherent, transmission)
+        if transmission and side.opaque:
+            return out[0], mi.Spectrum(0.0)
+        return out
+
+    def colour(self, si, cos_theta, active=True, *, inside: bool | Any = False,
+               transmission: bool = False):
+        """RGB/mono variants: ``R`` (and ``T`` if asked) as ``mi.Spectrum`` colours,
+        the spectral values integrated against colour matching
+        (:mod:`thinfilm_mi.integrated`), read from the side's colour table; a side
+        with no films over an index given per channel is evaluated per channel
+        (Fresnel), as Mitsuba's ``conductor`` does. Where a thickness or an index
+        carries gradients, they come from an unbiased estimate of the integral
+        (:class:`~thinfilm_mi.colour_tables.GradientSampler`); the value stays the
+        table's. Arguments as :meth:`reflectance`."""
+        scale = self.thickness_scale_at(si, active)
+
+        def side(flag: bool):
+            plan = self.plan.get(flag)
+            if plan is None:
+                raise ThinFilmError(f"{self.plugin}: internal error: the side lit from the "
+                                    f"{'substrate' if flag else 'ambient'} was not planned")
+            if plan.colour is None:
+                return self._eval_side(flag, si, cos_theta, active, transmission, None)
+            R, T = plan.colour.lookup(cos_theta, scale, active)
+            if transmission and T is None:
+                T = _mi().Spectrum(0.0)
+            if self.colour_gradients(si, active):
+                sampler = GradientSampler.get()
+                wl = sampler.wavelengths(si)
+                exact = self._eval_side(flag, si, cos_theta, active, transmission, scale, wl)
+                if transmission:
+                    R = attach_gradient(R, sampler.estimate(wl, exact[0]))
+                    T = attach_gradient(T, sampler.estimate(wl, exact[1]))
+                else:
+                    R = attach_gradient(R, sampler.estimate(wl, exact))
+            return (R, T) if transmission else R
+
+        return _either_side(side, inside, transmission)
+
+    def colour_gradients(self, si, active=True) -> bool:
+        """Whether a film thickness or an index of this stack carries gradients
+        (RGB/mono AD variants; decided when the kernel is traced)."""
+        if not dr.is_diff_v(_mi().Float):
+            return False
+        media = [self.ambient, self.substrate] + list(self.indices)
+        return self._differentiating() or any(
+            dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
+            for ix in media)
+
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
                     transmission: bool = False, thickness_scale=None):
         """Unpolarised ``R`` (and ``T`` if asked) as ``mi.Spectrum`` at ``si.wavelengths``.
@@ -581,12 +708,17 @@ class KernelStack:
         def side(flag: bool):
             return self._eval_side(flag, si, cos_theta, active, transmission, thickness_scale)
 
-        if isinstance(inside, bool):
-            return side(inside)
-        out_r, in_r = side(False), side(True)
-        if transmission:
-            return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
-        return dr.select(inside, in_r, out_r)
+        return _either_side(side, inside, transmission)
+
+
+def _either_side(side, inside, transmission: bool):
+    """``side(inside)`` for a Python bool; for a mask both sides, blended."""
+    if isinstance(inside, bool):
+        return side(inside)
+    out_r, in_r = side(False), side(True)
+    if transmission:
+        return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
+    return dr.select(inside, in_r, out_r)
 
 
 def _index_grads(side: _Side, si, active) -> bool:
@@ -644,36 +776,65 @@ def _tables_cache(stack: KernelStack, side: _Side):
     if found:
         return table
 
+    data = _side_data(side, transmission)
+    table = _tables.build_table(data, stack.table_error, GRID, max_texels,
+                                stack.spectral_resolution)
+    _TABLE_CACHE.put(key, table)
+    return table
+
+
+def _index_function(ix: SpectralIndex, real: bool = False, channel: complex | None = None):
+    """``wl -> index`` (float64 numpy) of a medium for the table builds: its spectral
+    values (:meth:`SpectralIndex.spectral_values`), or the constant ``channel``."""
+    memo = {}
+
+    def f(wl):   # the build asks for the same wavelengths several times
+        wl = np.asarray(wl, np.float64)
+        if channel is not None:
+            return np.full(wl.shape, channel.real if real else channel)
+        key = wl.tobytes()
+        if key not in memo:
+            memo.clear()
+            memo[key] = ix.spectral_values(wl, real)
+        return memo[key]
+    return f
+
+
+def _side_data(side: _Side, transmission: bool, channel: dict | None = None) -> _tables.SideData:
+    """The float64 build data (:class:`tables.SideData`) of ``side``; ``channel`` maps
+    media (by ``id``) given per channel to their index in the channel built."""
+    channel = channel or {}
+
     def on(ix, real=False):
-        memo = {}
+        return _index_function(ix, real, channel.get(id(ix)))
 
-        def f(wl):   # the build asks for the same wavelengths several times
-            wl = np.asarray(wl, np.float64)
-            key = wl.tobytes()
-            if key not in memo:
-                eta = texture_on_grid(ix.eta, wl)
-                memo.clear()
-                memo[key] = eta if real else eta + 1j * texture_on_grid(ix.k, wl)
-            return memo[key]
-        return f
-
-    n0 = on(side.n0, real=True)
-    exit_ = on(side.exit, real=True) if side.exit_real else on(side.exit)
     incoherent = side.incoherent
 
     def rt(n0_, cos0, films, n_exit, wl, transmission):
         return _rt(n0_, cos0, films, n_exit, wl, incoherent, transmission)
 
-    data = _tables.SideData(
-        n0=n0, films=[(on(ix), scalar(d)) for ix, d, _ in side.films], n_exit=exit_,
+    media = [side.n0] + [f[0] for f in side.films] + [side.exit]
+    return _tables.SideData(
+        n0=on(side.n0, real=True), films=[(on(ix), scalar(d)) for ix, d, _ in side.films],
+        n_exit=on(side.exit, real=True) if side.exit_real else on(side.exit),
         transmission=transmission, rt=rt,
         rt_loop=None if any(incoherent) else unpolarised_rt_loop,
         kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
-    table = _tables.build_table(data, stack.table_error, GRID, max_texels,
-                                stack.spectral_resolution)
-    _TABLE_CACHE.put(key, table)
-    return table
+
+
+def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.ndarray):
+    """Exact float64 ``(R, T)`` of the planned side ``inside`` of ``stack`` at every
+    angle ``cos`` and wavelength (shape ``(len cos, len wavelengths)`` each), as
+    the colour tables see it (spectral values of every medium)."""
+    side = stack.plan[inside]
+    data = with_absorbing(_side_data(side, True))
+    wl = np.asarray(wavelengths, np.float64)
+    rows = np.tile(np.arange(wl.size), cos.size)
+    out = _tables._evaluate(data, np.repeat(cos, wl.size), rows, wl, _tables._indices(data, wl))
+    out = out.reshape(cos.size, wl.size, 2)
+    T = np.zeros_like(out[..., 0]) if side.opaque else out[..., 1]
+    return out[..., 0], T
 
 
 def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):

@@ -23,8 +23,13 @@ Modes:
   ``-wo_hat`` and leaves along ``wi_hat``, which swap with ``ctx.mode``).
   Diffuse lobes are Mitsuba's ``depolarizer`` of the weight.
 
-RGB and mono modes (issue 19) plug in here: a ``response`` reading integrated
-tables and the ``spectral`` mode's ``value``.
+* ``colour`` (RGB and mono variants: ``*_rgb``, ``*_mono``): ``R``/``T`` are the
+  spectral values integrated against colour matching (linear sRGB or Y under
+  D65), read from the stack's colour tables (:meth:`KernelStack.colour`,
+  :mod:`thinfilm_mi.integrated`); the value is the weight itself. Factors the
+  user gives as colours multiply per channel, as in Mitsuba's own plugins.
+  Products of spectral factors (``thinfilm_diffuse``'s film-in x base x
+  film-out) are integrated as products by the plugin's own tables.
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ from typing import Any
 import drjit as dr
 
 from .amplitudes import Shape, depolarizing_shape, polarised_response
+from .colour_tables import colour_channels
 from .kernel import KernelStack
 from .textures import _mi
 
@@ -123,10 +129,26 @@ def sp_matrix(weight, shape: Shape):
                         [zero, zero, c_im, c_re]])
 
 
-_MODES = {"spectral": SpectralMode(), "polarized": PolarizedMode()}
+class ColourMode(SpectralMode):
+    """RGB and mono variants: colours integrated over wavelengths at load time."""
+
+    name = "colour"
+    #: integrated products of spectral factors are the plugin's business
+    integrated = True
+
+    def response(self, stack, si, cos_theta, active=True, *, inside=False,
+                 transmission=False) -> Response:
+        out = stack.colour(si, cos_theta, active, inside=inside, transmission=transmission)
+        return Response(*out) if transmission else Response(out)
+
+
+_MODES = {"spectral": SpectralMode(), "polarized": PolarizedMode(), "colour": ColourMode()}
+SpectralMode.integrated = False
 
 
 def current() -> SpectralMode:
     """The mode of the current Mitsuba variant (checked by :func:`kernel.check_variant`)."""
     mi = _mi()
+    if colour_channels() is not None:
+        return _MODES["colour"]
     return _MODES["polarized" if mi.is_polarized else "spectral"]

@@ -124,15 +124,19 @@ def texture_range(tex, mono: bool = False):
         u, v = u.ravel(), v.ravel()
     else:
         u = v = np.full(1, 0.5)
-    n = max(u.size, -(-wl.size // 4))
+    if not mi.is_spectral:   # RGB/mono variants: no wavelengths (Color0f)
+        wl = wl[:1]
+    nw = dr.size_v(mi.UnpolarizedSpectrum) if mi.is_spectral else 1   # per sample
+    n = max(u.size, -(-wl.size // nw))
     i = np.arange(n)
     uu, vv = u[i % u.size], v[i % v.size]
-    lam = [wl[(4 * i + c) % wl.size] for c in range(4)]
+    lam = [wl[(nw * i + c) % wl.size] for c in range(nw)]
     try:
         if jit:
             si = dr.zeros(mi.SurfaceInteraction3f, n)
             si.uv = mi.Point2f(mi.Float(uu), mi.Float(vv))
-            si.wavelengths = mi.UnpolarizedSpectrum(*[mi.Float(x) for x in lam])
+            if mi.is_spectral:
+                si.wavelengths = mi.UnpolarizedSpectrum(*[mi.Float(x) for x in lam])
             val = tex.eval_1(si) if mono else tex.eval(si)
             arr = np.array(val, dtype=np.float64)
         else:
@@ -140,9 +144,10 @@ def texture_range(tex, mono: bool = False):
             for j in range(n):
                 si = dr.zeros(mi.SurfaceInteraction3f)
                 si.uv = mi.Point2f(float(uu[j]), float(vv[j]))
-                si.wavelengths = mi.UnpolarizedSpectrum(*[float(x[j]) for x in lam])
+                if mi.is_spectral:
+                    si.wavelengths = mi.UnpolarizedSpectrum(*[float(x[j]) for x in lam])
                 val = tex.eval_1(si) if mono else tex.eval(si)
-                vals.extend([float(val)] if mono else [float(val[c]) for c in range(4)])
+                vals.extend([float(val)] if mono else list(np.ravel(val)))
             arr = np.asarray(vals)
     except Exception:  # noqa: BLE001 - textures that need a shape cannot be checked here
         return None
