@@ -183,11 +183,12 @@ from thinfilm_mi import modes
 from thinfilm_mi.coated_diffuse import ColourDiffuse, DiffuseFactors
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.hemispherical import GRID, hemispherical_factors
-from thinfilm_mi.colour_tables import colour_channels
+from thinfilm_mi.colour_tables import (GradientSampler, attach_gradient, colour_channels,
+                                       index_on_wavelengths)
 from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
                                 ext_ior_from_props, films_from_props, opaque_float,
                                 stack_options_from_props)
-from thinfilm_mi.optics import film_attenuation
+from thinfilm_mi.optics import Cx, film_attenuation
 from thinfilm_mi.params import ALBEDO_SLACK, ParameterGuard
 from thinfilm_mi.textures import check_texture_range, regular, scalar, uniform
 
@@ -345,9 +346,41 @@ class ThinFilmDiffuse(mi.BSDF):
         """``π f`` at ``cos_o``: ``k_d t_i t_o S`` per wavelength, or its integral
         over wavelengths in RGB/mono variants."""
         if self.colour is not None:
-            return self.colour.value(cos_i, cos_o, kd, active)
+            value = self.colour.value(cos_i, cos_o, kd, active)
+            if self._colour_gradients(si, active):
+                value = attach_gradient(value, self._colour_estimate(si, kd, cos_i, cos_o,
+                                                                     active))
+            return value
         _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
         return kd * t_i * t_o * series
+
+    def _colour_gradients(self, si, active) -> bool:
+        """RGB/mono AD variants: whether a film thickness or index carries gradients."""
+        n = self.film_n
+        return self.coating.colour_gradients(si, active) or (n is not None and (
+            dr.grad_enabled(self.film_n_thickness) or dr.grad_enabled(n.eta.eval(si, active))
+            or dr.grad_enabled(n.k.eval(si, active))))
+
+    def _colour_estimate(self, si, kd, cos_i, cos_o, active):
+        """An unbiased estimate of the integrated diffuse term at stratified wavelengths
+        (:class:`~thinfilm_mi.colour_tables.GradientSampler`), whose gradients the
+        table's value takes; ``R_dh`` is not differentiated, as in spectral variants."""
+        sampler = GradientSampler.get()
+        wl = sampler.wavelengths(si)
+
+        def t(cos):
+            _, k_t = self.coating.at_wavelengths(False, si, cos, active, True, None, wl)
+            if self.film_n is None:
+                return k_t
+            n0, _ = index_on_wavelengths(self.coating.ambient, si, wl, active)
+            return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(self.film_n, si, wl,
+                                                                          active)),
+                                          self.film_n_thickness, wl)
+        product = t(cos_i) * t(cos_o)
+        r_dh = self.colour.r_dh_at(wl, active)
+        channels = [sampler.estimate(wl, product * self.colour.series(kd[c], r_dh))[c]
+                    for c in range(dr.size_v(mi.Spectrum))]
+        return mi.Spectrum(*channels)
 
     def _prob_specular(self, si, k_r, t_i, kd, series, active, cos_i):
         spec = spectral_mean(k_r)

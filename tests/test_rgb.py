@@ -412,3 +412,37 @@ def test_polarized_rgb_variants_are_refused():
             check_variant("thinfilm_conductor")
     finally:
         mi.set_variant(RGB)
+
+
+def test_diffuse_gradient_matches_finite_differences():
+    """thinfilm_diffuse's diffuse term ("single": no R_dh, which is not
+    differentiated in any variant) in llvm_ad_rgb: the forward derivative averaged
+    over hits against central differences of the tabulated value itself."""
+    def load(d):
+        return mi.load_dict({"type": "thinfilm_diffuse", "layers": f"1.46 {d}; 2.3 60",
+                             "model": "single",
+                             "reflectance": {"type": "rgb", "value": [0.8, 0.6, 0.4]}})
+    d, h, n = 300.0, 2.0, 1 << 17
+    ctx = mi.BSDFContext()
+    ctx.component = 1                      # the diffuse lobe
+
+    def evaluate(bsdf, si):
+        wo = mi.Vector3f(-0.5, 0.3, float(np.sqrt(1 - 0.34)))
+        return bsdf.eval(ctx, si, wo)
+    fd = (np.array(evaluate(load(d + h), interaction(35.0))).ravel()
+          - np.array(evaluate(load(d - h), interaction(35.0))).ravel()) / (2 * h)
+    bsdf = load(d)
+    params = mi.traverse(bsdf)
+    key = "layers.0.thickness"
+    dr.enable_grad(params[key])
+    dr.set_grad(params[key], 1.0)
+    params.update()
+    value = evaluate(bsdf, interaction(35.0, n, np.random.default_rng(11)))
+    dr.forward_to(value)
+    g = np.array(dr.grad(value), np.float64).reshape(3, -1)
+    mean, se = g.mean(axis=1), g.std(axis=1) / np.sqrt(n)
+    # as test_gradients_match_finite_differences, plus the tables' interpolation
+    # in the finite difference (<= 1e-4 of pi f, times cos/pi, over 2h)
+    slack = 1e-4 * 0.25 / (2 * h) * 4
+    assert np.all(np.abs(mean - fd) <= 6 * se + 0.03 * np.abs(fd) + slack), (mean, se, fd)
+    assert np.max(np.abs(fd)) > 10 * slack         # a real derivative, not noise

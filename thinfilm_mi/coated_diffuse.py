@@ -245,6 +245,13 @@ class ColourDiffuse:
         self._nu = constant(nu)
         self._inv_u = constant(1.0 / nu)
         self._r = [constant(float(r)) for r in nodes]
+        #: R_dh on the 1 nm grid, for the gradient estimate (not differentiated,
+        #: as in spectral variants)
+        r_dh = level_data(0)[2]
+        self._r_dh = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(r_dh[:, None], np.float32)),
+                                  use_accel=False, migrate=False,
+                                  filter_mode=dr.FilterMode.Linear,
+                                  wrap_mode=dr.WrapMode.Clamp)
 
     def _at_one(self, M, nodes):
         """``π f`` at ``k_d = 1`` (the series) and the single term (the ``ℓ_j`` sum
@@ -278,6 +285,18 @@ class ColourDiffuse:
             vals = res[j * C:(j + 1) * C]
             out += g * (mi.Spectrum(*vals) if C > 1 else mi.Spectrum(vals[0]))
         return out   # not clamped: see integrated.ColourTable.lookup
+
+    def r_dh_at(self, wavelengths, active=True):
+        """``R_dh`` at ``wavelengths`` (``mi.Spectrum``, nm), detached."""
+        mi = _mi()
+        lo, hi = SPECTRAL_RANGE
+        return dr.detach(mi.Spectrum(*[
+            self._r_dh.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)[0]
+            for k in range(dr.size_v(mi.Spectrum))]))
+
+    def series(self, kd, r_dh):
+        """``G(k_d, R_dh)`` of the model (per channel ``k_d``, spectral ``R_dh``)."""
+        return _g(kd, r_dh, self.model)
 
     def value(self, cos_i, cos_o, kd, active=True):
         """``π f`` (``mi.Spectrum``): the diffuse term without ``1/π`` and ``cos θ_o``."""

@@ -600,8 +600,8 @@ class KernelStack:
                    thickness_scale, wavelengths=None):
         mi = _mi()
         if wavelengths is not None:
-            return self._eval_at_wavelengths(inside, si, cos_theta, active, transmission,
-                                             thickness_scale, wavelengths)
+            return self.at_wavelengths(inside, si, cos_theta, active, transmission,
+                                       thickness_scale, wavelengths)
         # RGB/mono variants come here only for a side without films (no phase):
         # any wavelength will do for the Fresnel terms
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
@@ -627,8 +627,8 @@ class KernelStack:
             return out[0], mi.UnpolarizedSpectrum(0.0)
         return out
 
-    def _eval_at_wavelengths(self, inside: bool, si, cos_theta, active, transmission: bool,
-                             thickness_scale, wl):
+    def at_wavelengths(self, inside: bool, si, cos_theta, active, transmission: bool,
+                       thickness_scale, wl):
         """Exact ``R`` [, ``T``] at the wavelengths ``wl`` (``mi.Spectrum``) in an
         RGB/mono variant, through every film (the colour gradients)."""
         mi = _mi()
