@@ -72,7 +72,23 @@ wavelengths in the render kernel, for unpolarised light in ``*_spectral``
 variants. In ``*_spectral_polarized`` variants it returns the Mueller matrix of
 the stack's exact complex amplitudes ``r_s``, ``r_p`` (never a table), rotated
 into Mitsuba's Stokes bases as Mitsuba's ``conductor`` does; with no films it
-equals ``conductor``'s matrix. RGB and mono variants are refused.
+equals ``conductor``'s matrix.
+
+In RGB and mono variants (``*_rgb``, ``*_mono``; polarized ones are refused) the
+reflectance is the spectral reflectance integrated against colour matching: CIE 1931
+2° under D65 to linear sRGB, normalised so that a perfect reflector gives (1, 1, 1),
+or the luminance Y in mono; this is the convention of Mitsuba's spectral pipeline,
+so an RGB render and a spectral render of a scene agree. It is tabulated over the
+angle at scene load with the float64 recursion (``thinfilm_mi/integrated.py``; over
+the angle and the thickness scale with a ``thickness`` texture), so a deep stack
+costs what one film costs at render time; ``tabulate``, ``table_error`` and
+``spectral_resolution`` do not apply. ``eta``/``k`` given as ``rgb`` evaluate per
+channel, as in ``conductor`` (with no films the plugin *is* ``conductor``); films
+over them are integrated per channel with that channel's constant index.
+``specular_reflectance`` multiplies per channel. Gradients of thicknesses and
+numeric indices in ``llvm_ad_rgb``: the value is the table's, and the gradient that
+of an unbiased estimate of the same integral at stratified wavelengths per hit (the
+exact recursion through every film), traced only when a parameter carries gradients.
 
 The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
 (``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``

@@ -149,6 +149,21 @@ stack work is skipped. Thicknesses (``layers.N.thickness``) are opaque and
 exposed to ``mi.traverse``; ``R_dh`` and ``T_hemi`` are recomputed (and not
 differentiated) when they change.
 
+**RGB and mono variants** (``*_rgb``, ``*_mono``; polarized ones are refused).
+``k_r`` is the spectral reflectance integrated against colour matching (CIE 1931 2°
+under D65 to linear sRGB, a perfect reflector (1, 1, 1); the luminance Y in mono),
+as the other plugins do, so RGB and spectral renders agree. The diffuse term is the
+spectral *product* integrated: ``π f_c = ∫ ŵ_c(λ) t(λ, θ_i) t(λ, θ_o) G(k_d,c,
+R_dh(λ)) dλ`` with ``G = k_d`` ("single") or ``k_d / (1 - k_d R_dh)`` ("multiple"),
+not a product of integrated factors (the fringes of ``t(θ_i)`` and ``t(θ_o)`` line
+up at some angles and cancel at others), tabulated over both angles at scene load
+(``thinfilm_mi/coated_diffuse.py``). ``reflectance`` is a colour and enters per
+channel, as in Mitsuba's ``diffuse``: a constant one is integrated exactly with the
+series; a texture through a Chebyshev expansion of ``G`` in ``R_dh`` (relative error
+<= 1e-5). Thickness and index gradients in ``llvm_ad_rgb`` are those of an unbiased
+estimate of the same integrals at stratified wavelengths per hit (the value stays
+the table's); ``R_dh`` is not differentiated, as in spectral variants.
+
 **Gradients.** Differentiate with ``path`` (the whole sample is differentiated,
 both components). Mitsuba's ``prb`` family samples detached and re-evaluates
 ``eval`` at the sampled direction for the derivative; ``eval`` holds only the

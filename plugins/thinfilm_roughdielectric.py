@@ -96,6 +96,21 @@ of the stack's exact amplitudes at the microfacet, rotated about ``m`` as
 Mitsuba's ``roughconductor`` rotates its reflection. Unlike Mitsuba's
 ``roughdielectric``, which depolarizes, this plugin keeps the polarization.
 
+In RGB and mono variants (``*_rgb``, ``*_mono``; polarized ones are refused) each
+microfacet's reflectance and transmittance (from both sides) are the spectral values
+integrated against colour matching: CIE 1931 2° under D65 to linear sRGB, normalised
+so that a perfect reflector gives (1, 1, 1), or the luminance Y in mono; this is the
+convention of Mitsuba's spectral pipeline, so an RGB render and a spectral render of
+a scene agree. They are tabulated over the angle at scene load with the float64
+recursion (``thinfilm_mi/integrated.py``; over the angle and the thickness scale
+with a ``thickness`` texture), so a deep stack costs what one film costs at render
+time; ``tabulate``, ``table_error`` and ``spectral_resolution`` do not apply.
+``specular_reflectance`` and ``specular_transmittance`` multiply per channel.
+Gradients of thicknesses and numeric indices in ``llvm_ad_rgb``: the value is the
+table's, and the gradient that of an unbiased estimate of the same integral at
+stratified wavelengths per hit (the exact recursion through every film), traced only
+when a parameter carries gradients.
+
 .. tabs::
     .. code-tab:: xml
 

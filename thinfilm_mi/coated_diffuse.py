@@ -21,15 +21,20 @@ from the wavelengths exactly up to that error:
 
     π f_c = Σ_j G(k_d,c, r_j) M_jc(θ_i, θ_o),   M_jc = ∫ ŵ_c t t ℓ_j(R_dh) dλ
 
-with ``ℓ_j`` the Lagrange basis. The ``M_jc`` are a 2-D table over both angles
-(uniform in the angle coordinate of :func:`tables.u_texel`, refined until the
-4-point rule predicts the midpoints within ΔE2000 0.05, then subdivided for
-the linear lookup, as :mod:`thinfilm_mi.integrated` does); the albedo estimate
-of the lobe-selection probability, ``Σ_j G(k_d, r_j) A_jc(θ_i)`` with
-``A_jc = ∫ ŵ_c t T_hemi ℓ_j(R_dh) dλ``, is a 1-D table. ``R_dh`` and ``T_hemi``
-are the float64 hemispherical factors of :mod:`thinfilm_mi.hemispherical`. The
-wavelength grid is uniform, halved from 1 nm until the table changes by
-ΔE2000 <= 0.01 (at most 1/16 nm).
+with ``ℓ_j`` the Lagrange basis. Where ``reflectance`` does not vary over the
+surface the expansion is not needed: ``G`` is integrated with the albedo itself
+(one basis function, ``M_c = ∫ ŵ_c t t S_c dλ``, ``S_c = G(k_d,c, R_dh)/k_d,c``)
+and the kernel multiplies by ``k_d``. The ``M_jc`` are a 2-D table over both
+angles (uniform in the angle coordinate of :func:`tables.u_texel`): the angle
+nodes are doubled until the 4-point rule predicts the new ones within
+:data:`LEVEL_ABS` (at most :data:`MAX_NODES`), then subdivided for the linear
+lookup until it is within :data:`LINEAR_ABS` (at most :data:`MAX_TABLE_FLOATS`);
+the albedo estimate of the lobe-selection probability, ``Σ_j G(k_d, r_j)
+A_jc(θ_i)`` with ``A_jc = ∫ ŵ_c t T_hemi ℓ_j(R_dh) dλ``, is a 1-D table. ``R_dh``
+and ``T_hemi`` are the float64 hemispherical factors of
+:mod:`thinfilm_mi.hemispherical`. The wavelength grid is uniform, halved from
+1 nm until ``π f`` at ``k_d = 1`` changes by at most :data:`LEVEL_ABS` (at most
+1/16 nm).
 """
 from __future__ import annotations
 
