@@ -446,3 +446,25 @@ def test_diffuse_gradient_matches_finite_differences():
     slack = 1e-4 * 0.25 / (2 * h) * 4
     assert np.all(np.abs(mean - fd) <= 6 * se + 0.03 * np.abs(fd) + slack), (mean, se, fd)
     assert np.max(np.abs(fd)) > 10 * slack         # a real derivative, not noise
+
+
+@pytest.mark.parametrize("plugin", ["thinfilm_conductor", "thinfilm_dielectric", "thinfilm_diffuse"])
+def test_edited_thickness_rebuilds_the_colour_table(plugin):
+    """``mi.traverse`` edits rebuild the tables: the edited BSDF equals a fresh one,
+    and a bad value is refused naming the key (the last valid table stays)."""
+    def sample(bsdf):
+        _, w = bsdf.sample(mi.BSDFContext(), interaction(30.0), 0.3, mi.Point2f(0.4, 0.6))
+        return np.array(w, np.float64).ravel()
+    bsdf = mi.load_dict({"type": plugin, "layers": "1.46 300"})
+    before = sample(bsdf)
+    params = mi.traverse(bsdf)
+    params["layers.0.thickness"] = 420.0
+    params.update()
+    after = sample(bsdf)
+    np.testing.assert_allclose(after, sample(mi.load_dict({"type": plugin,
+                                                           "layers": "1.46 420"})), atol=1e-6)
+    assert np.max(np.abs(after - before)) > 1e-3     # the edit changed the colour
+    params["layers.0.thickness"] = float("nan")
+    with pytest.raises(Exception, match="thickness"):
+        params.update()
+    np.testing.assert_allclose(sample(bsdf), after, atol=1e-6)

@@ -134,7 +134,10 @@ def colour_table(stack, side, side_data):
             # the points' wavelengths repeat (one per angle node): indices per unique one
             uniq, rows = np.unique(wl, return_inverse=True)
             return _tables._evaluate(d, cos, rows, uniq, _tables._indices(d, uniq))
-        return integrated.Source(evaluate, chans)
+        # the stack's optical thickness at its thickest (the largest scale)
+        optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) * sum(
+            float(np.max(np.real(f(GRID)))) * t for f, t in data.films)
+        return integrated.Source(evaluate, chans, integrated.first_step(optical))
 
     C = 1 if channels == "mono" else 3
     if per_channel:

@@ -63,8 +63,15 @@ TOLERANCE_ABS = 1e-3
 #: metal cavities (~0.1 nm wide, narrower towards grazing incidence).
 MAX_LAMBDA_LEVEL = 7
 #: Max abs error in any channel of an integral: the sum of the intervals' error
-#: estimates (1e-5: ΔE2000 <= 0.01 for a dark colour, Y ~ 0.001).
+#: estimates (1e-5: ΔE2000 <= 0.01 for a dark colour, Y ~ 0.001) ...
 LAMBDA_TOLERANCE = 1e-5
+#: ... or this fraction of the integral, where that is larger (1e-4 of a bright
+#: colour: ΔE2000 ~ 0.005; L* varies as Y^(1/3), so a relative error is what the
+#: eye sees).
+LAMBDA_RELATIVE = 1e-4
+#: Largest first step (nm): 16 steps per interference fringe of the stack's whole
+#: optical thickness (:func:`first_step`) but never coarser than this.
+MAX_FIRST_STEP = 4.0
 #: First wavelength step (nm) of the adaptive integration; it divides the 1 nm
 #: spacing of the colour-matching data, so the weights are linear on every interval.
 FIRST_STEP = 0.5
@@ -148,6 +155,20 @@ def _close(a: np.ndarray, b: np.ndarray, channels: int) -> bool:
             and colour_difference(a, b, channels) <= TOLERANCE_DE)
 
 
+def first_step(optical_thickness: float) -> float:
+    """The first wavelength step (nm) for a stack of optical thickness ``Σ n_j d_j``
+    (largest real index over 360-830 nm): the narrowest fringe of all the films
+    together, ``Δλ = λ² / (2 Σ n_j d_j)`` at 360 nm, sampled 16 times, as a
+    power-of-two multiple of :data:`FIRST_STEP` in ``[FIRST_STEP,
+    MAX_FIRST_STEP]``. Deep stacks, whose cavity resonances are far narrower than
+    a fringe, get :data:`FIRST_STEP` and the refinement finds the rest."""
+    if optical_thickness <= 0:
+        return MAX_FIRST_STEP
+    step = SPECTRAL_RANGE[0] ** 2 / (2.0 * optical_thickness) / 16.0
+    k = int(np.floor(np.log2(max(step, FIRST_STEP) / FIRST_STEP)))
+    return float(min(FIRST_STEP * 2 ** k, MAX_FIRST_STEP))
+
+
 def _trapezoid(wl: np.ndarray) -> np.ndarray:
     h = np.full(wl.size, (wl[-1] - wl[0]) / (wl.size - 1))
     h[0] *= 0.5
@@ -164,6 +185,8 @@ class Source:
     the media are given per channel, e.g. ``eta``/``k`` as ``rgb``)."""
     evaluate: object
     channels: list = field(default_factory=list)
+    #: the first wavelength step (nm, :func:`first_step`)
+    first_step: float = FIRST_STEP
 
 
 def _weights(kind: str, channels: list):
@@ -197,7 +220,8 @@ def integrate(sources: list, weights_kind: str, cos: np.ndarray, scales: list) -
     out = None
     for src in sources:
         w = _weights(weights_kind, src.channels)
-        res = np.stack([_adaptive(src.evaluate, w, cos, s) for s in scales])   # (S, m, k, c)
+        res = np.stack([_adaptive(src.evaluate, w, cos, s, src.first_step)
+                        for s in scales])                                # (S, m, k, c)
         if out is None:
             out = np.zeros(res.shape[:3] + (C,))
         out[..., src.channels] = res
@@ -205,10 +229,10 @@ def integrate(sources: list, weights_kind: str, cos: np.ndarray, scales: list) -
     return out.reshape(S, m, k * C)
 
 
-def _adaptive(evaluate, w, cos: np.ndarray, scale) -> np.ndarray:
+def _adaptive(evaluate, w, cos: np.ndarray, scale, first_step: float = FIRST_STEP) -> np.ndarray:
     """:func:`integrate` of one source at one scale: shape ``(len cos, k, c)``."""
     lo, hi = SPECTRAL_RANGE
-    n = int(round((hi - lo) / FIRST_STEP))
+    n = int(round((hi - lo) / first_step))
     grid = lo + np.arange(n + 1) * ((hi - lo) / n)
     m = cos.size
     f = _evaluate_chunked(evaluate, np.repeat(cos, n + 1), scale, np.tile(grid, m))
@@ -218,14 +242,19 @@ def _adaptive(evaluate, w, cos: np.ndarray, scale) -> np.ndarray:
     a = np.tile(grid[:-1], m)
     ga, gb = g[:, :-1].reshape((-1,) + g.shape[2:]), g[:, 1:].reshape((-1,) + g.shape[2:])
     h = (hi - lo) / n
-    for level in range(MAX_LAMBDA_LEVEL + 1):
+    # the tolerance of a node: absolute for dark colours, relative for bright ones
+    # (the trapezoid rule on the first grid estimates the integral)
+    first = (0.5 * h * (ga + gb)).reshape(m, n, -1)
+    tol = np.maximum(LAMBDA_TOLERANCE, LAMBDA_RELATIVE * np.abs(first.sum(axis=1)).max(axis=1))
+    levels = MAX_LAMBDA_LEVEL + int(round(np.log2(first_step / FIRST_STEP)))
+    for level in range(levels + 1):
         mid = a + 0.5 * h
         gm = (_evaluate_chunked(evaluate, cos[node], scale, mid)[..., None]
               * w(mid)[:, None, :])
         coarse = 0.5 * h * (ga + gb)
         fine = 0.25 * h * (ga + 2.0 * gm + gb)
         err = np.abs(fine - coarse).reshape(len(a), -1).max(axis=1) / 3.0
-        ok = (err <= LAMBDA_TOLERANCE * h / (hi - lo)) | (level == MAX_LAMBDA_LEVEL)
+        ok = (err <= tol[node] * h / (hi - lo)) | (level == levels)
         np.add.at(total, node[ok], (fine + (fine - coarse) / 3.0)[ok])
         if np.all(ok):
             break
