@@ -206,9 +206,14 @@ class ColourDiffuse:
         def tables(level, t):
             _, _, _, t_hemi = level_data(level)
             nodes, b = basis(level)
-            # M[i, o, j, c] = sum_l t[i, l] t[o, l] b[l, j, c]
-            M = np.einsum("il,ol,ljc->iojc", t, t, b, optimize=True)
-            A = np.einsum("il,ljc->ijc", t * t_hemi[None, :], b, optimize=True)
+            # M[i, o, j, c] = sum_l t[i, l] t[o, l] b[l, j, c]: one matrix product
+            # per (j, c) (BLAS; einsum's path search alone costs more at these sizes)
+            K = b.shape[1]
+            M = np.empty((t.shape[0], t.shape[0], K, C))
+            for j in range(K):
+                for c in range(C):
+                    M[:, :, j, c] = (t * b[:, j, c][None, :]) @ t.T
+            A = ((t * t_hemi[None, :]) @ b.reshape(b.shape[0], -1)).reshape(t.shape[0], K, C)
             return M, A, nodes
 
         level, nu = 0, FIRST_NODES
