@@ -129,11 +129,13 @@ def colour_table(stack, side, side_data):
         data = with_absorbing(data)
 
         def evaluate(cos, scale, wl):
-            d = data if scale is None else replace(
+            per_point = isinstance(scale, np.ndarray)   # a scale per point (2-D tables)
+            d = data if scale is None or per_point else replace(
                 data, films=[(f, t * scale) for f, t in data.films])
             # the points' wavelengths repeat (one per angle node): indices per unique one
             uniq, rows = np.unique(wl, return_inverse=True)
-            return _tables._evaluate(d, cos, rows, uniq, _tables._indices(d, uniq))
+            return _tables._evaluate(d, cos, rows, uniq, _tables._indices(d, uniq),
+                                     scale if per_point else None)
         # the stack's optical thickness at its thickest (the largest scale)
         optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) * sum(
             float(np.max(np.real(f(GRID)))) * t for f, t in data.films)

@@ -58,6 +58,11 @@ from .textures import _mi
 #: one checked, so its own error is ~1/16 of the check's for a smooth function
 #: (tests/test_rgb.py: the tables are within ΔE2000 0.03 of a 0.01 nm reference).
 TOLERANCE_DE = 0.05
+#: The same for the nodes of a 2-D table (a ``thickness`` texture): the cells
+#: multiply by four at every level, and ΔE2000 0.2 is a fifth of a just noticeable
+#: difference (tests/test_rgb.py checks such a table against the reference).
+TOLERANCE_DE_2D = 0.2
+TOLERANCE_ABS_2D = 3e-3
 TOLERANCE_ABS = 1e-3
 #: Finest wavelength step tried (nm): 2^-7 nm, below the resonances of 30-film
 #: metal cavities (~0.1 nm wide, narrower towards grazing incidence).
@@ -83,8 +88,10 @@ LINEAR_ABS = 2e-4
 #: Nodes of the first grid along the angle axis, and along the thickness scale.
 FIRST_NODES = 17
 FIRST_SCALE_NODES = 17
-#: Most nodes along one axis, and texels (nodes of both axes) of a 2-D table.
+#: Most nodes along one axis, and texels (nodes of both axes) of a 2-D table
+#: (whose integrals stop at MAX_NODES_2D nodes per axis).
 MAX_NODES = 1025
+MAX_NODES_2D = 257
 MAX_TEXELS_2D = 1 << 17
 #: Points (angle nodes x wavelengths) per float64 kernel launch of a build.
 CHUNK_POINTS = 1 << 21
@@ -229,13 +236,33 @@ def integrate(sources: list, weights_kind: str, cos: np.ndarray, scales: list) -
     return out.reshape(S, m, k * C)
 
 
+def integrate_points(sources: list, weights_kind: str, cos: np.ndarray,
+                     scale: np.ndarray) -> np.ndarray:
+    """:func:`integrate` at the points ``(cos[i], scale[i])`` (flat arrays, one
+    batch): shape ``(len cos, k * C)``."""
+    C = 1 if weights_kind == "mono" else 3
+    out = None
+    for src in sources:
+        res = _adaptive(src.evaluate, _weights(weights_kind, src.channels), cos,
+                        np.asarray(scale, np.float64), src.first_step)     # (m, k, c)
+        if out is None:
+            out = np.zeros(res.shape[:2] + (C,))
+        out[..., src.channels] = res
+    return out.reshape(out.shape[0], -1)
+
+
 def _adaptive(evaluate, w, cos: np.ndarray, scale, first_step: float = FIRST_STEP) -> np.ndarray:
     """:func:`integrate` of one source at one scale: shape ``(len cos, k, c)``."""
     lo, hi = SPECTRAL_RANGE
     n = int(round((hi - lo) / first_step))
     grid = lo + np.arange(n + 1) * ((hi - lo) / n)
     m = cos.size
-    f = _evaluate_chunked(evaluate, np.repeat(cos, n + 1), scale, np.tile(grid, m))
+    per_node = isinstance(scale, np.ndarray)     # a scale per node (2-D tables)
+
+    def scale_at(nodes):
+        return scale[nodes] if per_node else scale
+    f = _evaluate_chunked(evaluate, np.repeat(cos, n + 1),
+                          np.repeat(scale, n + 1) if per_node else scale, np.tile(grid, m))
     g = f.reshape(m, n + 1, -1)[..., None] * w(grid)[None, :, None, :]      # (m, n+1, k, c)
     total = np.zeros(g.shape[:1] + g.shape[2:])
     node = np.repeat(np.arange(m), n)
@@ -249,7 +276,7 @@ def _adaptive(evaluate, w, cos: np.ndarray, scale, first_step: float = FIRST_STE
     levels = MAX_LAMBDA_LEVEL + int(round(np.log2(first_step / FIRST_STEP)))
     for level in range(levels + 1):
         mid = a + 0.5 * h
-        gm = (_evaluate_chunked(evaluate, cos[node], scale, mid)[..., None]
+        gm = (_evaluate_chunked(evaluate, cos[node], scale_at(node), mid)[..., None]
               * w(mid)[:, None, :])
         coarse = 0.5 * h * (ga + gb)
         fine = 0.25 * h * (ga + 2.0 * gm + gb)
@@ -271,8 +298,10 @@ def _adaptive(evaluate, w, cos: np.ndarray, scale, first_step: float = FIRST_STE
 def _evaluate_chunked(evaluate, cos: np.ndarray, scale, wl: np.ndarray) -> np.ndarray:
     if cos.size == 0:
         return np.zeros((0, 1))
-    parts = [evaluate(cos[i:i + CHUNK_POINTS], scale, wl[i:i + CHUNK_POINTS])
-             for i in range(0, cos.size, CHUNK_POINTS)]
+    def chunk(i):
+        sc = scale[i:i + CHUNK_POINTS] if isinstance(scale, np.ndarray) else scale
+        return evaluate(cos[i:i + CHUNK_POINTS], sc, wl[i:i + CHUNK_POINTS])
+    parts = [chunk(i) for i in range(0, cos.size, CHUNK_POINTS)]
     return np.concatenate(parts, axis=0)
 
 
@@ -413,8 +442,8 @@ def _segments(values: np.ndarray, segments: int, axis: int = 1) -> list:
 def build(sources: list, weights_kind: str, transmission: bool, axis: Axis,
           scale_max: float | None = None, fixed_scale: float | None = None) -> ColourTable:
     """The :class:`ColourTable` of one side (see the module docstring): over the
-    angle, and the thickness scale in ``[0, scale_max]`` if given; with
-    ``fixed_scale`` every film's thickness is scaled by it (a constant
+    angle, and the thickness scale in ``[0, scale_max]`` if given (:func:`_build_2d`);
+    with ``fixed_scale`` every film's thickness is scaled by it (a constant
     ``thickness`` texture).
 
     Integrals are computed only where they are needed: every interval of the
@@ -423,6 +452,8 @@ def build(sources: list, weights_kind: str, transmission: bool, axis: Axis,
     its finer nodes are the rule's; one it mispredicted is split and both
     halves are checked again (a critical angle, the grazing rise of a
     resonant stack). The exact midpoints are kept."""
+    if scale_max is not None:
+        return _build_2d(sources, weights_kind, transmission, axis, scale_max)
     C = 1 if weights_kind == "mono" else 3
     seg = axis.segments
     mirror = axis.kind == "plain"
@@ -480,6 +511,92 @@ def build(sources: list, weights_kind: str, transmission: bool, axis: Axis,
                                 axis=1)
         nu = axis.refined(nu)
     while scale_max is not None and nu * ns * 2 <= MAX_TEXELS_2D:
+        if _linear_ok(values, 0, False, C):
+            break
+        values, ns = _interleave(values, _midpoints4(values, 0), 0), 2 * ns - 1
+    return ColourTable(values, axis, C, transmission, scale_max)
+
+
+def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
+              scale_max: float) -> ColourTable:
+    """:func:`build` over the angle and the thickness scale ``s`` in ``[0,
+    scale_max]``, refined cell by cell: every level doubles both axes; a new
+    node is predicted by the 4-point rule (along its axis; a cell centre along
+    both) and computed exactly only next to an open cell. A cell stays open
+    while one of its new nodes was mispredicted (:func:`close_each`); its four
+    children then are checked again. Every exact integral of one level is one
+    batch (:func:`integrate_points`), so interference colours that change with
+    the thickness but little with the angle cost integrals along ``s`` only."""
+    C = 1 if weights_kind == "mono" else 3
+    seg = axis.segments
+    mirror = axis.kind == "plain"
+    nu, ns = FIRST_NODES * seg, FIRST_SCALE_NODES
+    S = np.linspace(0.0, scale_max, ns)
+    values = integrate(sources, weights_kind, axis.cos(nu), list(S))      # (ns, nu, kC)
+    open_ = np.ones((ns - 1, nu - seg), bool)                             # cells (s, u)
+
+    def interleave_u(a, b):
+        return np.concatenate([_interleave(x, y, 1) for x, y in
+                               zip(_segments(a, seg), _segments(b, seg))], axis=1)
+
+    while open_.any() and nu // seg < MAX_NODES_2D and ns < MAX_NODES_2D:
+        m = nu // seg
+        # the intervals either side of every angle node (-1 at a segment's ends)
+        j = np.arange(nu)
+        left = np.where(j % m > 0, (j // m) * (m - 1) + j % m - 1, -1)
+        right = np.where(j % m < m - 1, (j // m) * (m - 1) + j % m, -1)
+        um = np.concatenate([_midpoints4(a, 1, mirror) for a in _segments(values, seg)],
+                            axis=1)                                      # (ns, nu-seg)
+        sm = _midpoints4(values, 0)                                      # (ns-1, nu)
+        cm = _midpoints4(um, 0)                                          # (ns-1, nu-seg)
+        need_um = np.zeros(um.shape[:2], bool)
+        need_um[:-1] |= open_
+        need_um[1:] |= open_
+        pad = np.concatenate([open_, np.zeros((ns - 1, 1), bool)], axis=1)
+        need_sm = pad[:, left] & (left >= 0)[None, :] | pad[:, right] & (right >= 0)[None, :]
+        cos_n, cos_m = axis.cos(nu), axis.midpoints(nu)
+        s_mid = 0.5 * (S[:-1] + S[1:])
+        sets = [(um, need_um, S[:, None], cos_m[None, :]),
+                (sm, need_sm, s_mid[:, None], cos_n[None, :]),
+                (cm, open_, s_mid[:, None], cos_m[None, :])]
+        cos_pts = np.concatenate([np.broadcast_to(c, need.shape)[need] for _, need, _, c in sets])
+        s_pts = np.concatenate([np.broadcast_to(sc, need.shape)[need] for _, need, sc, _ in sets])
+        exact = integrate_points(sources, weights_kind, cos_pts, s_pts)
+        bad = []
+        start = 0
+        for grid, need, _, _ in sets:
+            k = int(need.sum())
+            ok = close_each(grid[need], exact[start:start + k], C, axis=0,
+                            de=TOLERANCE_DE_2D, abs_=TOLERANCE_ABS_2D)
+            grid[need] = exact[start:start + k]
+            miss = np.zeros(need.shape, bool)
+            miss[need] = ~ok
+            bad.append(miss)
+            start += k
+        bad_um, bad_sm, bad_cm = bad
+        # a cell failed if its centre, an edge midpoint along u (below, above) or
+        # one along s (left, right node) was mispredicted
+        u_int = np.arange(nu - seg)
+        node_l = (u_int // (m - 1)) * m + u_int % (m - 1)              # its left node
+        failed = (bad_cm | bad_um[:-1] | bad_um[1:] | bad_sm[:, node_l]
+                  | bad_sm[:, node_l + 1]) & open_
+        values = _interleave(interleave_u(values, um), interleave_u(sm, cm), 0)
+        nu, ns = axis.refined(nu), 2 * ns - 1
+        S = np.linspace(0.0, scale_max, ns)
+        open_ = np.zeros((ns - 1, nu - seg), bool)
+        fs, fu = np.nonzero(failed)
+        for ds in (0, 1):
+            for du in (0, 1):
+                open_[2 * fs + ds, 2 * fu + du] = True
+    # Denser texels by the same rule, until linear interpolation (the lookup) is as good.
+    while nu * ns * 2 <= MAX_TEXELS_2D:
+        parts = _segments(values, seg)
+        if all(_linear_ok(a, 1, mirror, C) for a in parts):
+            break
+        values = np.concatenate([_interleave(a, _midpoints4(a, 1, mirror), 1) for a in parts],
+                                axis=1)
+        nu = axis.refined(nu)
+    while nu * ns * 2 <= MAX_TEXELS_2D:
         if _linear_ok(values, 0, False, C):
             break
         values, ns = _interleave(values, _midpoints4(values, 0), 0), 2 * ns - 1

@@ -419,9 +419,10 @@ def _indices(side: SideData, wl: np.ndarray):
 
 
 def _evaluate(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
-              indices) -> np.ndarray:
+              indices, scale: np.ndarray | None = None) -> np.ndarray:
     """Exact float64 R [, T] at points ``(cos0[i], wl[rows[i]])`` (flat arrays),
-    with ``indices`` (:func:`_indices`) at the wavelengths ``wl``; returns shape
+    with ``indices`` (:func:`_indices`) at the wavelengths ``wl``, every film's
+    thickness times ``scale[i]`` if given (a flat array); returns shape
     (len cos0, channels). One trace and one kernel launch for all the points;
     the phase follows the wavelength also beyond 360-830 nm.
 
@@ -449,6 +450,7 @@ def _evaluate(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray
         return Cx(per_row(values.real), per_row(values.imag) if complex_ else 0.0)
 
     args = (per_row(n0), float64_array(cos0))
+    per_point = None if scale is None else float64_array(np.asarray(scale, np.float64))
     tail = (cx(n_exit, absorbing[-1]), per_row(wl), side.transmission)
     if side.rt_loop is not None and len(film_n) >= BUILD_LOOP_MIN_FILMS:
         re = np.concatenate([n.real for n in film_n])
@@ -462,14 +464,16 @@ def _evaluate(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray
             i = j * width + at
             m = Cx(dr.gather(Float64, buf_re, i),
                    0.0 if real else dr.gather(Float64, buf_im, i))
-            return m, dr.gather(Float64, thick, j)
+            d = dr.gather(Float64, thick, j)
+            return m, d if per_point is None else d * per_point
 
         res = side.rt_loop(*args, dr.opaque(UInt32, len(film_n), len(rows)), film, *tail,
                            n0_max=float(np.max(n0)), film_n_min=float(re.min()) if real else None,
                            film_n_max=float(re.max()) if real else None,
                            films_max=len(film_n))
     else:
-        films = [(cx(n, a), dr.opaque(Float64, float(d)))
+        films = [(cx(n, a), dr.opaque(Float64, float(d)) if per_point is None
+                  else dr.opaque(Float64, float(d)) * per_point)
                  for n, a, (_, d) in zip(film_n, absorbing, side.films)]
         res = side.rt(*args, films, *tail)
     res = res if side.transmission else (res,)
