@@ -84,7 +84,9 @@ def test_every_plugin_has_a_readme_table_and_an_xml_example():
         rows = gen.parse_table(gen.plugin_doc(path), path.name)
         assert rows, path.name
         assert f"#### `{path.stem}`" in region, f"no parameter table for {path.stem}"
-        assert f'<bsdf type="{path.stem}"' in readme, f"no XML example for {path.stem} in README.md"
+        # a BSDF's example is a <bsdf>, a texture's (thinfilm_blackbody) a <spectrum>/<texture>
+        assert re.search(rf'<(bsdf|spectrum|texture) type="{path.stem}"', readme), \
+            f"no XML example for {path.stem} in README.md"
 
 
 def test_readme_setup_commands_are_makefile_targets():

@@ -7,7 +7,9 @@ requested size, RGB channels, finite pixels that are not all black and have
 no negative luminance, and its metadata (scene path, variant, spp, seed, no parameters).
 Scenes that use Mitsuba's ``stokes`` integrator (which refuses unpolarized variants) are
 rendered in a second subprocess in ``llvm_ad_spectral_polarized`` and must also carry the
-S0..S3 channels, with S0 equal to the RGB image. The
+S0..S3 channels, with S0 equal to the RGB image. Every other scene is also rendered
+in ``llvm_ad_rgb`` (the project requires that every scene renders there), by a third
+subprocess for all of them at once, with the same checks. The
 error paths of the CLI (bad -D, missing file, unknown plugin) are in
 tests/test_cli.py.
 """
@@ -29,6 +31,7 @@ REPO = Path(__file__).resolve().parent.parent
 SCENES = sorted((REPO / "scenes").glob("*.xml"))
 WIDTH, HEIGHT, SPP, SEED = 24, 16, 1, 3
 POLARIZED_VARIANT = "llvm_ad_spectral_polarized"
+RGB_VARIANT = "llvm_ad_rgb"
 STOKES = ["S0", "S1", "S2", "S3"]
 
 
@@ -41,23 +44,62 @@ def variant_of(scene: Path) -> str:
     return POLARIZED_VARIANT if needs_polarized(scene) else cli.DEFAULT_VARIANT
 
 
+def render_all(scenes: list[Path], variant: str, out: Path) -> str:
+    """Render ``scenes`` in one CLI subprocess into ``out``; returns its stderr."""
+    proc = subprocess.run(
+        [sys.executable, "-m", "thinfilm_mi", "render", *map(str, scenes), "--out-dir", str(out),
+         "--size", f"{WIDTH}x{HEIGHT}", "--spp", str(SPP), "--seed", str(SEED),
+         "--variant", variant],
+        capture_output=True, text=True, cwd=out, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-4000:]
+    return proc.stderr
+
+
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
     """Render every scene once; returns (output folder, the CLI's stderr)."""
     out = tmp_path_factory.mktemp("scenes")
     err = ""
     for variant in (cli.DEFAULT_VARIANT, POLARIZED_VARIANT):
-        scenes = [str(p) for p in SCENES if variant_of(p) == variant]
-        if not scenes:
-            continue
-        proc = subprocess.run(
-            [sys.executable, "-m", "thinfilm_mi", "render", *scenes, "--out-dir", str(out),
-             "--size", f"{WIDTH}x{HEIGHT}", "--spp", str(SPP), "--seed", str(SEED),
-             "--variant", variant],
-            capture_output=True, text=True, cwd=out, timeout=900)
-        assert proc.returncode == 0, proc.stderr[-4000:]
-        err += proc.stderr
+        scenes = [p for p in SCENES if variant_of(p) == variant]
+        if scenes:
+            err += render_all(scenes, variant, out)
     return out, err
+
+
+RGB_SCENES = [p for p in SCENES if not needs_polarized(p)]
+
+
+@pytest.fixture(scope="module")
+def rendered_rgb(tmp_path_factory):
+    """Every scene that does not need a polarized variant, rendered in llvm_ad_rgb by
+    one CLI subprocess; returns (output folder, the CLI's stderr)."""
+    out = tmp_path_factory.mktemp("scenes_rgb")
+    return out, render_all(RGB_SCENES, RGB_VARIANT, out)
+
+
+def check_image(scene: Path, exr: Path, variant: str, err: str, stokes: list[str]) -> np.ndarray:
+    """The checks every rendered scene passes; returns its RGB image."""
+    assert exr.is_file(), err[-4000:]
+    channels, header = read_exr(exr)
+    assert sorted(channels) == sorted(["B", "G", "R", *stokes])
+    image = np.stack([channels[c] for c in "RGB"], axis=-1)
+    assert image.shape == (HEIGHT, WIDTH, 3)
+    assert np.all(np.isfinite(image)), f"{scene.name}: NaN/inf pixels"
+    # single spectral samples can fall outside the sRGB gamut (a negative channel),
+    # but their luminance Y (CIE y-bar >= 0 weighting of a radiance >= 0) cannot; an
+    # RGB variant's colours (integrated spectra) can be outside the gamut too
+    luminance = image @ np.array([0.2126, 0.7152, 0.0722])
+    assert luminance.min() >= -1e-4, f"{scene.name}: negative luminance {luminance.min()}"
+    assert image.mean() > 1e-3, f"{scene.name}: black image"
+    assert header["scene"] == str(scene.resolve())
+    assert header["variant"] == variant
+    assert header["spp"] == SPP
+    assert header["seed"] == SEED
+    assert header["parameters"] == ""
+    assert exr.with_suffix(".png").is_file()
+    assert f"-> {exr}" in err  # the one-line summary of this scene
+    return image
 
 
 def test_scenes_exist():
@@ -73,32 +115,22 @@ def test_scenes_exist():
 def test_scene_renders(scene, rendered):
     out, err = rendered
     exr = out / f"{scene.stem}.exr"
-    assert exr.is_file(), err[-4000:]
-    channels, header = read_exr(exr)
     stokes = [f"{s}.{c}" for s in STOKES for c in "RGB"] if needs_polarized(scene) else []
-    assert sorted(channels) == sorted(["B", "G", "R", *stokes])
-    image = np.stack([channels[c] for c in "RGB"], axis=-1)
+    image = check_image(scene, exr, variant_of(scene), err, stokes)
     if stokes:
+        channels, _ = read_exr(exr)
         S = np.stack([np.stack([channels[f"{s}.{c}"] for c in "RGB"], -1) for s in STOKES])
         assert np.all(np.isfinite(S))
         # the film's RGB is the intensity S0 (up to float32 rounding of the conversions);
         # the degree of polarization is checked per wavelength in tests/test_polarized.py
         assert np.allclose(S[0], image, rtol=1e-4, atol=1e-5)
         assert np.abs(S[1:]).max() > 0   # the stokes channels are filled
-    assert image.shape == (HEIGHT, WIDTH, 3)
-    assert np.all(np.isfinite(image)), f"{scene.name}: NaN/inf pixels"
-    # single spectral samples can fall outside the sRGB gamut (a negative channel),
-    # but their luminance Y (CIE y-bar >= 0 weighting of a radiance >= 0) cannot
-    luminance = image @ np.array([0.2126, 0.7152, 0.0722])
-    assert luminance.min() >= -1e-4, f"{scene.name}: negative luminance {luminance.min()}"
-    assert image.mean() > 1e-3, f"{scene.name}: black image"
-    assert header["scene"] == str(scene.resolve())
-    assert header["variant"] == variant_of(scene)
-    assert header["spp"] == SPP
-    assert header["seed"] == SEED
-    assert header["parameters"] == ""
-    assert (out / f"{scene.stem}.png").is_file()
-    assert f"-> {exr}" in err  # the one-line summary of this scene
+
+
+@pytest.mark.parametrize("scene", RGB_SCENES, ids=[p.stem for p in RGB_SCENES])
+def test_scene_renders_in_rgb(scene, rendered_rgb):
+    out, err = rendered_rgb
+    check_image(scene, out / f"{scene.stem}.exr", RGB_VARIANT, err, [])
 
 
 def test_several_scenes_need_out_dir_not_o(tmp_path):

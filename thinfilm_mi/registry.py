@@ -1,6 +1,7 @@
 """Registration of the thin-film plugins with Mitsuba.
 
-:func:`register` registers every plugin of :mod:`thinfilm_mi.plugins` for the
+:func:`register` registers every plugin of :mod:`thinfilm_mi.plugins` (the
+BSDFs of :data:`PLUGINS` and the textures of :data:`TEXTURES`) for the
 current Mitsuba variant and installs a variant callback so that they are
 registered again whenever ``mi.set_variant`` switches variant. Plugins are
 registered in every variant; in a variant they do not support (RGB, mono)
@@ -19,6 +20,12 @@ PLUGINS = {
     "thinfilm_roughdielectric": ("thinfilm_roughdielectric", "ThinFilmRoughDielectric"),
 }
 
+#: texture (and spectrum) plugin name -> (module in thinfilm_mi.plugins, class name);
+#: apart from :data:`PLUGINS`, which the tests treat as the list of BSDFs
+TEXTURES = {
+    "thinfilm_blackbody": ("thinfilm_blackbody", "ThinFilmBlackbody"),
+}
+
 _callback_installed = False
 
 
@@ -28,16 +35,18 @@ def _register_current() -> list[str]:
     if mi.variant() is None:
         return []
     done = []
-    for name, (module, cls_name) in PLUGINS.items():
-        # Modules are imported after the variant is set: their classes derive
-        # from the variant's mi.BSDF, so they are re-imported per variant.
-        mod = importlib.import_module(f"thinfilm_mi.plugins.{module}")
-        if getattr(mod, "_variant", None) != mi.variant():
-            mod = importlib.reload(mod)
-            mod._variant = mi.variant()
-        cls = getattr(mod, cls_name)
-        mi.register_bsdf(name, lambda props, cls=cls: cls(props))
-        done.append(name)
+    for plugins, register_plugin in ((PLUGINS, mi.register_bsdf),
+                                     (TEXTURES, mi.register_texture)):
+        for name, (module, cls_name) in plugins.items():
+            # Modules are imported after the variant is set: their classes derive
+            # from the variant's mi.BSDF (mi.Texture), so they are re-imported per variant.
+            mod = importlib.import_module(f"thinfilm_mi.plugins.{module}")
+            if getattr(mod, "_variant", None) != mi.variant():
+                mod = importlib.reload(mod)
+                mod._variant = mi.variant()
+            cls = getattr(mod, cls_name)
+            register_plugin(name, lambda props, cls=cls: cls(props))
+            done.append(name)
     return done
 
 
