@@ -272,15 +272,17 @@ class ThinFilmDiffuse(mi.BSDF):
         check_unqueried(props, NAME)
 
         self.no_films = len(films) == 0
+        # RGB/mono variants read only k_r from the coating's colour table: the
+        # transmission enters through the diffuse table (coated_diffuse)
+        sides = {False: not self.mode.integrated}
         if films and _absorbs(films[-1][0]):
             # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
-            self.coating = KernelStack(films[:-1], ext, films[-1][0], sides={False: True},
-                                       **options)
+            self.coating = KernelStack(films[:-1], ext, films[-1][0], sides=sides, **options)
             self.film_n = films[-1][0]
             self.film_n_thickness = opaque_float(films[-1][1])
         else:
             # No absorbing film N: all films over the base medium (matched to the ambient).
-            self.coating = KernelStack(films, ext, ext, sides={False: True}, **options)
+            self.coating = KernelStack(films, ext, ext, sides=sides, **options)
             self.film_n = None
             self.film_n_thickness = None
 

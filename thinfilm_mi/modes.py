@@ -61,6 +61,8 @@ class SpectralMode:
 
     name = "spectral"
     polarized = False
+    #: Whether values are integrated over wavelengths at load time (RGB and mono)
+    integrated = False
     #: The lobe of a diffuse (depolarising) component.
     depolarized = None
 
@@ -143,7 +145,6 @@ class ColourMode(SpectralMode):
 
 
 _MODES = {"spectral": SpectralMode(), "polarized": PolarizedMode(), "colour": ColourMode()}
-SpectralMode.integrated = False
 
 
 def current() -> SpectralMode:
