@@ -83,17 +83,16 @@ def colour_table(stack, side, side_data):
         if v is None:
             per_channel[id(ix)] = ix.channel_values()
             v = per_channel[id(ix)]
-            if v is None or side.films:
-                where = "the substrate" if ix is side.exit else "a medium"
-                if v is None and not side.films:
+            if v is None:
+                if not side.films:
                     return None   # per-channel Fresnel of a spatially varying eta/k
-                if v is None:
-                    raise ThinFilmError(
-                        f"{stack.plugin}: 'eta'/'k' ({where}) vary over the surface, and films "
-                        f"lie on it: in the {_mi().variant()!r} variant a spectrum or a "
-                        "constant (number, rgb) is required there, so that the films can "
-                        "be integrated over wavelengths at load time (or use a spectral "
-                        "variant)")
+                where = "the substrate" if ix is side.exit else "a medium"
+                raise ThinFilmError(
+                    f"{stack.plugin}: 'eta'/'k' ({where}) vary over the surface, and films "
+                    f"lie on it: in the {_mi().variant()!r} variant a spectrum or a "
+                    "constant (number, rgb) is required there, so that the films can "
+                    "be integrated over wavelengths at load time (or use a spectral "
+                    "variant)")
         h.update(np.ascontiguousarray(v).tobytes())
     if per_channel and not side.films:
         return None   # per-channel Fresnel, exactly as Mitsuba's conductor
@@ -118,8 +117,7 @@ def colour_table(stack, side, side_data):
     h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
     h.update(repr((_mi().variant(), channels, transmission, side.exit_real, side.opaque, axis,
                    scale_max, fixed_scale,
-                   integrated.TOLERANCE_DE, integrated.TOLERANCE_ABS, integrated.LAMBDA_TOLERANCE,
-                   integrated.LINEAR_DE, integrated.LINEAR_ABS)).encode())
+                   integrated.settings())).encode())
     key = h.hexdigest()
     found, table = COLOUR_CACHE.get(key)
     if found:

@@ -97,6 +97,13 @@ MAX_TEXELS_2D = 1 << 17
 CHUNK_POINTS = 1 << 21
 
 
+def settings() -> tuple:
+    """The tolerances and limits a table depends on (part of the cache key)."""
+    return (TOLERANCE_DE, TOLERANCE_ABS, TOLERANCE_DE_2D, TOLERANCE_ABS_2D, LAMBDA_TOLERANCE,
+            LAMBDA_RELATIVE, FIRST_STEP, MAX_FIRST_STEP, MAX_LAMBDA_LEVEL, LINEAR_DE,
+            LINEAR_ABS, FIRST_NODES, FIRST_SCALE_NODES, MAX_NODES, MAX_NODES_2D, MAX_TEXELS_2D)
+
+
 def xyz_to_srgb_matrix() -> np.ndarray:
     """Mitsuba's XYZ -> linear sRGB matrix (rows: R, G, B)."""
     mi = _mi()
@@ -458,59 +465,43 @@ def build(sources: list, weights_kind: str, transmission: bool, axis: Axis,
     seg = axis.segments
     mirror = axis.kind == "plain"
     nu = FIRST_NODES * seg
-    ns = 1 if scale_max is None else FIRST_SCALE_NODES
-
-    def scales(n):
-        return [fixed_scale] if scale_max is None else list(np.linspace(0.0, scale_max, n))
-
-    def at(n, idx):
-        return [scales(n)[i] for i in idx]
-
-    def interleave_u(values, mid):
-        return np.concatenate([_interleave(a, b, 1) for a, b in
-                               zip(_segments(values, seg), _segments(mid, seg))], axis=1)
-
-    def children(idx, count):
-        out = np.zeros(count, bool)
-        out[2 * idx], out[2 * idx + 1] = True, True
-        return out
-
-    values = integrate(sources, weights_kind, axis.cos(nu), scales(ns))
+    values = integrate(sources, weights_kind, axis.cos(nu), [fixed_scale])   # (1, nu, kC)
     open_u = np.ones(nu - seg, bool)                    # intervals along the angle
-    open_s = np.ones(ns - 1, bool)                      # ... and the thickness scale
-    while open_u.any() or open_s.any():
-        if open_u.any() and nu // seg < MAX_NODES:
-            mid = np.concatenate([_midpoints4(a, 1, mirror) for a in _segments(values, seg)],
-                                 axis=1)
-            idx = np.flatnonzero(open_u)
-            exact = integrate(sources, weights_kind, axis.midpoints(nu)[idx], scales(ns))
-            bad = idx[~close_each(mid[:, idx], exact, C, axis=1)]
-            mid[:, idx] = exact
-            values, nu = interleave_u(values, mid), axis.refined(nu)
-            open_u = children(bad, nu - seg)
-        else:
-            open_u[:] = False
-        if open_s.any() and nu * (2 * ns - 1) <= MAX_TEXELS_2D:
-            mid = _midpoints4(values, 0)
-            idx = np.flatnonzero(open_s)
-            s_mid = np.linspace(0.0, scale_max, 2 * ns - 1)[1::2]
-            exact = integrate(sources, weights_kind, axis.cos(nu), list(s_mid[idx]))
-            bad = idx[~close_each(mid[idx], exact, C, axis=0)]
-            mid[idx] = exact
-            values, ns = _interleave(values, mid, 0), 2 * ns - 1
-            open_s = children(bad, ns - 1)
-        else:
-            open_s[:] = False
-    # Denser texels by the same rule, until linear interpolation (the lookup) is as good.
-    while nu * 2 <= MAX_NODES * seg * 4 and nu * ns * 2 <= (MAX_TEXELS_2D if scale_max
-                                                             else 1 << 30):
+    while open_u.any() and nu // seg < MAX_NODES:
+        mid = np.concatenate([_midpoints4(a, 1, mirror) for a in _segments(values, seg)],
+                             axis=1)
+        idx = np.flatnonzero(open_u)
+        exact = integrate(sources, weights_kind, axis.midpoints(nu)[idx], [fixed_scale])
+        bad = idx[~close_each(mid[:, idx], exact, C, axis=1)]
+        mid[:, idx] = exact
+        values, nu = _interleave_u(values, mid, seg), axis.refined(nu)
+        open_u = np.zeros(nu - seg, bool)
+        open_u[2 * bad], open_u[2 * bad + 1] = True, True
+    return _for_lookup(values, axis, C, transmission, None, MAX_NODES * seg * 4)
+
+
+def _interleave_u(values: np.ndarray, mid: np.ndarray, seg: int) -> np.ndarray:
+    """Nodes and midpoints interleaved along the angle (axis 1), segment by segment."""
+    return np.concatenate([_interleave(a, b, 1) for a, b in
+                           zip(_segments(values, seg), _segments(mid, seg))], axis=1)
+
+
+def _for_lookup(values: np.ndarray, axis: Axis, C: int, transmission: bool,
+                scale_max: float | None, max_texels: int) -> ColourTable:
+    """The table of ``values`` (scales x angles x channels), with texels added by
+    the 4-point rule (along the angle, then the scale) until linear interpolation,
+    the lookup, is within :data:`LINEAR_DE` / :data:`LINEAR_ABS` of it, or
+    ``max_texels`` would be exceeded."""
+    seg, mirror = axis.segments, axis.kind == "plain"
+    ns, nu = values.shape[0], values.shape[1]
+    while nu * ns * 2 <= max_texels:
         parts = _segments(values, seg)
         if all(_linear_ok(a, 1, mirror, C) for a in parts):
             break
         values = np.concatenate([_interleave(a, _midpoints4(a, 1, mirror), 1) for a in parts],
                                 axis=1)
         nu = axis.refined(nu)
-    while scale_max is not None and nu * ns * 2 <= MAX_TEXELS_2D:
+    while scale_max is not None and nu * ns * 2 <= max_texels:
         if _linear_ok(values, 0, False, C):
             break
         values, ns = _interleave(values, _midpoints4(values, 0), 0), 2 * ns - 1
@@ -534,10 +525,6 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
     S = np.linspace(0.0, scale_max, ns)
     values = integrate(sources, weights_kind, axis.cos(nu), list(S))      # (ns, nu, kC)
     open_ = np.ones((ns - 1, nu - seg), bool)                             # cells (s, u)
-
-    def interleave_u(a, b):
-        return np.concatenate([_interleave(x, y, 1) for x, y in
-                               zip(_segments(a, seg), _segments(b, seg))], axis=1)
 
     while open_.any() and nu // seg < MAX_NODES_2D and ns < MAX_NODES_2D:
         m = nu // seg
@@ -580,7 +567,7 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
         node_l = (u_int // (m - 1)) * m + u_int % (m - 1)              # its left node
         failed = (bad_cm | bad_um[:-1] | bad_um[1:] | bad_sm[:, node_l]
                   | bad_sm[:, node_l + 1]) & open_
-        values = _interleave(interleave_u(values, um), interleave_u(sm, cm), 0)
+        values = _interleave(_interleave_u(values, um, seg), _interleave_u(sm, cm, seg), 0)
         nu, ns = axis.refined(nu), 2 * ns - 1
         S = np.linspace(0.0, scale_max, ns)
         open_ = np.zeros((ns - 1, nu - seg), bool)
@@ -588,16 +575,4 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
         for ds in (0, 1):
             for du in (0, 1):
                 open_[2 * fs + ds, 2 * fu + du] = True
-    # Denser texels by the same rule, until linear interpolation (the lookup) is as good.
-    while nu * ns * 2 <= MAX_TEXELS_2D:
-        parts = _segments(values, seg)
-        if all(_linear_ok(a, 1, mirror, C) for a in parts):
-            break
-        values = np.concatenate([_interleave(a, _midpoints4(a, 1, mirror), 1) for a in parts],
-                                axis=1)
-        nu = axis.refined(nu)
-    while nu * ns * 2 <= MAX_TEXELS_2D:
-        if _linear_ok(values, 0, False, C):
-            break
-        values, ns = _interleave(values, _midpoints4(values, 0), 0), 2 * ns - 1
-    return ColourTable(values, axis, C, transmission, scale_max)
+    return _for_lookup(values, axis, C, transmission, scale_max, MAX_TEXELS_2D)
