@@ -25,9 +25,9 @@ ROOT = HERE.parent
 PROCESSES = 24
 
 
-def _load_once(_):
-    out = subprocess.run([sys.executable, str(HERE / "_parallel_load_child.py"), str(ROOT)],
-                         capture_output=True, text=True, timeout=300)
+def _load_once(_, variant="llvm_ad_spectral"):
+    out = subprocess.run([sys.executable, str(HERE / "_parallel_load_child.py"), str(ROOT),
+                          variant], capture_output=True, text=True, timeout=300)
     return out.returncode, out.stdout.strip()[-400:], out.stderr.strip()[-400:]
 
 
@@ -40,6 +40,16 @@ def test_parallel_scene_loading_with_every_plugin_and_bitmaps_never_fails():
     kinds = set(results[0][1].split()[1:])
     assert {"ThinFilmConductor", "ThinFilmDielectric", "ThinFilmDiffuse",
             "ThinFilmRoughConductor", "ThinFilmRoughDielectric"} <= kinds
+
+
+def test_parallel_loading_builds_colour_tables_safely():
+    """llvm_ad_rgb: every constructor builds colour tables (float64 kernel launches,
+    the shared table cache) on Mitsuba's loader threads at once. 8 fresh processes
+    (~1.3 s each) must all load."""
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        results = list(pool.map(lambda i: _load_once(i, "llvm_ad_rgb"), range(8)))
+    failed = [r for r in results if r[0] != 0 or not r[1].startswith("ok")]
+    assert not failed, f"{len(failed)} of 8 parallel loads failed: {failed[:3]}"
 
 
 def test_library_and_plugins_never_call_load_dict():
