@@ -162,7 +162,9 @@ channel, as in Mitsuba's ``diffuse``: a constant one is integrated exactly with 
 series; a texture through a Chebyshev expansion of ``G`` in ``R_dh`` (relative error
 <= 1e-5). Thickness and index gradients in ``llvm_ad_rgb`` are those of an unbiased
 estimate of the same integrals at stratified wavelengths per hit (the value stays
-the table's); ``R_dh`` is not differentiated, as in spectral variants.
+the table's); ``R_dh`` is not differentiated, as in spectral variants. The gradient
+with respect to a constant ``reflectance`` treats the series as constant (exact for
+"single"); through a texture it is exact.
 
 **Gradients.** Differentiate with ``path`` (the whole sample is differentiated,
 both components). Mitsuba's ``prb`` family samples detached and re-evaluates
