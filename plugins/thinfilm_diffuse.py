@@ -201,7 +201,7 @@ from thinfilm_mi.coated_diffuse import ColourDiffuse, DiffuseFactors
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.hemispherical import GRID, hemispherical_factors
 from thinfilm_mi.colour_tables import (GradientSampler, attach_gradient, colour_channels,
-                                       index_on_wavelengths)
+                                       index_on_wavelengths, prepare_gradients)
 from thinfilm_mi.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
                                 ext_ior_from_props, films_from_props, opaque_float,
                                 stack_options_from_props)
@@ -319,6 +319,8 @@ class ThinFilmDiffuse(mi.BSDF):
                 self.colour = ColourDiffuse(
                     DiffuseFactors(self.coating, self.film_n, thickness), self.model,
                     colour_channels(), self._constant_albedo())
+                if self.film_n is not None and dr.is_diff_v(mi.Float):
+                    prepare_gradients([self.film_n])
             return
         if self.no_films:
             t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))

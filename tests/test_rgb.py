@@ -490,3 +490,40 @@ def test_thickness_texture_table_over_angle_and_scale():
         ref = reference(tf.Stack(layers=f"1.33 {700 * s!r}", substrate="Au", ambient=1.0), theta)
         worst = max(worst, float(delta_e(got, ref)[0]))
     assert worst <= DE_MAX, worst
+
+
+def test_render_gradient_in_rgb_matches_finite_difference():
+    """Through mi.render in llvm_ad_rgb (path, reverse mode): the mean pixel's
+    derivative with respect to a film thickness of a coated conductor sphere under a
+    constant sky, against a central difference of renders (tables rebuilt by the
+    edits; same seed). The smooth conductor's paths do not depend on the thickness,
+    so the difference is exact up to the tables' interpolation; the AD side is the
+    unbiased per-hit estimate (measured 2.8e-4 against 2.9e-4, 3 %); 10 % + 1e-5 bound."""
+    sc = mi.load_dict({
+        "type": "scene", "integrator": {"type": "path", "max_depth": 2},
+        "sensor": {"type": "perspective", "fov": 25,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0],
+                                                             up=[0, 1, 0]),
+                   "film": {"type": "hdrfilm", "width": 16, "height": 16,
+                            "rfilter": {"type": "box"}},
+                   "sampler": {"type": "independent", "sample_count": 256}},
+        "sphere": {"type": "sphere", "bsdf": {"type": "thinfilm_conductor", "material": "Au",
+                                              "layers": "1.46 300; 2.3 60"}},
+        "light": {"type": "constant"}})
+    key = "sphere.bsdf.layers.0.thickness"
+    params = mi.traverse(sc)
+    d0 = float(params[key][0])
+    dr.enable_grad(params[key])
+    params.update()
+    img = mi.render(sc, params, seed=3)
+    dr.backward(dr.mean(img, axis=None))
+    ad = float(dr.grad(params[key])[0])
+    dr.disable_grad(params[key])
+    h, vals = 2.0, []
+    for d in (d0 + h, d0 - h):
+        params[key] = d
+        params.update()
+        vals.append(float(np.mean(np.array(mi.render(sc, seed=3)))))
+    fd = (vals[0] - vals[1]) / (2 * h)
+    assert abs(fd) > 1e-4, fd
+    assert abs(ad - fd) <= 0.1 * abs(fd) + 1e-5, (ad, fd)

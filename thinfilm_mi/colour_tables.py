@@ -211,22 +211,42 @@ def attach_gradient(value, estimate):
     return dr.detach(value) + (estimate - dr.detach(estimate))
 
 
+def prepare_gradients(media) -> None:
+    """Build, at scene load, what :class:`GradientSampler` and
+    :func:`index_on_wavelengths` read in the kernel for these media (the render
+    kernel is traced inside Mitsuba's symbolic loops, where no array may be
+    evaluated, so nothing can be built lazily there)."""
+    GradientSampler.get()
+    for ix in media:
+        _wavelength_texture(ix)
+
+
+def _wavelength_texture(ix):
+    """A dataset index's 1 nm values (re, im) as a float texture over 360-830 nm,
+    built once per index; ``None`` for anything else."""
+    if ix.material is None or ix.material.constant is not None:
+        return None
+    tex = getattr(ix, "_wl_texture", None)
+    if tex is None:
+        mi = _mi()
+        v = ix.material.index(GRID)
+        tex = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(
+            np.stack([v.real, v.imag], axis=1), np.float32)), use_accel=False, migrate=False,
+            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+        ix._wl_texture = tex
+    return tex
+
+
 def index_on_wavelengths(ix, si, wavelengths, active=True):
     """The :class:`~thinfilm_mi.kernel.SpectralIndex` ``ix`` at ``wavelengths``
     (``mi.Spectrum``, nm) in RGB/mono variants, as ``(re, im)``: a dataset's from
     a float texture of its 1 nm values (built once per index), anything else
     (numbers: ``uniform``, differentiable) as its textures evaluate."""
     mi = _mi()
-    if ix.material is None or ix.material.constant is not None:
+    tex = _wavelength_texture(ix)
+    if tex is None:
         n = ix.eval(si, active)
         return n.re, n.im
-    tex = getattr(ix, "_wl_texture", None)
-    if tex is None:
-        v = ix.material.index(GRID)
-        tex = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(
-            np.stack([v.real, v.imag], axis=1), np.float32)), use_accel=False, migrate=False,
-            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
-        ix._wl_texture = tex
     lo, hi = SPECTRAL_RANGE
     re, im = [], []
     for k in range(dr.size_v(mi.Spectrum)):

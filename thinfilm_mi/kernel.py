@@ -29,7 +29,7 @@ from . import tables as _tables
 from ._llvm import require_llvm
 from .colour_tables import (GradientSampler, attach_gradient, channel_mean_texture,
                             colour_channels, colour_table, index_on_wavelengths,
-                            with_absorbing)
+                            prepare_gradients, with_absorbing)
 from .errors import ThinFilmError
 from .optics import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
                      transmittance_factor_s)
@@ -498,6 +498,8 @@ class KernelStack:
             # RGB and mono variants read integrated colour tables (thinfilm_mi.integrated)
             for side in self.plan.values():
                 side.colour = colour_table(self, side, _side_data)
+            if dr.is_diff_v(_mi().Float):
+                prepare_gradients([self.ambient, self.substrate] + list(self.indices))
             return
         if _mi().is_polarized:
             # Polarized variants evaluate the amplitudes exactly (thinfilm_mi.amplitudes);
