@@ -148,11 +148,6 @@ def colour_differences(a: np.ndarray, b: np.ndarray, channels: int) -> np.ndarra
     return delta_e2000(_lab(a @ _WHITE.T, white), _lab(b @ _WHITE.T, white))
 
 
-def colour_difference(a: np.ndarray, b: np.ndarray, channels: int) -> float:
-    """Max CIEDE2000 between colours ``a`` and ``b`` (:func:`colour_differences`)."""
-    return float(np.max(colour_differences(a, b, channels)))
-
-
 def close_each(a: np.ndarray, b: np.ndarray, channels: int, axis: int,
                de: float = None, abs_: float = None) -> np.ndarray:
     """Per index along ``axis``: whether every colour there agrees within ``de``
@@ -165,11 +160,6 @@ def close_each(a: np.ndarray, b: np.ndarray, channels: int, axis: int,
     d_abs = np.abs(a - b).reshape(n, -1).max(axis=1)
     d_col = colour_differences(a, b, channels).reshape(n, -1).max(axis=1)
     return (d_abs <= abs_) & (d_col <= de)
-
-
-def _close(a: np.ndarray, b: np.ndarray, channels: int) -> bool:
-    return (float(np.max(np.abs(a - b))) <= TOLERANCE_ABS
-            and colour_difference(a, b, channels) <= TOLERANCE_DE)
 
 
 def first_step(optical_thickness: float) -> float:

@@ -599,11 +599,8 @@ class KernelStack:
         return side
 
     def _eval_side(self, inside: bool, si, cos_theta, active, transmission: bool,
-                   thickness_scale, wavelengths=None):
+                   thickness_scale):
         mi = _mi()
-        if wavelengths is not None:
-            return self.at_wavelengths(inside, si, cos_theta, active, transmission,
-                                       thickness_scale, wavelengths)
         # RGB/mono variants come here only for a side without films (no phase):
         # any wavelength will do for the Fresnel terms
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
@@ -674,7 +671,8 @@ class KernelStack:
             if self.colour_gradients(si, active):
                 sampler = GradientSampler.get()
                 wl = sampler.wavelengths(si)
-                exact = self._eval_side(flag, si, cos_theta, active, transmission, scale, wl)
+                exact = self.at_wavelengths(flag, si, cos_theta, active, transmission, scale,
+                                            wl)
                 if transmission:
                     R = attach_gradient(R, sampler.estimate(wl, exact[0]))
                     T = attach_gradient(T, sampler.estimate(wl, exact[1]))
