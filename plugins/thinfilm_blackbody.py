@@ -64,6 +64,7 @@ import mitsuba as mi
 import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.integrated import trapezoid_weights, xyz_to_srgb_matrix
 
 NAME = "thinfilm_blackbody"
 
@@ -104,15 +105,6 @@ def _check(name: str, value: float, strict: bool, unit: str) -> float:
         raise ThinFilmError(f"{NAME}: '{name}' must be a finite number "
                             f"{'>' if strict else '>='} 0{unit}, got {value!r}")
     return value
-
-
-def _trapezoid(x: np.ndarray) -> np.ndarray:
-    """Weights of the trapezoid rule on the nodes ``x``."""
-    w = np.empty_like(x)
-    w[1:-1] = 0.5 * (x[2:] - x[:-2])
-    w[0] = 0.5 * (x[1] - x[0])
-    w[-1] = 0.5 * (x[-1] - x[-2])
-    return w
 
 
 def _scalar(value) -> float:
@@ -167,7 +159,7 @@ class ThinFilmBlackbody(mi.Texture):
                                 f"gives a radiance beyond float32 range")
         radiance = scale * planck(lam, temperature)
         if self.spectral:
-            self._mean = float(radiance @ _trapezoid(lam) / (lam[-1] - lam[0]))
+            self._mean = float(radiance @ trapezoid_weights(lam) / (lam[-1] - lam[0]))
             self._max = float(radiance.max())
             # wavelength sampling: a piecewise-linear fit of the radiance; a black body
             # too cold to radiate in the range (all zeros) is sampled uniformly
@@ -179,19 +171,12 @@ class ThinFilmBlackbody(mi.Texture):
             if mi.is_monochromatic:
                 colour = colour[1:2]          # the luminance Y
             else:
-                colour = self._xyz_to_srgb() @ colour
+                colour = xyz_to_srgb_matrix() @ colour
             self.value = mi.UnpolarizedSpectrum(*[float(c) for c in colour])
             if dr.is_jit_v(self.value):
                 dr.make_opaque(self.value)
             self._mean = float(np.mean(colour))
             self._max = float(np.max(colour))
-
-    @staticmethod
-    def _xyz_to_srgb() -> np.ndarray:
-        """Mitsuba's XYZ -> linear sRGB matrix."""
-        cols = [np.array(mi.xyz_to_srgb(mi.ScalarColor3f(*e)), np.float64).ravel()
-                for e in np.eye(3)]
-        return np.stack(cols, axis=1)
 
     @staticmethod
     def colour(temperature: float, scale: float = 1.0,
@@ -206,7 +191,7 @@ class ThinFilmBlackbody(mi.Texture):
         lam, cmf = lam[inside], cmf[:, inside]
         if lam.size < 2:
             return np.zeros(3)
-        xyz = cmf @ (scale * planck(lam, temperature) * _trapezoid(lam))
+        xyz = cmf @ (scale * planck(lam, temperature) * trapezoid_weights(lam))
         return xyz * float(mi.MI_CIE_Y_NORMALIZATION)
 
     # -- Texture interface ----------------------------------------------------------

@@ -182,7 +182,7 @@ class ColourDiffuse:
             if level not in levels:
                 n = int(round((hi - lo) * (1 << level)))
                 wl = lo + np.arange(n + 1) * ((hi - lo) / n)
-                w = integrated.channel_weights(channels, wl) * integrated._trapezoid(wl)[None, :]
+                w = integrated.channel_weights(channels, wl) * integrated.trapezoid_weights(wl)[None, :]
                 if level - 1 in levels:     # the coarser level's wavelengths are every other one
                     _, _, r_c, t_c = levels[level - 1]
                     r_new, t_new = factors.hemispherical(wl[1::2])

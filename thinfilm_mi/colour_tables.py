@@ -162,8 +162,7 @@ class GradientSampler:
 
     def __init__(self, channels: str):
         mi = _mi()
-        w = integrated.channel_weights(channels, GRID)
-        w = w / (w * integrated._trapezoid(GRID)[None, :]).sum(axis=1, keepdims=True)
+        w = integrated.normalised_weights(channels)       # on GRID, the 1 nm grid
         self.C = w.shape[0]
         self.texture = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(w.T, np.float32)),
                                     use_accel=False, migrate=False,

@@ -176,11 +176,22 @@ def first_step(optical_thickness: float) -> float:
     return float(min(FIRST_STEP * 2 ** k, MAX_FIRST_STEP))
 
 
-def _trapezoid(wl: np.ndarray) -> np.ndarray:
-    h = np.full(wl.size, (wl[-1] - wl[0]) / (wl.size - 1))
-    h[0] *= 0.5
-    h[-1] *= 0.5
-    return h
+def trapezoid_weights(x: np.ndarray) -> np.ndarray:
+    """Weights of the trapezoid rule on the increasing nodes ``x``."""
+    x = np.asarray(x, np.float64)
+    w = np.empty_like(x)
+    w[1:-1] = 0.5 * (x[2:] - x[:-2])
+    w[0] = 0.5 * (x[1] - x[0])
+    w[-1] = 0.5 * (x[-1] - x[-2])
+    return w
+
+
+def normalised_weights(kind: str) -> np.ndarray:
+    """``ŵ_c`` on the 1 nm grid of the colour data (shape ``(C, 471)``): the channel
+    weights of :func:`channel_weights` scaled to a unit integral."""
+    lam = colour_weights()[:, 0]
+    w = channel_weights(kind, lam)
+    return w / (w * trapezoid_weights(lam)[None, :]).sum(axis=1, keepdims=True)
 
 
 @dataclass
@@ -200,10 +211,8 @@ def _weights(kind: str, channels: list):
     """``wl -> ŵ_c(wl)`` (shape ``(n, len channels)``): the channel weights
     normalised to a unit integral (exact: they are linear between the 1 nm knots,
     where every interval of :func:`integrate` starts and ends)."""
-    W = colour_weights()
-    full = channel_weights(kind, W[:, 0])[channels]
-    full = full / (full * _trapezoid(W[:, 0])[None, :]).sum(axis=1, keepdims=True)
-    lam = W[:, 0]
+    full = normalised_weights(kind)[channels]
+    lam = colour_weights()[:, 0]
 
     def at(wl):
         return np.stack([np.interp(wl, lam, f) for f in full], axis=-1)
