@@ -218,19 +218,20 @@ class ColourDiffuse:
 
         level, nu = 0, FIRST_NODES
         cos = axis.cos(nu)
-        M, A, nodes = tables(level, factors.t(cos, level_data(level)[0]))
+        t = factors.t(cos, level_data(level)[0])
+        M, A, nodes = tables(level, t)
         # wavelengths: halve the step until the table (of the single-scattering
         # term, G = k_d = 1, and of the series at k_d = 1) stops changing
         while level < MAX_LEVEL:
-            M2, A2, nodes2 = tables(level + 1, factors.t(cos, level_data(level + 1)[0]))
+            t2 = factors.t(cos, level_data(level + 1)[0])
+            M2, A2, nodes2 = tables(level + 1, t2)
             same = self._close(M, nodes, M2, nodes2)
-            level, M, A, nodes = level + 1, M2, A2, nodes2
+            level, t, M, A, nodes = level + 1, t2, M2, A2, nodes2
             if same:
                 break
         # angles: double until the 4-point rule predicts the midpoints (t at the
         # new nodes only)
         wl = level_data(level)[0]
-        t = factors.t(cos, wl)
         while nu < MAX_NODES:
             t = integrated._interleave(t, factors.t(axis.midpoints(nu), wl), 0)
             M2, A2, nodes2 = tables(level, t)
