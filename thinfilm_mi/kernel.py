@@ -25,6 +25,7 @@ import drjit as dr
 import numpy as np
 
 from . import materials as _materials
+from . import band_tables as _band_tables
 from . import tables as _tables
 from ._llvm import require_llvm
 from .colour_tables import (GradientSampler, attach_gradient, channel_mean_texture,
@@ -253,12 +254,11 @@ AUTO_MIN_FILMS = 2
 #: :data:`tables.MAX_TEXELS` per channel.
 AUTO_MAX_TEXELS = 1 << 19
 #: Default ``spectral_resolution`` (nm): tables may hold ``R`` and ``T`` convolved
-#: along λ with a Gaussian of this standard deviation (``0``: the exact values
-#: only). Off by default for now: the band-limited build is accurate (R_σ within
-#: 5e-6 of a brute-force convolution) and 1 nm changes the D65 colour of the
-#: 30-film benchmark stack by ΔE2000 <= 0.009, but it is slow: 3.6 s for the
-#: 10-film stack (271x1168 texels), and the 30-film stack runs over the build
-#: budget (benchmarks/SPEED.md, issue 21).
+#: with a Gaussian in wavenumber of this standard deviation at 560 nm
+#: (:mod:`thinfilm_mi.band_tables`; ``0``: the exact values only). Off by default:
+#: the band-limited build is accurate (``R_σ`` within ~1e-5 of a brute-force
+#: convolution) but takes seconds for deep stacks at load (1.5-4 s for 10 films on
+#: two cores, over its budget for 30; benchmarks/SPEED.md, issue 21).
 DEFAULT_SPECTRAL_RESOLUTION = 0.0
 #: A film is optically opaque when the amplitude of light crossing it once,
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
@@ -777,8 +777,8 @@ def _tables_cache(stack: KernelStack, side: _Side):
         return table
 
     data = _side_data(side, transmission)
-    table = _tables.build_table(data, stack.table_error, GRID, max_texels,
-                                stack.spectral_resolution)
+    table = _band_tables.build_table(data, stack.table_error, GRID, max_texels,
+                                     stack.spectral_resolution)
     _TABLE_CACHE.put(key, table)
     return table
 

@@ -158,10 +158,23 @@ def u_texel(cos_i, sin_i, n0, n_exit, kind: str, nu):
     (``R`` is even in the angle at normal incidence) and puts nodes
     quadratically closer towards grazing incidence, where coated metals show
     their sharp pseudo-Brewster dip and the rise to ``R = 1``.
+
+    ``kind="band"`` (band-limited tables, :mod:`thinfilm_mi.band_tables`) blends
+    that ``w`` with ``S = 2a/π - (m sin(4a)/2 + (1 - m) sin(2a)) / π`` (``m`` =
+    :data:`BAND_MID`), whose node density ``∝ m sin²(2a) + (1 - m) sin²(a)``
+    rises to mid and high angles: ``BAND_WARP S + (1 - BAND_WARP) w``. A
+    band-limited ``R``'s features move along λ as the angle changes, fastest
+    between 30° and 75°, where ``w`` alone is sparsest.
     """
-    if kind == "plain":
+    if kind == "plain" or kind == "band":
         x = (1.0 / HALF_PI) * dr.atan2(cos_i, sin_i)
-        return (nu - 1) * (1.0 - dr.sqrt(x))
+        w = 1.0 - dr.sqrt(x)
+        if kind == "band":
+            sin2 = 2.0 * sin_i * cos_i
+            sin4 = 2.0 * sin2 * (cos_i * cos_i - sin_i * sin_i)
+            S = (1.0 - x) - (0.5 * BAND_MID * sin4 + (1.0 - BAND_MID) * sin2) * (0.5 / HALF_PI)
+            w = BAND_WARP * S + (1.0 - BAND_WARP) * w
+        return (nu - 1) * w
     m = 0.5 * nu            # split tables have an even nu: nodes 0..m-1 | m..nu-1
     beta = n0 * sin_i
     d2 = (n_exit - beta) * (n_exit + beta)            # q_exit^2
@@ -171,6 +184,39 @@ def u_texel(cos_i, sin_i, n0, n_exit, kind: str, nu):
     x = (1.0 / HALF_PI) * dr.atan2(n0 * cos_i, a)     # 1 - phi / (pi/2)
     return dr.select(d2 > 0, (m - 1) * (1.0 / HALF_PI) * theta_t,
                      m + (m - 1) * (1.0 - dr.sqrt(x)))
+
+
+#: Share of the mid-angle term ``S`` in the angle axis of band-limited tables
+#: (:func:`u_texel`, ``kind="band"``), and the share of ``sin²(2a)`` in its
+#: density. Chosen from the interpolation error of ``R_σ`` per 5° of incidence
+#: on the plain axis (10-film benchmark stack, 129 nodes: 8e-5 at 80-85°, 2.5e-2
+#: at 45-50°): the blend that equalises it needs ~0.6x the nodes.
+BAND_WARP = 0.6
+BAND_MID = 0.6
+
+
+def band_warp(theta: np.ndarray) -> np.ndarray:
+    """The ``"band"`` axis coordinate (0 at normal, 1 at grazing incidence) of
+    angles ``theta`` (radians; negative angles continue it analytically)."""
+    x = 1.0 - theta / HALF_PI
+    S = (1.0 - x) - (0.5 * BAND_MID * np.sin(4.0 * theta)
+                     + (1.0 - BAND_MID) * np.sin(2.0 * theta)) * (0.5 / HALF_PI)
+    return BAND_WARP * S + (1.0 - BAND_WARP) * (1.0 - np.sqrt(x))
+
+
+def band_cos(u: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`band_warp` as ``cos θ`` (float64 numpy, any shape): ``u < 0``
+    continues to negative angles, ``u > 1`` mirrors about grazing incidence
+    (as the plain axis's ghosts)."""
+    u = np.asarray(u, np.float64)
+    target = np.where(u > 1.0, 2.0 - u, u)
+    lo = np.full(target.shape, -HALF_PI)
+    hi = np.full(target.shape, HALF_PI)
+    for _ in range(60):     # the warp increases monotonically on [-pi/2, pi/2]
+        mid = 0.5 * (lo + hi)
+        below = band_warp(mid) < target
+        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
+    return np.cos(0.5 * (lo + hi))
 
 
 def _u_nodes_cos(s: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str, nu: int,
@@ -350,8 +396,8 @@ class Table:
         #: the verified max abs interpolation error (sum of both axes' maxima),
         #: against ``R_σ`` for a band-limited table
         self.error = error
-        #: σ (nm) of the Gaussian along λ the tabulated values are convolved
-        #: with (:class:`_BandPoints`); 0: the exact values
+        #: ``spectral_resolution`` (nm) of the band-limited values tabulated
+        #: (:mod:`thinfilm_mi.band_tables`); 0: the exact values
         self.resolution = resolution
         #: bytes of the texture's float32 data
         self.nbytes = int(values.size) * 4
@@ -395,10 +441,10 @@ class Table:
         cos_i = dr.clip(cos_i, 0.0, 1.0)
         sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
         out = [[] for _ in range(self.channels)]
-        if self.kind == "plain":
+        if self.kind != "tir":
             u = self._u(cos_i, sin_i, 1.0, 1.0)
         for i in range(len(wavelengths)):
-            if self.kind != "plain":
+            if self.kind == "tir":
                 u = self._u(cos_i, sin_i, n0[i], n_exit[i])
             v = (v_texel(wavelengths[i], self._nv) + self._offset) * self._inv_v
             res = self.texture.eval_cubic(mi.Point2f(u, v), active)
@@ -726,19 +772,13 @@ def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: d
 last_build: dict = {}
 
 
-def band_limits(side: SideData) -> bool:
-    """Whether a side can be tabulated band-limited: every film coherent (the
-    incoherent evaluator has no smooth amplitudes) and at most
-    :data:`BAND_MAX_FILMS` films."""
-    return (0 < len(side.films) <= BAND_MAX_FILMS
-            and len(side.fringe_films) == len(side.films))
-
-
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
-                max_texels: int = MAX_TEXELS, resolution: float = 0.0) -> Table | None:
-    """Build and verify a table for one side, or ``None`` if the target cannot be
-    met within ``max_texels`` texels and :data:`MAX_BUILD_POINTS` evaluations
-    (or the exit medium's critical angle depends on λ).
+                max_texels: int = MAX_TEXELS) -> Table | None:
+    """Build and verify a table of the exact values of one side, or ``None`` if
+    the target cannot be met within ``max_texels`` texels and
+    :data:`MAX_BUILD_POINTS` evaluations (or the exit medium's critical angle
+    depends on λ). (Band-limited tables, for stacks this rejects:
+    :func:`thinfilm_mi.band_tables.build_table`.)
 
     The table holds the coefficients of the interpolating cubic B-spline, on a
     plain u axis or on each segment of a split one (total internal
@@ -756,29 +796,9 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     What the build did is left in :data:`last_build`.
     """
     global last_build
-    if resolution > 0 and band_limits(side):
-        # the exact values first: a stack whose table resolves them keeps it
-        # (1-3 films: the same tables as without band-limiting)
-        table = build_table(side, error, wavelengths, max_texels, 0.0)
-        if table is not None or last_build["result"] == "critical angle varies":
-            return table
-        before = last_build
-        table = _build(side, error, wavelengths, max_texels, resolution)
-        last_build["exact_attempt"] = before
-        return table
-    return _build(side, error, wavelengths, max_texels, 0.0)
-
-
-def _build(side: SideData, error: float, wavelengths: np.ndarray, max_texels: int,
-           resolution: float) -> Table | None:
-    """:func:`build_table` of the exact values (``resolution`` 0) or band-limited ones."""
-    global last_build
     kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
-    band = resolution > 0
     last_build = stats = {"kind": kind, "probe_points": 0, "rounds": 0, "points": 0,
-                          "result": "critical angle varies",
-                          "resolution": resolution if band else 0.0, "colour_error": None,
-                          "sub_points": 0}
+                          "result": "critical angle varies", "resolution": 0.0}
     if kind is None:
         return None
     g, order = GHOST, 4
@@ -786,14 +806,13 @@ def _build(side: SideData, error: float, wavelengths: np.ndarray, max_texels: in
     side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)
                       + (bool(np.any(np.asarray(side.n_exit(wavelengths)).imag)),))
     nu, nv = table_resolution(side, error, wavelengths)
-    if not band:
-        pu, pv = _estimate(side, kind, error, max_texels, stats)
-        stats["points"] = stats["probe_points"]
-        if pu is None:
-            stats["result"] = "rejected by the probe"
-            return None
-        nu = min(max(nu, int(math.ceil(1.05 * pu))), MAX_U)
-        nv = min(max(nv, int(math.ceil(1.05 * pv))), MAX_V)
+    pu, pv = _estimate(side, kind, error, max_texels, stats)
+    stats["points"] = stats["probe_points"]
+    if pu is None:
+        stats["result"] = "rejected by the probe"
+        return None
+    nu = min(max(nu, int(math.ceil(1.05 * pu))), MAX_U)
+    nv = min(max(nv, int(math.ceil(1.05 * pv))), MAX_V)
     stats["result"] = "over budget"
     history = {}
     for _ in range(MAX_ROUNDS + 1):
@@ -818,18 +837,12 @@ def _build(side: SideData, error: float, wavelengths: np.ndarray, max_texels: in
         # Where an index's slope jumps (tabulated data) the spline errs most
         # beside, not between, the nodes: check there too.
         kinks = v_texel(side.kinks, nv)
-        pts = _BandPoints(side, kind, resolution) if band else _Points(side, kind)
+        pts = _Points(side, kind)
         pts.add(su, tv, nu, nv)
         pts.add(mu, tv[rows], nu, nv)
         pts.add(cols.astype(np.float64), np.concatenate([np.arange(nv - 1) + 0.5, kinks]),
                 nu, nv)
         (nodes, _), (mid_u, cos_u), (mid_v, cos_v) = pts.evaluate()
-        if band:
-            stats["colour_error"] = pts.colour_error
-            stats["sub_points"] += pts.sub_points
-            if pts.colour_error > BAND_COLOUR_TOLERANCE:
-                stats["result"] = "colour check failed"
-                return None
         # Spline coefficients along u, per segment with its ghosts, then along v.
         if split:
             segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *ends), 0, 1)
@@ -855,8 +868,7 @@ def _build(side: SideData, error: float, wavelengths: np.ndarray, max_texels: in
         stats.setdefault("errors", []).append((nu, nv, err_u, err_v))
         if err_u + err_v <= error:
             stats["result"] = "table"
-            return Table(coeffs, kind, err_u + err_v, nodes.shape[-1],
-                         resolution if band else 0.0)
+            return Table(coeffs, kind, err_u + err_v, nodes.shape[-1])
         # Refine: aim at REFINE_SHARE of the target; an axis already within
         # half of that keeps its nodes and leaves the rest to the other.
         budget = REFINE_SHARE * error
@@ -887,213 +899,7 @@ def _build(side: SideData, error: float, wavelengths: np.ndarray, max_texels: in
 
 
 
-# -- band-limited tables ------------------------------------------------------------
-#: Coarse wavelength nodes per period of the fastest term of the smooth
-#: amplitudes (:func:`_smooth_terms`), whose cubic spline the band-limited
-#: build integrates between them.
-BAND_NODES_PER_PERIOD = 24
-#: The coarse step is at most this share of the resolution σ (it is also the
-#: width of the bins the integral is gathered in, whose own width the Gaussian
-#: of the last step takes out: σ'^2 = σ^2 - w^2/3).
-BAND_STEP_SHARE = 0.4
-#: Largest coarse step (nm), for stacks with slow fringes.
-BAND_STEP_MAX = 2.0
-#: Sub-points per distance to the nearest zero of the denominator ``D`` (a
-#: resonance's pole): the midpoint rule's error on a rational function falls as
-#: exp(-2 pi d / h), 3.5e-6 at 2 sub-points per distance ``d``.
-BAND_POINTS_PER_POLE = 1.0
-#: At most this many sub-points per coarse interval (a resonance narrower than
-#: 1/(2 x 512) of the coarse step, ~4e-4 nm: its area is below ~1e-4 of the bin's).
-BAND_MAX_SUB = 32
-#: The same within the grazing sliver (cos < GRAZING_COS), which builds do not
-#: verify and where cavity resonances are narrowest.
-BAND_MAX_SUB_GRAZING = 2
-#: Coarse intervals within this many intervals of a resonance's pole are
-#: integrated on exact values (elsewhere on the splines, whose small relative
-#: error in ``D`` would be magnified by ``1 / |D|^2`` near the pole).
-BAND_EXACT_DISTANCE = 3.0
-_GL3_X = (-0.5 * math.sqrt(0.6), 0.0, 0.5 * math.sqrt(0.6))
-_GL3_W = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
-#: The Gaussian is cut at this many standard deviations.
-BAND_TAIL = 6.0
-#: The band-limited build's own recursion runs without the power-of-two
-#: rescaling of the render kernels (it would make the amplitudes jump along
-#: λ): |N|, |D| grow by at most ~2.8 per film, within float64 to ~600 films.
-BAND_MAX_FILMS = 250
-#: Largest colour difference (CIEDE2000) between the exact ``R`` and ``R_σ``
-#: (and ``T``, ``T_σ``) over the table's angle rows under D65, A and F11 a
-#: band-limited table may show; otherwise the build gives up (``auto`` then
-#: evaluates exactly).
-BAND_COLOUR_TOLERANCE = 0.5
-
-
-def _smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
-                  indices) -> np.ndarray:
-    """The stack's projective amplitudes at points ``(cos0[i], wl[rows[i]])``:
-    shape ``(points, C)`` with channels ``Re, Im`` of ``N_s, D_s, N_p, D_p``
-    and, with transmission, ``|T_s|^2 f_s, |T_p|^2 f_p`` (``R = |N|^2 /
-    |D|^2``, ``T = |T|^2 f / |D|^2``, :func:`optics._recursion`).
-
-    The Rouard recursion in float64 as a Dr.Jit loop over the films, with the
-    step of :func:`optics._rouard_step` (no division), scaled after each film
-    by ``1 / sqrt(|a_j|^2 + |a_j+1|^2)``, a smooth function of the wavelength
-    (the render kernels' power-of-two rescaling is not): every channel is then
-    an analytic function of λ without the resonant denominator ``1 / D``, and
-    a few nodes per fringe interpolate it where ``R`` itself would need
-    hundreds."""
-    from drjit.llvm import Float64, UInt32
-
-    from . import optics as op
-    from ._backend import aligned_array, float64_array
-
-    n0, film_n, n_exit = indices
-    film_n = [np.asarray(n, np.complex128) for n in film_n]
-    n_exit = np.asarray(n_exit, np.complex128)
-    at = aligned_array(rows, np.uint32, UInt32)
-
-    def per_row(values):
-        return dr.gather(Float64, float64_array(values), at)
-
-    real = not any(np.any(n.imag) for n in film_n)
-    n0_max = float(np.max(n0))
-    cos, beta2, q0 = op._incidence(per_row(n0), float64_array(cos0))
-    n0v = per_row(n0)
-    wlv = per_row(wl)
-    beta = dr.sqrt(beta2)
-    zero = 0.0 * cos
-    exit_cx = Cx(per_row(n_exit.real), per_row(n_exit.imag) if np.any(n_exit.imag) else 0.0)
-    n_ex, q_ex, a_ex = op._exit_admittances(exit_cx, beta2, n0_max * n0_max)
-    re = np.concatenate([n.real for n in film_n])
-    buf_re = float64_array(re)
-    buf_im = None if real else float64_array(np.concatenate([n.imag for n in film_n]))
-    thick = float64_array(np.array([d for _, d in side.films], np.float64))
-    width = dr.opaque(UInt32, len(wl))
-    n2_min = float(re.min()) ** 2 if real else None
-    inv_wl = 1.0 / wlv
-    transmission = side.transmission
-
-    def film(j):
-        i = j * width + at
-        m = Cx(dr.gather(Float64, buf_re, i), 0.0 if real else dr.gather(Float64, buf_im, i))
-        d = dr.gather(Float64, thick, j)
-        q = op._guard_zero_q(m, op._normal_index(m, beta2, n0_max * n0_max, n2_min), beta, zero)
-        E = op._phase_factor(q, d * inv_wl, True)
-        mag2 = 1.0 if real else dr.exp((-4.0 * math.pi) * (q.im * d * inv_wl))
-        inv_m2 = 1.0 / (m.re * m.re) if real else op._inv(m.square())
-        return {"s": q, "p": op._cmul(q, Cx.of(inv_m2))}, E, mag2
-
-    def full(z):
-        return (zero + z.re, zero + z.im)
-
-    def step(a, b, E_b, N, D, T, mag2):
-        N, D = op._rouard_step(a, b, E_b, N, D)
-        s2 = 1.0 / (a.abs2() + b.abs2())
-        scale = dr.sqrt(s2)
-        return N * scale, D * scale, T * (4.0 * a.abs2() * mag2 * s2)
-
-    state = (dr.opaque(UInt32, len(film_n), len(rows)),
-             *full(Cx(0.0)), *full(Cx(1.0)), zero + 1.0,
-             *full(Cx(0.0)), *full(Cx(1.0)), zero + 1.0,
-             *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
-
-    def body(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, bsr, bsi, bpr, bpi, Er, Ei):
-        j = j - 1
-        a, E, mag2 = film(j)
-        out = []
-        for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
-                                  ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
-            N, D, T = step(a[pol], b, Cx(Er, Ei), N, D, T, mag2)
-            out += [N.re, N.im, D.re, D.im, T]
-        return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
-
-    (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, bsr, bsi, bpr, bpi, Er, Ei) = \
-        dr.while_loop(state, op._films_left, op._loop_body(body), label="thinfilm_band")
-    a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0v * n0v)), 0.0)}
-    out = []
-    ts = []
-    for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
-                              ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
-        N, D, T = step(a0[pol], b, Cx(Er, Ei), N, D, T, 1.0)
-        out += [N.re, N.im, D.re, D.im]
-        ts.append(T)
-    if transmission:
-        grazing = cos <= 0.0
-        fac = op._power_factors(n0v, q0, n_ex, q_ex, grazing, 1.0)
-        out += [dr.select(grazing, 0.0, ts[0] * fac["s"]), dr.select(grazing, 0.0, ts[1] * fac["p"])]
-    dr.eval(*out)
-    return np.stack([np.array(v, dtype=np.float64) for v in out], axis=-1)
-
-
-def _powers_of(terms: np.ndarray, transmission: bool) -> np.ndarray:
-    """``R`` [, ``T``] (last axis) from :func:`_smooth_terms` channels (any leading shape)."""
-    Ns = terms[..., 0] ** 2 + terms[..., 1] ** 2
-    Ds = terms[..., 2] ** 2 + terms[..., 3] ** 2
-    Np = terms[..., 4] ** 2 + terms[..., 5] ** 2
-    Dp = terms[..., 6] ** 2 + terms[..., 7] ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        R = np.minimum(0.5 * (Ns / Ds + Np / Dp), 1.0)
-        if not transmission:
-            return R[..., None]
-        T = 0.5 * (terms[..., 8] / Ds + terms[..., 9] / Dp)
-    R = np.where(np.isfinite(R), R, 1.0)
-    T = np.clip(np.where(np.isfinite(T), T, 0.0), 0.0, 1.0 - R)
-    return np.stack([R, T], axis=-1)
-
-
-def _pole_distance(coef: np.ndarray, channels) -> np.ndarray:
-    """For each interval ``[i, i+1]`` of cubic splines (B-spline coefficients
-    ``coef``, shape ``(rows, n, C)``; the complex functions ``coef[..., k] + i
-    coef[..., k+1]`` for ``k`` in ``channels``), the distance (in intervals)
-    from the interval to the nearest complex zero of any of them.
-
-    On each interval the spline is a cubic ``p``. A zero lies at least ``rho``
-    from the midpoint, with ``rho`` the bound of the Taylor coefficients ``b_k``
-    there (``|b_k| rho^k <= |b_0| / 3``, k = 1..3): intervals with ``rho - 1/2
-    >= 2`` are far from any zero (reported as that bound). The others are
-    searched by Newton's method from both ends and the midpoint (8 steps): the
-    nearest zero found (a resonance's pole, when ``p`` is a denominator)."""
-    rows, n, _ = coef.shape
-    out = np.full((rows, n - 1), np.inf)
-    for k in channels:
-        c = coef[..., k] + 1j * coef[..., k + 1]
-        c = np.concatenate([c[:, :1], c, c[:, -1:]], axis=1)   # clamped ends
-        c0, c1, c2, c3 = c[:, :-3], c[:, 1:-2], c[:, 2:-1], c[:, 3:]
-        # Taylor coefficients at the interval's midpoint
-        b0 = (c0 + 23.0 * (c1 + c2) + c3) / 48.0
-        b1 = (-c0 - 5.0 * c1 + 5.0 * c2 + c3) / 8.0
-        b2 = (c0 - c1 - c2 + c3) / 4.0
-        b3 = (-c0 + 3.0 * c1 - 3.0 * c2 + c3) / 6.0
-        a0 = np.abs(b0) / 3.0
-        with np.errstate(divide="ignore", invalid="ignore"):
-            rho = np.minimum(np.minimum(a0 / np.abs(b1), np.sqrt(a0 / np.abs(b2))),
-                             np.cbrt(a0 / np.abs(b3)))
-        bound = np.where(np.isfinite(rho), rho, np.inf) - 0.5
-        out = np.minimum(out, bound)
-        near = bound < 2.0
-        if not near.any():
-            continue
-        b0, b1, b2, b3 = b0[near], b1[near], b2[near], b3[near]
-        best = np.full(b0.shape, np.inf)
-        for start in (-0.5, 0.0, 0.5):
-            z = np.full(b0.shape, start, np.complex128)
-            for _ in range(8):
-                p = ((b3 * z + b2) * z + b1) * z + b0
-                dp = (3.0 * b3 * z + 2.0 * b2) * z + b1
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    z = z - p / dp
-            ok = np.isfinite(z) & (np.abs(((b3 * z + b2) * z + b1) * z + b0)
-                                   <= 1e-6 * (np.abs(b0) + np.abs(b1) + np.abs(b2) + np.abs(b3)))
-            dist = np.abs(z - np.clip(z.real, -0.5, 0.5))
-            best = np.minimum(best, np.where(ok, dist, np.inf))
-        sub = out[near]
-        out[near] = np.minimum(sub, np.maximum(best, 0.0))
-    return np.maximum(out, 0.0)
-
-
-def _gaussian(x: np.ndarray, sigma: float) -> np.ndarray:
-    return np.exp(-0.5 * (x / sigma) ** 2) * (1.0 / (sigma * math.sqrt(2.0 * math.pi)))
-
-
+# -- colour data (the band-limited and colour tables' checks) ------------------------
 _COLOUR = None
 
 
@@ -1149,192 +955,6 @@ def delta_e2000(lab1: np.ndarray, lab2: np.ndarray) -> np.ndarray:
     RT = -np.sin(np.radians(2.0 * dtheta)) * Rc
     return np.sqrt((dLp / SL) ** 2 + (dCp / SC) ** 2 + (dHp / SH) ** 2
                    + RT * (dCp / SC) * (dHp / SH))
-
-
-class _BandPoints:
-    """:class:`_Points` for band-limited tables: the values at the points are
-    ``R_σ`` (and ``T_σ``), the exact ones convolved along λ with a Gaussian of
-    standard deviation ``sigma`` nm, at a fixed node coordinate ``s`` along u
-    (a fixed incidence angle on a plain axis).
-
-    For each u coordinate asked for, :func:`_smooth_terms` is evaluated on a
-    coarse λ grid (uniform in λ, step ``w``: :data:`BAND_NODES_PER_PERIOD`
-    per period of the fastest term, at most :data:`BAND_STEP_SHARE` σ) and
-    interpolated by cubic splines. Each coarse interval is integrated by the
-    midpoint rule on as many sub-points as the distance from it to the zero
-    of the linear interpolant of ``D`` (the nearest resonance's pole, in
-    units of the interval) asks for (:data:`BAND_POINTS_PER_POLE`), so
-    resonances far narrower than the coarse step are integrated to ~1e-6
-    of their area. The sub-points' ``R h`` are gathered into bins at the
-    coarse nodes with cubic B-spline weights (``I_b = ∫ R(λ) B((λ - λ_b)/w)
-    dλ``) and ``R_σ(λ) = Σ_b G_σ'(λ - λ_b) I_b`` with ``σ'^2 = σ^2 - w^2/3``
-    (the B-spline's variance): the bins' Gaussian of ``σ'`` times the
-    B-spline is the Gaussian of ``σ`` to its fourth cumulant (relative
-    error ~1e-5 where ``R_σ`` has any amplitude).
-
-    :meth:`evaluate` also leaves in :attr:`colour_error` the largest CIEDE2000
-    difference, over the rows and D65, A and F11, between the colours of
-    ``R`` and ``R_σ`` (and ``T``, ``T_σ``).
-    """
-
-    def __init__(self, side: SideData, kind: str, sigma: float):
-        self.side, self.kind, self.sigma = side, kind, sigma
-        self.sets = []
-        self.colour_error = 0.0
-        self.sub_points = 0
-        self.exact_points = 0
-        ot = 0.0
-        wl = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1], 48)
-        for n, d in side.films:
-            ot += float(np.max(np.abs(n(wl)))) * d
-        period = SPECTRAL_RANGE[0] ** 2 / max(2.0 * ot, 1e-9)
-        self.step = min(period / BAND_NODES_PER_PERIOD, BAND_STEP_SHARE * sigma, BAND_STEP_MAX)
-
-    add = _Points.add
-    size = _Points.size
-
-    def evaluate(self):
-        side, kind, w = self.side, self.kind, self.step
-        # the union of the u coordinates (rows) and of the wavelengths (outputs)
-        rows_s = [(s, nu) for _, s, nu, _, _ in self.sets]
-        keys = np.concatenate([s + 1e6 * nu for s, nu in rows_s])
-        ukeys, urow = np.unique(keys, return_inverse=True)
-        out_wl = np.concatenate([_v_nodes_wl(t, nv) for t, _, _, nv, _ in self.sets])
-        uwl, uout = np.unique(out_wl, return_inverse=True)
-        s_all = np.concatenate([s for s, _ in rows_s])
-        nu_all = np.concatenate([np.full(s.size, nu) for s, nu in rows_s])
-        first = np.unique(urow, return_index=True)[1]
-        s_u, nu_u = s_all[first], nu_all[first]
-        ghost = max(g for *_, g in self.sets)
-        # coarse grid: the outputs, the colour range, and the Gaussian's tails
-        margin = BAND_TAIL * self.sigma + 4.0 * w
-        lo = min(uwl.min(), SPECTRAL_RANGE[0]) - margin
-        hi = max(uwl.max(), SPECTRAL_RANGE[1]) + margin
-        nb = int(math.ceil((hi - lo) / w)) + 1
-        lam = lo + w * np.arange(nb)
-        indices = _indices(side, lam)
-        n0 = np.asarray(indices[0], np.float64)
-        ne = np.asarray(indices[2]).real
-        cos = np.empty((s_u.size, nb))
-        for nu in np.unique(nu_u):
-            m = nu_u == nu
-            cos[m] = np.broadcast_to(_u_nodes_cos(s_u[m][:, None], n0[None, :], ne[None, :],
-                                                  kind, int(nu), ghost), (m.sum(), nb))
-        rowsix = np.broadcast_to(np.arange(nb)[None, :], cos.shape)
-        terms = _smooth_terms(side, cos.ravel(), rowsix.ravel(), lam, indices)
-        terms = terms.reshape(s_u.size, nb, -1)
-        bins = self._integrate(terms, cos, lam, s_u, nu_u, ghost)  # (rows, nb, C)
-        sig = math.sqrt(self.sigma ** 2 - w * w / 3.0)
-        W = _gaussian(uwl[:, None] - lam[None, :], sig)           # (outs, nb)
-        W[np.abs(uwl[:, None] - lam[None, :]) > BAND_TAIL * sig] = 0.0
-        rows_n, _, C = bins.shape
-        smooth = (W @ np.moveaxis(bins, 1, 0).reshape(nb, rows_n * C)).reshape(
-            uwl.size, rows_n, C).swapaxes(0, 1)                   # (rows, outs, C)
-        # the colour check, over the rows outside the grazing sliver (as the
-        # verification)
-        keep = cos.min(axis=1) >= GRAZING_COS
-        self.colour_error = self._colour_check(bins[keep], lam, sig) if keep.any() else 0.0
-        # cos at the outputs (for the grazing mask): the rows' angle at each output λ
-        oidx = _indices(side, uwl)
-        cos_o = np.empty((s_u.size, uwl.size))
-        for nu in np.unique(nu_u):
-            m = nu_u == nu
-            cos_o[m] = np.broadcast_to(
-                _u_nodes_cos(s_u[m][:, None], np.asarray(oidx[0], np.float64)[None, :],
-                             np.asarray(oidx[2]).real[None, :], kind, int(nu), ghost),
-                (m.sum(), uwl.size))
-        out, rs, os_ = [], 0, 0
-        for t, s, *_ in self.sets:
-            r = urow[rs:rs + s.size]
-            o = uout[os_:os_ + t.size]
-            rs, os_ = rs + s.size, os_ + t.size
-            out.append((np.swapaxes(smooth[r][:, o], 0, 1), cos_o[r][:, o].T))
-        return out
-
-    def _integrate(self, terms: np.ndarray, cos: np.ndarray, lam: np.ndarray,
-                   s_u: np.ndarray, nu_u: np.ndarray, ghost: int) -> np.ndarray:
-        """``I_b``: the exact ``R`` [, ``T``] of each row integrated against the
-        cubic B-spline of each coarse node (see the class). Intervals with one
-        sub-point (no resonance near) take the splines' value at their
-        midpoint; sub-points of the others are evaluated exactly (near a
-        resonance the interpolated ``D`` errs relative to its small value)."""
-        rows, nb, C = terms.shape
-        coef = bspline_coefficients(terms, axis=1)
-        d = _pole_distance(coef, (2, 6))
-        cap = np.where(cos[:, :-1] < GRAZING_COS, BAND_MAX_SUB_GRAZING, BAND_MAX_SUB)
-        n_sub = np.minimum(np.ceil(BAND_POINTS_PER_POLE / np.maximum(d, 1e-300)),
-                           cap).astype(np.int64).ravel()
-        exact_iv = (d < BAND_EXACT_DISTANCE).ravel()
-        # 3-point Gauss-Legendre on each of an interval's n_sub sub-intervals
-        n_pts = 3 * n_sub
-        self.sub_points += int(n_pts.sum())
-        start = np.repeat(np.cumsum(n_pts) - n_pts, n_pts)
-        iv = np.repeat(np.arange(n_pts.size), n_pts)
-        k = np.arange(n_pts.sum()) - start
-        sub, g = np.divmod(k, 3)
-        frac = (sub + 0.5 + np.array(_GL3_X)[g]) / n_sub[iv]
-        h = np.array(_GL3_W)[g] / n_sub[iv]
-        r, i = np.divmod(iv, nb - 1)
-        wts = ((1 - frac) ** 3 / 6, (3 * frac ** 3 - 6 * frac ** 2 + 4) / 6,
-               (-3 * frac ** 3 + 3 * frac ** 2 + 3 * frac + 1) / 6, frac ** 3 / 6)
-        vals = np.empty((iv.size, C))
-        many = exact_iv[iv]
-        one = ~many
-        if one.any():
-            pad = np.concatenate([coef[:, :1], coef, coef[:, -1:]], axis=1).reshape(-1, C)
-            base = (r * (nb + 2) + i)[one]
-            f1 = frac[one]
-            for kk, wk in enumerate(((1 - f1) ** 3 / 6, (3 * f1 ** 3 - 6 * f1 ** 2 + 4) / 6,
-                                     (-3 * f1 ** 3 + 3 * f1 ** 2 + 3 * f1 + 1) / 6, f1 ** 3 / 6)):
-                term = wk[:, None] * pad[base + kk]
-                vals[one] = term if kk == 0 else vals[one] + term
-        if many.any():
-            wl = lam[i[many]] + self.step * frac[many]
-            rr = r[many]
-            idx = _indices(self.side, wl)
-            c = np.empty(wl.size)
-            for nu in np.unique(nu_u[rr]):
-                m = nu_u[rr] == nu
-                c[m] = _u_nodes_cos(s_u[rr[m]], np.asarray(idx[0], np.float64)[m],
-                                    np.asarray(idx[2]).real[m], self.kind, int(nu), ghost)
-            vals[many] = _smooth_terms(self.side, c, np.arange(wl.size), wl, idx)
-            self.exact_points += int(wl.size)
-        powers = _powers_of(vals, self.side.transmission)
-        grazing = np.repeat(cos[:, :-1].ravel() <= 0.0, n_pts)
-        if grazing.any():
-            powers[grazing, 0] = 1.0
-            if powers.shape[1] > 1:
-                powers[grazing, 1] = 0.0
-        powers *= (h * self.step)[:, None]
-        out = np.zeros((rows * nb, powers.shape[1]))
-        for kk, wk in enumerate(wts):
-            node = np.clip(i + kk - 1, 0, nb - 1) + r * nb
-            for c in range(powers.shape[1]):
-                out[:, c] += np.bincount(node, wk * powers[:, c], minlength=rows * nb)
-        return out.reshape(rows, nb, -1)
-
-    def _colour_check(self, bins: np.ndarray, lam: np.ndarray, sig: float) -> float:
-        """Largest CIEDE2000 between the colours of the exact and the band-limited
-        values of each row (each channel), under D65, A and F11."""
-        cw = colour_weights()
-        grid = cw[:, 0]
-        inside = (lam >= grid[0]) & (lam <= grid[-1])
-        cmf = np.stack([np.interp(lam, grid, cw[:, c], left=0.0, right=0.0) for c in (1, 2, 3)],
-                       axis=-1)
-        worst = 0.0
-        G = _gaussian(lam[:, None] - lam[None, :], sig) * self.step
-        for col in (4, 5, 6):
-            spd = np.interp(lam, grid, cw[:, col]) * inside
-            wgt = cmf * spd[:, None]                       # (nb, 3), per nm
-            # the band-limited colour weights the bins by the smoothed weights
-            wgt_s = G.T @ wgt
-            white = wgt.sum(axis=0) * self.step
-            xyz = np.einsum("rbc,bk->rck", bins, wgt)
-            xyz_s = np.einsum("rbc,bk->rck", bins, wgt_s)
-            de = delta_e2000(_lab(100.0 * xyz / white[1], 100.0 * white / white[1]),
-                             _lab(100.0 * xyz_s / white[1], 100.0 * white / white[1]))
-            worst = max(worst, float(np.max(de)))
-        return worst
 
 
 class TableCache:
