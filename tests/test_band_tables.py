@@ -103,7 +103,7 @@ def test_band_limiting_is_off_by_default_and_leaves_thin_stacks_alone(monkeypatc
     """Default settings: no band-limited table (the resonant stack is evaluated
     exactly); with a resolution, a 3-film stack keeps its table of the exact
     values (band-limiting only applies where that fails)."""
-    assert K.DEFAULT_SPECTRAL_RESOLUTION == 0.0
+    assert K.DEFAULT_SPECTRAL_RESOLUTION == 1.0
     K._TABLE_CACHE.clear()
     b = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "tabulate": True,
                       "layers": "2.3 130; 1.46 101; 2.3 105", "spectral_resolution": 1.0})

@@ -323,10 +323,11 @@ def test_ghost_nodes():
 
 def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     """The probe's estimate is verified like any table (one round for STACK), and a
-    stack no table within the budgets resolves -- 30 random films on Al, with
-    cavity resonances ~0.1 nm wide -- is rejected by the probe alone, for a small
-    fraction of the evaluations a failing build used to spend (up to
-    tables.MAX_BUILD_POINTS)."""
+    stack no table of the exact values within the budgets resolves -- 30 random
+    films on Al, with cavity resonances ~0.1 nm wide -- is rejected by the probe
+    alone, for a small fraction of the evaluations a failing build used to spend
+    (up to tables.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
+    table is tried after it; tests/test_band_tables.py covers those.)"""
     from thinfilm_mi import tables
     K._TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
@@ -338,7 +339,7 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(30))
     with pytest.warns(UserWarning, match="cannot be tabulated"):
         deep = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
-                             "tabulate": True})
+                             "tabulate": True, "spectral_resolution": 0.0})
     assert deep.stack.mode() == "exact"
     assert tables.last_build["result"] == "rejected by the probe"
     assert tables.last_build["rounds"] == 0
@@ -367,8 +368,11 @@ def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
 
 def test_auto_keeps_only_tables_that_fit_the_cache():
     """A table too large for the cache costs as much per lookup as the recursion
-    (benchmarks/SPEED.md): ``auto`` renders such a stack exactly, after the probe
-    alone; ``tabulate=true`` still builds it."""
+    (benchmarks/SPEED.md): ``auto`` does not keep such a table of the exact values,
+    after the probe alone; ``tabulate=true`` still builds it. Without band-limiting
+    ``auto`` then renders exactly; by default it tabulates ``R_σ`` instead, which
+    fits the cache (the 1 nm resolution damps the fringes of these 3 µm of optical
+    thickness by exp(-2 π² (σ_ν 2 Σ n d)²) < 1 %, yet the table is 160x824)."""
     from thinfilm_mi import tables
     layers = "2.3 800; 1.46 800"
     K._TABLE_CACHE.clear()
@@ -376,9 +380,15 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
                         "tabulate": True})
     table = big.stack.plan[False].table
     assert table is not None and K.AUTO_MAX_TEXELS < table.texels <= tables.MAX_TEXELS
-    auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
+    assert table.resolution == 0.0
+    auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
+                         "spectral_resolution": 0.0})
     assert auto.stack.mode() == "exact"
     assert tables.last_build["rounds"] == 0   # the probe's estimate alone says so
+    auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
+    table = auto.stack.plan[False].table
+    assert table is not None and table.resolution == K.DEFAULT_SPECTRAL_RESOLUTION
+    assert table.texels <= K.AUTO_MAX_TEXELS and table.error <= 1e-3
 
 
 @pytest.mark.parametrize("n", [2, 3, 16, 33, 700])
