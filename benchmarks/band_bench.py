@@ -1,30 +1,41 @@
-"""Band-limited tables (``spectral_resolution``, issue 21): build, steady render time,
-image error against exact evaluation, and noise at equal spp.
+"""Band-limited tables (``spectral_resolution``, issue 21): builds, steady render time
+at every depth with default settings, first image, image error against exact
+evaluation, and noise at equal spp.
 
-    python benchmarks/band_bench.py [--repeats 5] [--resolution 1.0] [--skip-30]
+    python benchmarks/band_bench.py [--repeats 5] [--first-repeats 3] [--de-spp 1024]
+                                    [--skip-first] [--skip-fig8]
 
-Variant llvm_ad_spectral, one process, the sphere scene and the Al stacks of
-render_bench.py (2.3/1.46 films, 50-200 nm from ``default_rng(6)``):
+Variant llvm_ad_spectral; the sphere scene and the Al stacks of render_bench.py
+(2.3/1.46 films, 50-200 nm from ``default_rng(6)``). Configurations:
+``conductor`` (Mitsuba's, Al), ``L:default`` (``thinfilm_conductor`` with L films
+and default settings: ``tabulate="auto"``, ``spectral_resolution`` 1 nm) and
+``L:exact`` (``tabulate=false``).
 
-1. Build: ``mi.load_dict`` of the BSDF with ``tabulate`` true and
-   ``spectral_resolution`` set (empty table cache, the build kernels compiled by
-   a first load of another stack), 10 and 30 films: load time, what the build
-   obtained (``tables.last_build``: result, rounds' (nu, nv, err_u, err_v),
-   exact evaluations, colour check).
-2. Steady render time, 256x256, 16 spp: ``conductor``, 10 films exact
-   (``tabulate`` false) and 10 films band-limited; one warm-up render each, then
-   --repeats round-robin rounds, medians.
-3. Image error of the band-limited table against exact evaluation, 10 films,
-   128x128 at 1024 spp, the same seed: CIEDE2000 of 4x4-pixel block means (linear
-   sRGB clipped to [0, 1]); noise floor: exact seed 0 against exact seed 1.
-4. Noise at equal spp: 16 renders (seeds 0..15) at 4 spp in each mode; the mean
-   over pixels of the per-pixel variance of the luminance, exact / table.
+1. Builds: ``mi.load_dict`` of the 10- and 30-film BSDFs with default settings,
+   empty table cache (the build kernels compiled by a first load of another
+   stack): load time and what the build obtained (``tables.last_build``).
+2. Steady render, 256x256, 16 spp: one warm-up render each, then --repeats
+   round-robin rounds (every configuration once per round), medians.
+3. First image with an empty kernel cache (subprocess, fresh DRJIT_CACHE_DIR):
+   ``mi.load_dict`` + first ``mi.render``, --first-repeats round-robin rounds,
+   the run with the median total.
+4. Image error of default mode against ``tabulate=false``, 10 and 30 films,
+   128x128 at --de-spp, the same seed: CIEDE2000 of 4x4-pixel block means
+   (linear sRGB clipped to [0, 1]); noise floor: exact seed 0 against seed 1.
+   The paper's Fig. 8 scenes: render_bench.image_error (tabulate true against
+   false, per pixel).
+5. Noise at equal spp: 16 renders (seeds 0..15) at 4 spp per mode, 10 and 30
+   films; the mean over pixels of the per-pixel variance of the luminance, exact
+   / default.
 """
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
+import tempfile
 import time
 import warnings
 
@@ -33,51 +44,59 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import render_bench as rb  # noqa: E402
 
+DEPTHS = (1, 3, 10, 30)
 
-def bsdf(L: int, mode: str, resolution: float) -> dict:
+
+def bsdf(L: int, mode: str) -> dict:
     d = rb.thicknesses()
     layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(L))
-    out = {"type": "thinfilm_conductor", "material": "Al", "layers": layers,
-           "tabulate": mode != "exact"}
-    if mode == "band":
-        out["spectral_resolution"] = resolution
+    out = {"type": "thinfilm_conductor", "material": "Al", "layers": layers}
+    if mode == "exact":
+        out["tabulate"] = False
     return out
 
 
-def scene(config: str, resolution: float, res=256, spp=16) -> dict:
+def scene(config: str, res=256, spp=16) -> dict:
     s = rb.scene_dict("conductor", res, spp)
     if config != "conductor":
         L, mode = config.split(":")
-        s["sphere"]["bsdf"] = bsdf(int(L), mode, resolution)
+        s["sphere"]["bsdf"] = bsdf(int(L), mode)
     return s
 
 
-def build(resolution: float, films) -> None:
+def build() -> None:
     import mitsuba as mi
     from thinfilm_mi import kernel as K, tables
-    print("\n### Band-limited builds (tabulate true, spectral_resolution "
-          f"{resolution} nm)\n")
-    print("| films | load (s) | result | rounds (nu, nv, err_u, err_v) | exact evaluations "
-          "| colour check (max ΔE2000) |")
-    print("|---:|---:|---|---|---:|---:|")
-    mi.load_dict(bsdf(10, "band", resolution * 1.01))   # compiles the build kernels
-    for L in films:
+    print("\n### Band-limited builds (default settings)\n")
+    print("| films | load (s) | result | table | rounds (nu x nv: err_u, err_v) "
+          "| exact evaluations | colour check ΔE2000 (D65 / A / F11) |")
+    print("|---:|---:|---|---|---|---:|---|")
+    d = bsdf(10, "default")
+    d["layers"] = d["layers"].replace("2.3 ", "2.31 ")
+    mi.load_dict(d)                      # compiles the build kernels
+    for L in (10, 30):
         K._TABLE_CACHE.clear()
         t = time.perf_counter()
-        mi.load_dict(bsdf(L, "band", resolution))
+        b = mi.load_dict(bsdf(L, "default"))
         dt = time.perf_counter() - t
         s = tables.last_build
-        rounds = "; ".join(f"{nu}x{nv}: {eu:.1e}, {ev:.1e}" for nu, nv, eu, ev in s.get("errors", []))
-        print(f"| {L} | {dt:.2f} | {s['result']} | {rounds} | {s['points']:,} | "
-              f"{s.get('colour_error') or 0:.3f} |", flush=True)
+        tab = b.stack.plan[False].table
+        rounds = "; ".join(f"{nu}x{nv}: {eu:.1e}, {ev:.1e}" for nu, nv, eu, ev in s["errors"])
+        ce = s.get("colour_errors") or {}
+        print(f"| {L} | {dt:.2f} | {s['result']} | "
+              f"{f'{tab.nu}x{tab.nv} ({tab.error:.1e})' if tab is not None else '–'} | "
+              f"{rounds} | {s['points']:,} | "
+              f"{' / '.join(f'{v:.3f}' for v in ce.values())} |", flush=True)
 
 
-def steady(repeats: int, resolution: float) -> None:
+def steady(repeats: int) -> None:
     import mitsuba as mi
-    configs = ["conductor", "10:exact", "10:band"]
-    scenes = {c: mi.load_dict(scene(c, resolution)) for c in configs}
-    for s in scenes.values():
-        rb.render_sync(s, seed=0)
+    configs = (["conductor"] + [f"{L}:default" for L in DEPTHS]
+               + [f"{L}:exact" for L in (10, 30)])
+    scenes = {}
+    for c in configs:
+        scenes[c] = mi.load_dict(scene(c))
+        rb.render_sync(scenes[c], seed=0)
     ts = {c: [] for c in configs}
     for i in range(repeats):
         for c in configs:
@@ -85,12 +104,49 @@ def steady(repeats: int, resolution: float) -> None:
             rb.render_sync(scenes[c], seed=i + 1)
             ts[c].append(time.perf_counter() - t)
     base = float(np.median(ts["conductor"]))
-    print(f"\n### Steady render (256x256, 16 spp, median of {repeats} round-robin)\n")
+    print(f"\n### Steady render (256x256, 16 spp, median of {repeats} round-robin rounds)\n")
     print("| configuration | mode obtained | median (s) | ratio to conductor |")
     print("|---|---|---:|---:|")
     for c in configs:
         m = float(np.median(ts[c]))
-        print(f"| {c} | {rb.mode_of(scenes[c])} | {m:.3f} | {m / base:.2f} |")
+        print(f"| {c} | {rb.mode_of(scenes[c])} | {m:.3f} | {m / base:.2f} |", flush=True)
+
+
+def first_image_child(config: str) -> None:
+    import mitsuba as mi
+    mi.set_variant(rb.VARIANT)
+    import thinfilm_mi  # noqa: F401
+    warnings.simplefilter("ignore")
+    t0 = time.perf_counter()
+    s = mi.load_dict(scene(config))
+    t1 = time.perf_counter()
+    rb.render_sync(s, seed=0)
+    t2 = time.perf_counter()
+    print(json.dumps({"load": t1 - t0, "render": t2 - t1, "mode": rb.mode_of(s)}))
+
+
+def first_image(repeats: int) -> None:
+    configs = ["conductor", "10:default", "10:exact", "30:default", "30:exact"]
+    runs = {c: [] for c in configs}
+    for _ in range(repeats):
+        for c in configs:
+            with tempfile.TemporaryDirectory(prefix="drjit_cache_") as cache:
+                env = dict(os.environ, DRJIT_CACHE_DIR=cache)
+                res = subprocess.run([sys.executable, os.path.abspath(__file__),
+                                      "--first-image-child", c], env=env, capture_output=True,
+                                     text=True, check=True)
+                runs[c].append(json.loads(res.stdout.strip().splitlines()[-1]))
+    print(f"\n### First image, empty kernel cache (median total of {repeats} round-robin runs)\n")
+    print("| configuration | mode obtained | mi.load (s) | first render (s) | total (s) "
+          "| ratio to conductor |")
+    print("|---|---|---:|---:|---:|---:|")
+    base = None
+    for c in configs:
+        r = sorted(runs[c], key=lambda r: r["load"] + r["render"])[len(runs[c]) // 2]
+        tot = r["load"] + r["render"]
+        base = base or tot
+        print(f"| {c} | {r['mode']} | {r['load']:.2f} | {r['render']:.2f} | {tot:.2f} | "
+              f"{tot / base:.2f} |", flush=True)
 
 
 def blocks(img, k=4):
@@ -99,50 +155,65 @@ def blocks(img, k=4):
     return a[:h, :w].reshape(h // k, k, w // k, k, 3).mean(axis=(1, 3))
 
 
-def image_error(resolution: float, spp: int) -> None:
+def image_error(spp: int) -> None:
     import mitsuba as mi
-    ex = mi.load_dict(scene("10:exact", resolution, 128, spp))
-    bd = mi.load_dict(scene("10:band", resolution, 128, spp))
-    img_e = rb.render_sync(ex, seed=0)
-    img_b = rb.render_sync(bd, seed=0)
-    img_e1 = rb.render_sync(ex, seed=1)
-    de = rb.delta_e(blocks(img_b), blocks(img_e))
-    noise = rb.delta_e(blocks(img_e1), blocks(img_e))
-    print(f"\n### Image error, 10 films, band-limited table against exact (128x128, {spp} spp, "
-          "same seed, 4x4 blocks)\n")
-    print(f"mean ΔE2000 {de.mean():.3f}, p95 {np.percentile(de, 95):.3f}, max {de.max():.3f}; "
-          f"noise floor (exact seed 0 vs 1) mean {noise.mean():.3f}")
+    print(f"\n### Image error of default mode against tabulate=false (128x128, {spp} spp, "
+          "same seed, 4x4-pixel blocks)\n")
+    print("| films | mode obtained | mean ΔE2000 | p95 | max | noise floor (exact seed 0 vs 1), "
+          "mean |")
+    print("|---:|---|---:|---:|---:|---:|")
+    for L in (10, 30):
+        ex = mi.load_dict(scene(f"{L}:exact", 128, spp))
+        df = mi.load_dict(scene(f"{L}:default", 128, spp))
+        img_e = rb.render_sync(ex, seed=0)
+        img_d = rb.render_sync(df, seed=0)
+        img_e1 = rb.render_sync(ex, seed=1)
+        de = rb.delta_e(blocks(img_d), blocks(img_e))
+        noise = rb.delta_e(blocks(img_e1), blocks(img_e))
+        print(f"| {L} | {rb.mode_of(df)} | {de.mean():.4f} | {np.percentile(de, 95):.4f} | "
+              f"{de.max():.3f} | {noise.mean():.3f} |", flush=True)
 
 
-def variance(resolution: float, seeds: int = 16, spp: int = 4) -> None:
+def variance(seeds: int = 16, spp: int = 4) -> None:
     import mitsuba as mi
-    out = {}
-    for mode in ("exact", "band"):
-        s = mi.load_dict(scene(f"10:{mode}", resolution, 128, spp))
-        imgs = np.stack([np.array(rb.render_sync(s, seed=i), dtype=np.float64)[..., :3]
-                         for i in range(seeds)])
-        Y = imgs @ np.array([0.2126, 0.7152, 0.0722])
-        out[mode] = float(Y.var(axis=0, ddof=1).mean())
-    print(f"\n### Noise at equal spp (10 films, 128x128, {spp} spp, {seeds} seeds)\n")
-    print(f"mean per-pixel variance of luminance: exact {out['exact']:.4e}, band-limited table "
-          f"{out['band']:.4e}; ratio exact / table {out['exact'] / out['band']:.3f}")
+    print(f"\n### Noise at equal spp (128x128, {spp} spp, {seeds} seeds)\n")
+    print("| films | exact: mean per-pixel variance of Y | default (table) | ratio exact / table |")
+    print("|---:|---:|---:|---:|")
+    Yw = np.array([0.2126, 0.7152, 0.0722])
+    for L in (10, 30):
+        out = {}
+        for mode in ("exact", "default"):
+            s = mi.load_dict(scene(f"{L}:{mode}", 128, spp))
+            Y = np.stack([np.array(rb.render_sync(s, seed=i), dtype=np.float64)[..., :3] @ Yw
+                          for i in range(seeds)])
+            out[mode] = float(Y.var(axis=0, ddof=1).mean())
+        print(f"| {L} | {out['exact']:.4e} | {out['default']:.4e} | "
+              f"{out['exact'] / out['default']:.3f} |", flush=True)
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=5)
-    ap.add_argument("--resolution", type=float, default=1.0)
+    ap.add_argument("--first-repeats", type=int, default=3)
     ap.add_argument("--de-spp", type=int, default=1024)
-    ap.add_argument("--skip-30", action="store_true")
+    ap.add_argument("--skip-first", action="store_true")
+    ap.add_argument("--skip-fig8", action="store_true")
+    ap.add_argument("--first-image-child")
     args = ap.parse_args()
+    if args.first_image_child:
+        return first_image_child(args.first_image_child)
     import mitsuba as mi
     mi.set_variant(rb.VARIANT)
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
-    build(args.resolution, (10,) if args.skip_30 else (10, 30))
-    steady(args.repeats, args.resolution)
-    image_error(args.resolution, args.de_spp)
-    variance(args.resolution)
+    build()
+    steady(args.repeats)
+    if not args.skip_first:
+        first_image(args.first_repeats)
+    image_error(args.de_spp)
+    if not args.skip_fig8:
+        rb.image_error(200, 256)
+    variance()
 
 
 if __name__ == "__main__":

@@ -20,25 +20,38 @@ wavelength axis (uniform in ``ν``): ``R_σ`` needs the same node spacing
 everywhere, half the nodes a Gaussian of constant width in λ would need.
 
 **How ``R_σ`` is computed.** Per angle row (a node coordinate of the table's
-angle axis), the exact ``R`` (float64, :func:`tables._evaluate`) is integrated
-by adaptive Simpson along ``ν``: panels start at the knot spacing ``w``
-(:data:`KNOT_SHARE` σ_ν) and are halved, down to ``w / 2^MAX_LEVEL``, until
-their error estimate is within :data:`TOLERANCE` times their width, so a
-resonance far narrower than ``w`` is integrated to a small fraction of its
-area. The panels' Simpson rule gathers ``R`` into bins with cubic B-spline
-weights (``I_b = ∫ R(ν) B((ν - ν_b) / w) dν``, exact in ``B``, which is a cubic
-on every panel), and ``R_σ = Σ_b G_σ'(ν - ν_b) I_b`` with ``σ'² = σ_ν² -
-w²/3`` (the B-spline's variance): the Gaussian of ``σ'`` times the B-spline is
-the Gaussian of ``σ_ν`` to its fourth cumulant. ``tests/test_band_tables.py``
-checks ``R_σ`` against a brute-force convolution of exact values on a 0.0005 nm
-grid.
+angle axis), the exact ``R`` (float64) is integrated by adaptive Simpson along
+``ν`` into bins of width ``w`` (:data:`KNOT_SHARE` σ_ν) with cubic B-spline
+weights, ``I_b = ∫ R(ν) B((ν - ν_b) / w) dν``:
 
-**The table** is the cubic B-spline of :mod:`thinfilm_mi.tables` (same axes,
-same lookup), its error ``table_error`` still the interpolation error, now
-against ``R_σ``: the v nodes sit on every other bin (their midpoints on the
-others), so the whole spectrum of a row is one FFT convolution; the angle rows
-are refined until the spline through them predicts the midpoint rows within
-the target. The build also checks the colour: the colour of ``R_σ`` against
+* the first level samples the amplitudes ``N``, ``D`` of the recursion
+  (``R = |N|²/|D|²``, :func:`_smooth_terms`) 32 times per interference fringe
+  of the whole stack (:func:`first_step`); ``N`` and ``D`` are smooth where
+  ``R`` has resonances, so every resonance shows as a zero of ``D`` near the
+  real axis, found on the cubic through four samples (:func:`_near_zeros`),
+  however narrow it is;
+* a panel is halved (two new exact values) until Simpson's error estimate is
+  within :data:`TOLERANCE` times its width *and* it is no wider than
+  :data:`GRADING` times its distance to the nearest zero of ``D``, down to
+  :data:`MIN_PANEL` (~1e-4 nm);
+* each accepted panel stands for the quadratic through its three values,
+  integrated exactly against the B-splines (3-point Gauss-Legendre on each bin
+  interval it covers);
+
+then ``R_σ = Σ_b G_σ'(ν - ν_b) I_b`` with ``σ'² = σ_ν² - w²/3`` (the
+B-spline's variance; the Gaussian of ``σ'`` times the B-spline is the Gaussian
+of ``σ_ν`` to its fourth cumulant), one FFT per row.
+``tests/test_band_tables.py`` checks ``R_σ`` against a brute-force convolution
+of exact values on a 0.0005 nm grid (measured within 1e-5).
+
+**The table** is the cubic B-spline of :mod:`thinfilm_mi.tables` (same lookup;
+the angle axis warped to put more nodes at mid angles, ``kind="band"`` of
+:func:`tables.u_texel`, where ``R_σ``'s features move fastest with the angle),
+its error ``table_error`` still the interpolation error, now against ``R_σ``,
+verified outside the same grazing sliver: the v nodes sit on every other bin
+(their midpoints on the others), so a row gives the whole spectrum; the angle
+rows are refined until the spline through them predicts the midpoint rows
+within the target. The build also checks the colour: the colour of ``R_σ`` against
 that of ``R`` under D65, illuminant A and the line spectrum F11, per row and
 channel, must be within :data:`COLOUR_TOLERANCE` (CIEDE2000); otherwise no
 table is built (``tabulate="auto"`` then evaluates exactly).
@@ -63,22 +76,27 @@ __all__ = ["build_table", "REFERENCE_WAVELENGTH", "sigma_nu"]
 #: standard deviation in nm (it scales as λ² elsewhere).
 REFERENCE_WAVELENGTH = 560.0
 #: Spacing of the table's v nodes in units of σ_ν: the cubic spline of ``R_σ``
-#: is then within ~4e-4 (measured on the 30-film benchmark stack: 3.3e-4 at
-#: 0.8, 2.4e-3 at 1.2, 9e-5 at 0.6 in constant-width units); where that is not
-#: enough the build halves it.
+#: along v is then within ~3e-4 (measured: 1.6e-4 for the 10-film and 3.2e-4
+#: for the 30-film benchmark stack; at 0.8, 6.7e-4 and 1.3e-3); where that is not
+#: enough the build makes it finer (and computes every row again).
 V_SPACING = 0.6
-#: Bins (and Simpson panels) are half a v-node spacing wide: 0.4 σ_ν, where
-#: the B-spline's departure from a Gaussian is ~1e-6 of ``R_σ``.
+#: Bins are half a v-node spacing wide, 0.3 σ_ν: the bins' B-spline departs
+#: from a Gaussian by its fourth cumulant, ~1e-6 of ``R_σ``.
 KNOT_SHARE = 0.5 * V_SPACING
 #: A panel is accepted when its Simpson error estimate is within this times its
-#: width (``R_σ`` then errs by ~2x this at most: the Gaussian's peak is 0.4 / σ
-#: and ~5 σ of panels weigh in; measured <= 1.5e-5 outside the grazing sliver).
+#: width in bins (``R_σ`` then errs by ~2x this: the Gaussian's peak is 0.4 / σ
+#: and ~5 σ of panels weigh in). 5e-5 left single rows of the 30-film stack 9e-4
+#: off where the estimate was still far from its asymptotic regime.
 TOLERANCE = 5e-6
 #: Largest first-level sample step (bins).
 MAX_STEP = 8.0
 #: Finest panel (bins: ~1e-4 nm at 560 nm and the default σ), below the
 #: narrowest cavity resonances outside the grazing sliver.
 MIN_PANEL = 2.0 ** -10
+#: The finest panel where ``cos θ < GRAZING_COS / 2``: deep in the grazing
+#: sliver, which builds do not verify (the rows just inside it are as exact as
+#: the others: the spline at a verified midpoint reaches two nodes on either side).
+MIN_PANEL_GRAZING = 2.0 ** -2
 #: Panels near a zero ``z_p`` of the resonant denominator ``D`` are at most this
 #: times their distance to it (:class:`_Resonances`): Simpson's error estimate
 #: alone misses or mis-measures resonances a few samples wide (measured on the
@@ -88,10 +106,6 @@ GRADING = 0.5
 #: Zeros farther from the axis than this many first-level samples ask nothing
 #: of the first panels (two samples wide).
 RESOLVE_DISTANCE = 2.0 / GRADING
-#: The same where ``cos θ < GRAZING_COS / 2``: deep in the grazing sliver, which
-#: builds do not verify (the rows just inside it are as exact as the others: the
-#: spline at a verified midpoint reaches two nodes on either side).
-MIN_PANEL_GRAZING = 2.0 ** -2
 #: The Gaussian is cut at this many standard deviations.
 TAIL = 6.0
 #: Largest CIEDE2000 between the colours of ``R`` and ``R_σ`` (and ``T``,
@@ -101,11 +115,6 @@ TAIL = 6.0
 COLOUR_TOLERANCE = 0.5
 #: Angle nodes of the first round (a plain axis; a split one: per segment, half).
 FIRST_NU = 65
-#: Band-limited tables are verified for ``cos θ >= GRAZING`` (within ~6° of
-#: grazing incidence the cavity resonances of deep stacks narrow below 0.02 nm,
-#: too narrow for the adaptive sampling to find every one of them from its
-#: 0.2 σ first step: ``R_σ`` there is within ~1e-2, not the target).
-GRAZING = 0.1
 #: Convergence order assumed for the first refinement of the angle axis (then
 #: the order observed between rounds): ``R_σ``'s resonances are still sharp at
 #: the first round's spacing, so the cubic's h^4 is not reached yet (measured
@@ -220,6 +229,9 @@ class _Resonances:
         return out
 
 
+ILLUMINANTS = ("D65", "A", "F11")
+
+
 class Rows:
     """Band-limited angle rows of one side: ``R_σ`` [, ``T_σ``] on a grid of bins
     uniform in ``ν`` whose every other bin is a v node of a table of ``nv`` nodes.
@@ -253,7 +265,12 @@ class Rows:
         self.points = 0
         self._done: dict = {}
         self._row_cos: dict = {}
-        self.colour_error = 0.0
+        #: the largest colour difference of the rows so far under D65, A, F11
+        self.colour_errors = np.zeros(3)
+
+    @property
+    def colour_error(self) -> float:
+        return float(self.colour_errors.max())
 
     # -- exact values ----------------------------------------------------------
     def _exact(self, xs: np.ndarray, r: np.ndarray, nu: np.ndarray):
@@ -444,7 +461,7 @@ class Rows:
         if new.any():
             fresh = np.unique(keys[new])
             bins = self._bins(fresh)
-            self.colour_error = max(self.colour_error, self._colour_check(fresh, bins))
+            self.colour_errors = np.maximum(self.colour_errors, self._colour_check(fresh, bins))
             smooth = self._convolve(bins)
             for k, v in zip(fresh, smooth):
                 self._done[k] = v
@@ -463,7 +480,7 @@ class Rows:
                         np.tile(np.arange(nb), xs.size)).reshape(xs.size, nb)
         keep = cos.min(axis=1) >= GRAZING_COS
         if not keep.any():
-            return 0.0
+            return np.zeros(3)
         bins = bins[keep]
         cw = colour_weights()
         grid = cw[:, 0]
@@ -473,8 +490,8 @@ class Rows:
         J = self.reach
         j = np.arange(-J, J + 1)
         g = np.exp(-0.5 * (j * self.w / self.sig) ** 2) * (self.w / (self.sig * math.sqrt(2 * math.pi)))
-        worst = 0.0
-        for col in (4, 5, 6):
+        worst = np.zeros(3)
+        for i, col in enumerate((4, 5, 6)):
             wgt = cmf * (np.interp(wl_b, grid, cw[:, col]) * jac)[:, None]   # (nb, 3)
             wgt_s = np.stack([np.convolve(wgt[:, c], g, mode="same") for c in range(3)], axis=-1)
             white = wgt.sum(axis=0) * self.w
@@ -482,7 +499,7 @@ class Rows:
             xyz_s = np.einsum("rbc,bk->rck", bins, wgt_s)
             ref = 100.0 * white / white[1]
             de = delta_e2000(_lab(100.0 * xyz / white[1], ref), _lab(100.0 * xyz_s / white[1], ref))
-            worst = max(worst, float(np.max(de)))
+            worst[i] = float(np.max(de))
         return worst
 
 
@@ -539,6 +556,7 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
         stats["rounds"] += 1
         stats["points"] = points + rows.points
         stats["colour_error"] = rows.colour_error
+        stats["colour_errors"] = dict(zip(ILLUMINANTS, rows.colour_errors.tolist()))
         stats["errors"].append((nu, nv, err_u, err_v))
         if rows.colour_error > COLOUR_TOLERANCE:
             stats["result"] = "colour check failed"
@@ -595,14 +613,14 @@ def _round(rows: Rows, kind: str, nu: int):
     coeffs = bspline_coefficients(cu, axis=0)
     cos_m = _node_cos(rows, xm, tv[g:-g])
     dev = np.abs(mid_u - approx_u).max(axis=-1)
-    dev = np.where(cos_m >= GRAZING, dev, 0.0)
+    dev = np.where(cos_m >= GRAZING_COS, dev, 0.0)
     err_u = float(np.max(dev))
     # the spline along v through node column j: the u spline's (1, 4, 1) / 6 of
     # the coefficients
     cv = (coeffs[:, cols - 1] + 4.0 * coeffs[:, cols] + coeffs[:, cols + 1]) / 6.0
     dev = np.abs(mid_v[:, real] - _bspline_midpoints(cv, 0, g, nv)).max(axis=-1)
     cos_n = _node_cos(rows, xn[real], tv[g:-g])
-    keep = (cos_n[:-1] >= GRAZING) & (cos_n[1:] >= GRAZING)
+    keep = (cos_n[:-1] >= GRAZING_COS) & (cos_n[1:] >= GRAZING_COS)
     err_v = float(np.max(np.where(keep, dev, 0.0)))
     return coeffs, err_u, err_v
 
