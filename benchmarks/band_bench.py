@@ -4,6 +4,7 @@ evaluation, and noise at equal spp.
 
     python benchmarks/band_bench.py [--repeats 5] [--first-repeats 3] [--de-spp 1024]
                                     [--skip-first] [--skip-fig8]
+                                    [--only build|steady|first|de|fig8|noise]
 
 Variant llvm_ad_spectral; the sphere scene and the Al stacks of render_bench.py
 (2.3/1.46 films, 50-200 nm from ``default_rng(6)``). Configurations:
@@ -25,8 +26,9 @@ and default settings: ``tabulate="auto"``, ``spectral_resolution`` 1 nm) and
    The paper's Fig. 8 scenes: render_bench.image_error (tabulate true against
    false, per pixel).
 5. Noise at equal spp: 16 renders (seeds 0..15) at 4 spp per mode, 10 and 30
-   films; the mean over pixels of the per-pixel variance of the luminance, exact
-   / default.
+   films, of the scene above and of the sphere alone with direct reflection only
+   (the noise of the spectral estimate); the mean over pixels of the per-pixel
+   variance of the luminance, exact / default.
 """
 from __future__ import annotations
 
@@ -174,20 +176,32 @@ def image_error(spp: int) -> None:
               f"{de.max():.3f} | {noise.mean():.3f} |", flush=True)
 
 
+def specular_only(config: str, res: int, spp: int) -> dict:
+    """The sphere alone under the constant emitter, direct reflection only: a
+    pixel's noise is then the spectral estimate's (and the pixel jitter's)."""
+    s = scene(config, res, spp)
+    del s["floor"]
+    s["integrator"] = {"type": "path", "max_depth": 2}
+    return s
+
+
 def variance(seeds: int = 16, spp: int = 4) -> None:
     import mitsuba as mi
     print(f"\n### Noise at equal spp (128x128, {spp} spp, {seeds} seeds)\n")
-    print("| films | exact: mean per-pixel variance of Y | default (table) | ratio exact / table |")
-    print("|---:|---:|---:|---:|")
+    print("| films | scene | exact: mean per-pixel variance of Y | default (table) "
+          "| ratio exact / table |")
+    print("|---:|---|---:|---:|---:|")
     Yw = np.array([0.2126, 0.7152, 0.0722])
-    for L in (10, 30):
+    for L, (name, make) in ((L, v) for L in (10, 30) for v in (("sphere and floor", scene),
+                                                               ("sphere only, direct",
+                                                                specular_only))):
         out = {}
         for mode in ("exact", "default"):
-            s = mi.load_dict(scene(f"{L}:{mode}", 128, spp))
+            s = mi.load_dict(make(f"{L}:{mode}", 128, spp))
             Y = np.stack([np.array(rb.render_sync(s, seed=i), dtype=np.float64)[..., :3] @ Yw
                           for i in range(seeds)])
             out[mode] = float(Y.var(axis=0, ddof=1).mean())
-        print(f"| {L} | {out['exact']:.4e} | {out['default']:.4e} | "
+        print(f"| {L} | {name} | {out['exact']:.4e} | {out['default']:.4e} | "
               f"{out['exact'] / out['default']:.3f} |", flush=True)
 
 
@@ -198,6 +212,7 @@ def main():
     ap.add_argument("--de-spp", type=int, default=1024)
     ap.add_argument("--skip-first", action="store_true")
     ap.add_argument("--skip-fig8", action="store_true")
+    ap.add_argument("--only", choices=("build", "steady", "first", "de", "fig8", "noise"))
     ap.add_argument("--first-image-child")
     args = ap.parse_args()
     if args.first_image_child:
@@ -206,14 +221,20 @@ def main():
     mi.set_variant(rb.VARIANT)
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
-    build()
-    steady(args.repeats)
-    if not args.skip_first:
+    def want(part):
+        return args.only is None or args.only == part
+    if want("build"):
+        build()
+    if want("steady"):
+        steady(args.repeats)
+    if want("first") and not args.skip_first:
         first_image(args.first_repeats)
-    image_error(args.de_spp)
-    if not args.skip_fig8:
+    if want("de"):
+        image_error(args.de_spp)
+    if want("fig8") and not args.skip_fig8:
         rb.image_error(200, 256)
-    variance()
+    if want("noise"):
+        variance()
 
 
 if __name__ == "__main__":
