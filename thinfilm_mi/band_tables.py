@@ -193,9 +193,10 @@ class _Resonances:
     axis; per row, positions and distances in bins), and the graded panels they
     ask for: a panel must be no wider than :data:`GRADING` times its distance to
     the nearest zero, ``|x - (x_p + i d)|`` at its point nearest ``x_p`` (the
-    scale on which the resonance's Lorentzian varies there). Simpson's error estimate alone can
-    vanish by accident on a panel beside a resonance (measured: a panel of 16
-    bins on the flank of a dip of depth 0.4, left R_σ 0.017 off)."""
+    scale on which the resonance's Lorentzian varies there). Simpson's error
+    estimate alone can vanish by accident on a panel beside a resonance
+    (measured: a panel of 16 bins on the flank of a dip of depth 0.4 left R_σ
+    0.017 off)."""
 
     #: The zeros checked per panel: the last one before it and the first ones
     #: from its start (two polarisations, a few per panel at most).
@@ -253,11 +254,10 @@ class Rows:
         self.reach = int(math.ceil(TAIL * self.sig / w))
         self.step = first_step(side, w)
         # margins: ghosts, the Gaussian's reach, and whole pairs of first panels
+        # (nb - 1 a multiple of 4 steps; it is even, and so is every quantum)
         quantum = int(round(4 * self.step))
         b0 = 2 * GHOST + self.reach + 2
         b0 += (-(2 * (self.nv - 1) + 2 * b0)) % quantum // 2
-        if (2 * (self.nv - 1) + 2 * b0) % quantum:
-            b0 += quantum // 2
         self.b0 = b0
         self.nb = nb = 2 * (self.nv - 1) + 2 * b0 + 1
         self.wavenumbers = SIGMA_MAX - (np.arange(nb) - b0) * w          # decreasing ν
@@ -304,9 +304,10 @@ class Rows:
         are smooth where ``R`` has resonances: a resonance is a zero of ``D_s``
         or ``D_p`` just off the real axis, found on the cubic through the
         samples (:func:`_near_zeros`) even where it is far narrower than the
-        samples' step; a panel holding it is halved until it is no wider than
-        the zero's distance from the axis (its half width), and the adaptive
-        rule then resolves its shape."""
+        samples' step; the panels around it are graded by their distance to the
+        zero (:class:`_Resonances`: at the zero itself, its distance from the
+        axis, the resonance's half width), and the adaptive rule then resolves
+        its shape."""
         R, P, C = xs.size, nu_pts.size, self.channels
         rows_of = np.repeat(np.arange(R), P)
         if not _smooth_applies(self.side):
@@ -321,9 +322,8 @@ class Rows:
         terms = terms.reshape(R, P, -1)
         f = _powers_of(terms, self.side.transmission)
         f = np.where((cos <= 0.0)[..., None], np.array([1.0, 0.0][:C]), f)
-        # zeros of D_s and D_p within RESOLVE_DISTANCE sample steps of the axis:
-        # the panel holding one must be no wider than its distance (the
-        # resonance's half width), in bins
+        # zeros of D_s and D_p within RESOLVE_DISTANCE sample steps of the axis
+        # (positions and distances in bins)
         r, pos, d = (np.concatenate(v) for v in zip(*(_near_zeros(terms, k) for k in (2, 6))))
         return f, cos, _Resonances(r, self.step * pos,
                                    np.maximum(self.step * d, MIN_PANEL), self.nb)
@@ -333,9 +333,9 @@ class Rows:
         """``I_b`` of the rows ``xs``: shape ``(rows, nb, C)``.
 
         First level: samples every :attr:`step` bins, panels two steps wide whose
-        error is estimated in pairs (5 samples); a panel that fails, or holds a
-        resonance narrower than itself, is halved (2 new samples) until it
-        passes. Each accepted panel stands for the quadratic through its three
+        error is estimated in pairs (5 samples); a panel that fails, or is wider
+        than the resonances near it allow (:class:`_Resonances`), is halved (2
+        new samples) until it passes or reaches :data:`MIN_PANEL`. Each accepted panel stands for the quadratic through its three
         samples, integrated exactly against the bins' B-splines (3-point
         Gauss-Legendre on each bin interval it covers: degree 2 + 3)."""
         R, nb, w, S = xs.size, self.nb, self.w, self.step
@@ -468,11 +468,11 @@ class Rows:
         return np.stack([self._done[k] for k in keys])
 
     # -- colour check -------------------------------------------------------------
-    def _colour_check(self, xs: np.ndarray, bins: np.ndarray) -> float:
-        """Largest CIEDE2000 between the colours of the exact and the band-limited
-        values of each row (and channel) outside the grazing sliver, under D65, A
-        and F11 (``∫ R W dλ = ∫ R W(1/ν) dν / ν²``; ``R_σ``'s colour weights the bins
-        by the Gaussian-smoothed weights)."""
+    def _colour_check(self, xs: np.ndarray, bins: np.ndarray) -> np.ndarray:
+        """The largest CIEDE2000 between the colours of the exact and the
+        band-limited values of the rows (each channel) outside the grazing sliver,
+        under D65, A and F11 (an array of 3; ``∫ R W dλ = ∫ R W(1/ν) dν / ν²``;
+        ``R_σ``'s colour weights the bins by the Gaussian-smoothed weights)."""
         wl_b = 1.0 / self.wavenumbers
         idx = _indices(self.side, wl_b)
         nb = wl_b.size
@@ -504,9 +504,9 @@ class Rows:
 
 
 def _axis(kind: str, nu: int):
-    """Row coordinates of a table with ``nu`` angle nodes: ``(nodes, mids)``; a plain
-    axis's nodes include its ghosts (evaluated), a split axis's do not, and its
-    critical cell has no midpoint."""
+    """Row coordinates of a table with ``nu`` angle nodes: ``(nodes, mids)``; a
+    ``"band"`` axis's nodes include its ghosts (evaluated), a split axis's do not,
+    and its critical cell has no midpoint."""
     g = GHOST
     if kind == "band":
         s = np.arange(-g, nu + g, dtype=np.float64)
@@ -546,13 +546,17 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     spacing = V_SPACING
     rows = Rows(side, kind, resolution, spacing)
     nu = 2 * FIRST_NU if split else FIRST_NU
-    last, points = None, 0
+    last, points, per_row = None, 0, 0.0
     for _ in range(MAX_ROUNDS + 1):
         nv = rows.nv
-        if nu > MAX_U or nv > MAX_V or nu * nv > max_texels:
+        # the round's new rows at the cost per row so far
+        todo = sum(k not in rows._done for k in np.round(np.concatenate(_axis(kind, nu)), 12))
+        if (nu > MAX_U or nv > MAX_V or nu * nv > max_texels
+                or points + rows.points + todo * per_row > MAX_BUILD_POINTS):
             stats["result"] = "over budget"
             return None
         table, err_u, err_v = _round(rows, kind, nu)
+        per_row = max(per_row, rows.points / len(rows._done))
         stats["rounds"] += 1
         stats["points"] = points + rows.points
         stats["colour_error"] = rows.colour_error
