@@ -35,9 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
-import tempfile
 import time
 import warnings
 
@@ -129,22 +127,14 @@ def first_image_child(config: str) -> None:
 
 def first_image(repeats: int) -> None:
     configs = ["conductor", "10:default", "10:exact", "30:default", "30:exact"]
-    runs = {c: [] for c in configs}
-    for _ in range(repeats):
-        for c in configs:
-            with tempfile.TemporaryDirectory(prefix="drjit_cache_") as cache:
-                env = dict(os.environ, DRJIT_CACHE_DIR=cache)
-                res = subprocess.run([sys.executable, os.path.abspath(__file__),
-                                      "--first-image-child", c], env=env, capture_output=True,
-                                     text=True, check=True)
-                runs[c].append(json.loads(res.stdout.strip().splitlines()[-1]))
+    runs = rb.first_images(__file__, configs, repeats)
     print(f"\n### First image, empty kernel cache (median total of {repeats} round-robin runs)\n")
     print("| configuration | mode obtained | mi.load (s) | first render (s) | total (s) "
           "| ratio to conductor |")
     print("|---|---|---:|---:|---:|---:|")
     base = None
     for c in configs:
-        r = sorted(runs[c], key=lambda r: r["load"] + r["render"])[len(runs[c]) // 2]
+        r = runs[c]
         tot = r["load"] + r["render"]
         base = base or tot
         print(f"| {c} | {r['mode']} | {r['load']:.2f} | {r['render']:.2f} | {tot:.2f} | "

@@ -164,22 +164,28 @@ def first_image_child(config: str):
     print(json.dumps({"load": t1 - t0, "render": t2 - t1, "mode": mode_of(scene)}))
 
 
-def first_image(repeats: int):
-    configs = ["conductor"] + [f"{L}:{m}" for L in FILMS for m in ("exact", "table")]
+def first_images(script: str, configs, repeats: int) -> dict:
+    """Per configuration, the run (``{"load", "render", "mode"}``) with the median
+    total of ``repeats``: each a new process running ``script
+    --first-image-child CONFIG`` with a fresh ``DRJIT_CACHE_DIR``, the
+    configurations round-robin (as in steady())."""
     runs = {c: [] for c in configs}
-    for _ in range(repeats):   # round-robin, as in steady()
+    for _ in range(repeats):
         for c in configs:
             with tempfile.TemporaryDirectory(prefix="drjit_cache_") as cache:
                 env = dict(os.environ, DRJIT_CACHE_DIR=cache)
-                res = subprocess.run([sys.executable, os.path.abspath(__file__),
+                res = subprocess.run([sys.executable, os.path.abspath(script),
                                       "--first-image-child", c], env=env, capture_output=True,
                                      text=True, check=True)
                 runs[c].append(json.loads(res.stdout.strip().splitlines()[-1]))
             print(f"  first image {c}: {runs[c][-1]}", file=sys.stderr, flush=True)
-    out = {}
-    for c in configs:   # the run with the median total
-        ordered = sorted(runs[c], key=lambda r: r["load"] + r["render"])
-        out[c] = ordered[len(ordered) // 2]
+    return {c: sorted(runs[c], key=lambda r: r["load"] + r["render"])[len(runs[c]) // 2]
+            for c in configs}
+
+
+def first_image(repeats: int):
+    configs = ["conductor"] + [f"{L}:{m}" for L in FILMS for m in ("exact", "table")]
+    out = first_images(__file__, configs, repeats)
     base = out["conductor"]["load"] + out["conductor"]["render"]
     print("\n### First image, empty kernel cache (fresh DRJIT_CACHE_DIR per "
           f"configuration and run; the run with the median total of {repeats})\n")
