@@ -148,18 +148,30 @@ def check_powers(Arr, Rs, Rp, Ts, Tp, cos0, near, lossless):
         assert np.all(np.abs(Rp + Tp - 1) <= tol), np.max(np.abs(Rp + Tp - 1))
 
 
-@pytest.mark.parametrize("Arr", [Float, Float64], ids=["float32", "float64"])
-@SETTINGS
-@given(stack=stacks())
-def test_absorbing_stacks_stay_physical(Arr, stack):
-    check(Arr, stack, lossless=False)
+#: Examples per property and precision. float64 runs the same (array-generic)
+#: code as the float32 kernels and is what the table builds run, on physical
+#: inputs; its examples compile the slowest kernels (the films unrolled in
+#: float64: the lossless property took 60 s at 8 examples, a tenth of the
+#: suite), so it draws 4 of the same derandomised sequence of stacks.
+EXAMPLES = {Float: 8, Float64: 4}
+
+
+def _check_examples(Arr, strategy, lossless):
+    @settings(SETTINGS, max_examples=EXAMPLES[Arr])
+    @given(stack=strategy)
+    def run(stack):
+        check(Arr, stack, lossless=lossless)
+    run()
 
 
 @pytest.mark.parametrize("Arr", [Float, Float64], ids=["float32", "float64"])
-@SETTINGS
-@given(stack=stacks(lossless=True))
-def test_lossless_stacks_conserve_energy(Arr, stack):
-    check(Arr, stack, lossless=True)
+def test_absorbing_stacks_stay_physical(Arr):
+    _check_examples(Arr, stacks(), lossless=False)
+
+
+@pytest.mark.parametrize("Arr", [Float, Float64], ids=["float32", "float64"])
+def test_lossless_stacks_conserve_energy(Arr):
+    _check_examples(Arr, stacks(lossless=True), lossless=True)
 
 
 @pytest.mark.parametrize("Arr", [Float, Float64], ids=["float32", "float64"])
