@@ -60,11 +60,12 @@ def test_band_limited_values_match_a_brute_force_convolution(monkeypatch):
     """R_σ of the build's rows at a few (angle, wavenumber) points against the exact
     R on a 0.0005 nm grid convolved by direct summation. The 10-film stack has
     resonances ~0.1 nm wide and narrower (R drops by up to 0.3 within them),
-    below the rows' first step (0.2 σ, ~0.14 nm at 560 nm); the resonance search
-    of the first level must find them. Measured difference <= 1.6e-7 at normal,
-    42° and 71° incidence; the bound 1e-4 is a tenth of the default table_error,
-    and a missed resonance errs by ~1e-3 or more (measured 9e-4 with the looser
-    Simpson tolerance 5e-5 on the 30-film stack)."""
+    far below the rows' first step (4 bins of 0.3 σ, ~1.2 nm at 560 nm); the
+    resonance search of the first level must find them. Measured difference <=
+    4.4e-6 at normal, 42° and 71° incidence; the bound 1e-4 is a tenth of the
+    default table_error, and a missed resonance errs by ~1e-3 or more (measured
+    9e-4 with the looser Simpson tolerance 5e-5, 1.7e-2 without the panels'
+    grading)."""
     side = _resonant_side(monkeypatch)
     rows = band_tables.Rows(side, "band", 1.0)
     xs = np.array([0.0, 0.3, 0.7])

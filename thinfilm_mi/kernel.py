@@ -259,8 +259,8 @@ AUTO_MAX_TEXELS = 1 << 19
 #: deviation at 560 nm (:mod:`thinfilm_mi.band_tables`; ``0``: exact values
 #: only). 1 nm changes the colour of the 30-film benchmark stack by ΔE2000 <=
 #: 0.009 under D65 (0.2 under the line spectrum F11) and makes its table
-#: 385x824 texels, built in ~1 s; a render of it is then as fast as of a 3-film
-#: stack (benchmarks/SPEED.md, issue 21).
+#: 385x824 texels, built in 1-1.6 s; a render of it then costs 1.09x Mitsuba's
+#: ``conductor`` instead of 1.35x (benchmarks/SPEED.md, issue 21).
 DEFAULT_SPECTRAL_RESOLUTION = 1.0
 #: A film is optically opaque when the amplitude of light crossing it once,
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
@@ -539,7 +539,8 @@ class KernelStack:
                 if side.table is None:
                     self.table_failed.append(inside)
                     # "auto" does not retry after every parameter edit: a failed
-                    # build costs up to ~1 s (tables.MAX_BUILD_POINTS).
+                    # build costs up to ~1 s (tables.MAX_BUILD_POINTS), a failed
+                    # band-limited one ~2 s more (band_tables.MAX_BUILD_POINTS).
                     self._gave_up.add(inside)
         if self.tabulate is True and self.table_failed:
             import warnings

@@ -29,7 +29,9 @@ Axes (chosen so that the tabulated functions are smooth):
 * angle: when the exit medium cannot totally reflect, uniform in
   ``w = 1 - sqrt(1 - theta / (pi/2))`` (the films' responses are even in their
   ``q``, so ``R`` is analytic in ``theta``, and in ``w``; nodes crowd towards
-  grazing incidence, where coated metals dip sharply and rise to ``R = 1``).
+  grazing incidence, where coated metals dip sharply and rise to ``R = 1``;
+  band-limited tables, :mod:`thinfilm_mi.band_tables`, blend in more nodes at
+  mid angles: :func:`u_texel`'s ``kind="band"``).
   When it can (light inside glass, exit medium of lower index), the axis is
   split at the critical angle, which sits exactly on a node at every
   wavelength: below it the axis is uniform in the refraction angle ``theta_t``
