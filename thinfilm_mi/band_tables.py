@@ -139,10 +139,14 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     one resolves them within ``error`` (1-3 films: unchanged by band-limiting),
     else, if ``resolution`` > 0, of ``R_σ`` (:func:`build_band_table`); ``None``
     if neither can be built. What the build did is left in
-    :data:`tables.last_build` (the exact attempt under ``"exact_attempt"``)."""
+    :data:`tables.last_build` (the exact attempt under ``"exact_attempt"``).
+
+    Nothing here reads :data:`tables.last_build` to decide: Mitsuba's parallel
+    scene loading runs builds on several threads, each of which replaces it
+    (a build of a side whose critical angle varies returns ``None`` from both
+    builders by itself)."""
     table = _tables.build_table(side, error, wavelengths, max_texels)
-    if (table is not None or resolution <= 0
-            or _tables.last_build["result"] == "critical angle varies"):
+    if table is not None or resolution <= 0:
         return table
     before = _tables.last_build
     table = build_band_table(side, error, wavelengths, max_texels, resolution)

@@ -770,7 +770,8 @@ def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: d
 #: What the last :func:`build_table` did: ``kind``, ``probe_points`` and
 #: ``points`` (exact evaluations by the probe and in all), ``rounds`` (tables
 #: built and verified) and ``result`` ("table", "rejected by the probe", "over
-#: budget", "critical angle varies").
+#: budget", "critical angle varies"). For inspection only: under Mitsuba's
+#: parallel scene loading, builds on other threads replace it.
 last_build: dict = {}
 
 
