@@ -524,14 +524,16 @@ class ThinFilmDiffuse(mi.BSDF):
         callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
 
     def parameters_changed(self, keys):
-        def refresh():
+        def refresh(changed):
             self.coating.parameters_changed()
+            if self.film_n is not None:
+                self.film_n.parameters_changed(NAME, f"layers.{len(self.coating)}.")
             if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
                 dr.make_opaque(self.film_n_thickness)
             colour_albedo = self.colour is not None and self.colour.fixed
-            if not keys or any(k.startswith("layers.") or (colour_albedo and
-                                                           k.startswith("reflectance"))
-                               for k in keys):
+            if changed is None or any(k.startswith("layers.") or (colour_albedo and
+                                                                  k.startswith("reflectance"))
+                                      for k in changed):
                 self._update_hemispherical()
         self.guard.changed(self, refresh, keys)
 

@@ -74,6 +74,15 @@ def opaque_float(value: float):
     return x
 
 
+def _same_variables(a, b) -> bool:
+    """Whether two Dr.Jit arrays refer to the same JIT variables (no evaluation);
+    other values are compared by value."""
+    if dr.is_jit_v(a) and dr.is_jit_v(b):
+        return (dr.detail.collect_indices(dr.detach(a))
+                == dr.detail.collect_indices(dr.detach(b)))
+    return bool(np.array_equal(np.asarray(a, np.float64), np.asarray(b, np.float64)))
+
+
 class SpectralIndex:
     """A complex refractive index as textures ``eta(λ)`` and ``k(λ)``."""
 
@@ -88,6 +97,21 @@ class SpectralIndex:
         #: a constant, the 1 nm grid plus the dataset's knots for a dataset,
         #: ``None`` for textures given by the user (unknown).
         self.knots = knots
+        #: The arrays of the ``irregular`` spectra among the two textures (a
+        #: dataset's, or the user's), ``"eta"``/``"k"`` -> ``{"wavelengths": Float,
+        #: "values": Float}``. :meth:`traverse` exposes them as the BSDF's own
+        #: parameters rather than the spectrum's, so that an edit reaches the BSDF's
+        #: validation (:class:`thinfilm_mi.params.ParameterGuard`) before the
+        #: spectrum rebuilds its distribution (:meth:`parameters_changed`): a
+        #: spectrum notified directly raises Mitsuba's own error on a negative value
+        #: and is left broken for every later ``params.update()``.
+        self.arrays = {}
+        self._arrays_edited = False
+        for part, tex in (("eta", eta_tex), ("k", k_tex)):
+            if tex.class_name() == "IrregularSpectrum":
+                tp = _mi().traverse(tex)
+                self.arrays[part] = {name: type(tp[name])(tp[name])
+                                     for name in ("wavelengths", "values")}
 
     @classmethod
     def from_material(cls, spec: Any, name: str) -> "SpectralIndex":
@@ -143,9 +167,12 @@ class SpectralIndex:
         dataset's own knots (it is interpolated linearly between them). Empty
         for constants and formulas (their 1 nm sampling bends the slope by
         ~1e-7) and for textures given by the user (unknown)."""
-        if self.material is None:
+        if self._arrays_edited:   # edited through mi.traverse: every node may be a kink
+            knots = self.knots
+        elif self.material is None:
             return np.empty(0)
-        knots = getattr(self.material, "knots", lambda: np.empty(0))()
+        else:
+            knots = getattr(self.material, "knots", lambda: np.empty(0))()
         return knots[(knots > GRID[0]) & (knots < GRID[-1])]
 
     @classmethod
@@ -205,9 +232,54 @@ class SpectralIndex:
         return np.broadcast_to(eta, (n,)) + 1j * np.broadcast_to(k, (n,))
 
     def traverse(self, callback, prefix: str) -> None:
+        """Expose ``eta`` and ``k`` as ``<prefix>eta.*`` and ``<prefix>k.*``: a
+        texture's own parameters, or an ``irregular`` spectrum's arrays
+        (``wavelengths``, ``values``) as values of the calling object (see
+        :attr:`arrays`)."""
         mi = _mi()
-        callback.put(prefix + "eta", self.eta, mi.ParamFlags.Differentiable)
-        callback.put(prefix + "k", self.k, mi.ParamFlags.Differentiable)
+        for part in ("eta", "k"):
+            arrays = self.arrays.get(part)
+            if arrays is None:
+                callback.put(prefix + part, getattr(self, part), mi.ParamFlags.Differentiable)
+                continue
+            for name, value in arrays.items():
+                callback.put(f"{prefix}{part}.{name}", value, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, plugin: str, prefix: str) -> None:
+        """Write edited :attr:`arrays` into their spectra, after checking that each
+        spectrum's wavelengths are strictly increasing and as many as its values
+        (:class:`ThinFilmError` naming the key otherwise; their ranges are checked
+        by the BSDF's guard before this runs)."""
+        if not self.arrays:
+            return
+        mi = _mi()
+        edited = False
+        for part, arrays in self.arrays.items():
+            tex = getattr(self, part)
+            tp = mi.traverse(tex)
+            wl, values = arrays["wavelengths"], arrays["values"]
+            if _same_variables(tp["wavelengths"], wl) and _same_variables(tp["values"], values):
+                continue
+            w = np.asarray(dr.detach(wl), np.float64).ravel()
+            n = dr.width(values)
+            key = f"{prefix}{part}"
+            if w.size != n:
+                raise ThinFilmError(f"{plugin}: '{key}.values' must hold one value per entry of "
+                                    f"'{key}.wavelengths' ({w.size}), got {n} values")
+            if w.size < 2 or not np.all(np.diff(w) > 0):
+                raise ThinFilmError(f"{plugin}: '{key}.wavelengths' must be at least 2 strictly "
+                                    f"increasing wavelengths (nm), got {w.size} values "
+                                    f"in [{w.min() if w.size else math.nan:.7g}, "
+                                    f"{w.max() if w.size else math.nan:.7g}]")
+            tp["wavelengths"] = wl
+            tp["values"] = values
+            tp.update()
+            edited = True
+        if edited:
+            self._arrays_edited = True
+            self.knots = np.unique(np.concatenate(
+                [np.asarray(dr.detach(a["wavelengths"]), np.float64).ravel()
+                 for a in self.arrays.values()]))
 
 
 def _check_real_medium(index: SpectralIndex, name: str) -> SpectralIndex:
@@ -568,7 +640,11 @@ class KernelStack:
         if self.thickness_texture is not None:
             callback.put("thickness", self.thickness_texture, mi.ParamFlags.Differentiable)
 
-    def parameters_changed(self) -> None:
+    def parameters_changed(self, keys=None) -> None:
+        """Refresh after an edit (``keys``, the changed keys, are not needed:
+        the plan and its tables are rebuilt from the current values)."""
+        for i, ix in enumerate(self.indices):
+            ix.parameters_changed(self.plugin, f"layers.{i}.")
         for i, d in enumerate(self.thickness):
             if dr.is_jit_v(d):
                 dr.make_opaque(d)

@@ -35,6 +35,7 @@ ALBEDO_SLACK = 1e-3
 #: parameters: an RGB spectrum's or a bitmap's stored coefficients may be negative.
 RULES = [
     (r"^layers\.\d+\.thickness$", 0.0, False, math.inf, "a film thickness (nm)", False),
+    (r"\.wavelengths$", 0.0, True, math.inf, "a spectrum's wavelengths (nm)", False),
     (r"^(layers\.\d+\.)?eta\.", MIN_INDEX, False, MAX_INDEX, "a refractive index n", False),
     (r"^(layers\.\d+\.)?k\.", 0.0, False, MAX_INDEX, "an extinction coefficient k", False),
     (r"^alpha(_u|_v)?\.", 0.0, True, MAX_ALPHA, "a roughness", True),
@@ -100,35 +101,76 @@ def _copy(value):
     return type(value)(dr.detach(value)) if dr.is_array_v(value) else value
 
 
+def _jit_ids(value):
+    """The JIT variable indices of a Dr.Jit value (detached), ``None`` for other values."""
+    if dr.is_jit_v(value):
+        return tuple(dr.detail.collect_indices(dr.detach(value)))
+    return None
+
+
+def unchanged(value, snapshot) -> bool:
+    """Whether a traversed value is still its snapshot (:func:`_copy`).
+
+    A JIT array is unchanged when it still refers to the snapshot's variables:
+    Dr.Jit never writes into a variable that another reference (the snapshot)
+    holds, so every assignment or in-place write gives the value new indices,
+    and no other value can reuse indices that the snapshot keeps alive. Other
+    values (scalar variants) are compared by value (a NaN never equals)."""
+    ids = _jit_ids(value)
+    if ids is not None or _jit_ids(snapshot) is not None:
+        return ids == _jit_ids(snapshot)
+    try:
+        return bool(np.array_equal(np.asarray(value, dtype=np.float64),
+                                   np.asarray(snapshot, dtype=np.float64)))
+    except (TypeError, ValueError):
+        return value is snapshot
+
+
 class ParameterGuard:
     """Keeps the last valid traversed values of a BSDF and checks every edit.
 
     Create it at the end of the constructor; call :meth:`changed` from
     ``parameters_changed`` with the BSDF and the function that refreshes its
-    state. (It keeps no reference to the BSDF: no reference cycle.)
+    state (it receives the changed keys, see :meth:`changed`). It keeps no
+    reference to the BSDF: no reference cycle.
     """
 
     def __init__(self, bsdf, plugin: str):
         self.plugin = plugin
-        self._restoring = False
+        self._restoring = None
         params = _mi().traverse(bsdf)
         self._valid = {k: _copy(params[k]) for k in params.keys()}
 
     def changed(self, bsdf, refresh, keys=None) -> None:
-        """Validate the current values of ``bsdf`` (those under the changed
-        ``keys`` that ``parameters_changed`` received; all without), then
-        ``refresh()``; on a bad value (or a failing refresh) restore the last valid
-        values and raise."""
+        """Validate the values of ``bsdf`` that changed since the last valid state
+        (every value when ``keys`` is ``None``), then ``refresh(changed)`` with
+        the keys (relative to the BSDF) of the values that changed, or ``None``
+        for "everything may have changed"; on a bad value (or a failing refresh)
+        restore the last valid values and raise.
+
+        The keys ``parameters_changed`` receives are not used to find what changed:
+        ``mi.traverse(scene)`` passes a BSDF the wrong ones. Its ``set_dirty``
+        strips one dotted part per object level, but a BSDF names its films'
+        parameters with several parts, so an edit of ``ball.bsdf.layers.1.eta.value``
+        reaches the BSDF as ``['eta']`` and one of ``ball.bsdf.layers.1.thickness``
+        as ``['thickness']`` (Mitsuba 3.9). Every traversed value is compared with
+        the last valid snapshot instead (:func:`unchanged`: a comparison of JIT
+        indices, no evaluation), which is the same through a scene or a BSDF.
+        """
         if self._restoring:
-            refresh()
+            # writing the last valid values back: the BSDF's state is refreshed
+            # only if a refresh ran on the rejected values
+            if self._restoring == "refresh":
+                refresh(None)
             return
         mi = _mi()
         params = mi.traverse(bsdf)
         try:
+            changed = [key for key in params.keys()
+                       if keys is None or key not in self._valid
+                       or not unchanged(params[key], self._valid[key])]
             seen = set()
-            for key in params.keys():
-                if keys and not any(key == k or key.startswith(k + ".") for k in keys):
-                    continue
+            for key in changed:
                 node = params.properties[key][2]
                 texture = node if isinstance(node, mi.Texture) else None
                 if texture is not None:
@@ -136,18 +178,25 @@ class ParameterGuard:
                         continue
                     seen.add(id(texture))
                 check_value(key, params[key], self.plugin, texture)
-            refresh()
         except Exception:
-            self._restore(params)
+            # rejected before the refresh: the BSDF's state is still the last valid one
+            self._restore(params, refreshed=False)
+            raise
+        try:
+            refresh(None if keys is None else changed)
+        except Exception:
+            self._restore(params, refreshed=True)
             raise
         self._valid = {k: _copy(params[k]) for k in params.keys()}
 
-    def _restore(self, params) -> None:
-        self._restoring = True
+    def _restore(self, params, refreshed: bool) -> None:
+        """Write the last valid values back (their textures are notified again);
+        the BSDF refreshes its state from them only if ``refreshed``."""
+        self._restoring = "refresh" if refreshed else "values"
         try:
             for key, value in self._valid.items():
                 if key in params.keys():
                     params[key] = value
             params.update()
         finally:
-            self._restoring = False
+            self._restoring = None
