@@ -66,7 +66,8 @@ def scene(config: str, res=256, spp=16) -> dict:
 
 def build() -> None:
     import mitsuba as mi
-    from thinfilm_mi import kernel as K, tables
+    from thinfilm_mi.render import kernel as K
+    from thinfilm_mi.tabulate import exact as tables
     print("\n### Band-limited builds (default settings)\n")
     print("| films | load (s) | result | table | rounds (nu x nv: err_u, err_v) "
           "| exact evaluations | colour check ΔE2000 (D65 / A / F11) |")

@@ -21,7 +21,7 @@ import numpy as np
 import drjit as dr
 from drjit.llvm import Float
 
-from thinfilm_mi import optics
+from thinfilm_mi.optics import core as optics
 
 
 def stack(L):

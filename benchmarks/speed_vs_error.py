@@ -29,7 +29,7 @@ the grazing sliver (cos theta >= ``tables.GRAZING_COS``) that table builds verif
 * band: the same call with ``tabulate`` true and the default ``spectral_resolution``
   (1 nm) at ``table_error`` 1e-2, 3e-3, 1e-3, for the stacks whose exact values
   no table resolves (10 and 30 films): a table of ``R_σ``, the exact ``R``
-  convolved with a Gaussian in wavenumber (thinfilm_mi/band_tables.py). Its
+  convolved with a Gaussian in wavenumber (thinfilm_mi/tabulate/band.py). Its
   errors are against ``R_σ`` (what it approximates; against ``R`` a resonance
   far narrower than 1 nm makes them ~0.5 by design), computed by brute force on
   the first --band-points points: the build's float64 evaluator on a grid of
@@ -56,7 +56,8 @@ import mitsuba as mi
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
-from thinfilm_mi import kernel as tf_kernel, tables  # noqa: E402
+from thinfilm_mi.render import kernel as tf_kernel  # noqa: E402
+from thinfilm_mi.tabulate import exact as tables
 
 AMBIENT = 1.000277
 ERRORS = (1e-2, 3e-3, 1e-3, 3e-4)
@@ -79,7 +80,8 @@ def layers_string(films):
 def band_reference(bsdf, cos64, wl64, n, step=0.002):
     """``R_σ`` at the first ``n`` points by brute force: the build's float64
     evaluator on a grid of ``step`` nm over ±6 σ_ν, Gaussian-weighted."""
-    from thinfilm_mi import band_tables, kernel
+    from thinfilm_mi.tabulate import band as band_tables
+    from thinfilm_mi.render import kernel
     side = kernel._side_data(bsdf.stack.plan[False], False)
     sig = band_tables.sigma_nu(bsdf.stack.spectral_resolution)
     cos, wl = np.broadcast_to(cos64[None, :], wl64.shape).ravel()[:n], wl64.ravel()[:n]

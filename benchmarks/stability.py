@@ -35,9 +35,9 @@ import numpy as np
 import drjit as dr
 from drjit.llvm import Float, Float64, UInt32
 
-from thinfilm_mi._llvm import require_llvm
-from thinfilm_mi.kernel import unpolarised_rt
-from thinfilm_mi.optics import Cx, real_loop_applies, stack_rt_loop
+from thinfilm_mi.llvm import require_llvm
+from thinfilm_mi.render.kernel import unpolarised_rt
+from thinfilm_mi.optics.core import Cx, real_loop_applies, stack_rt_loop
 
 F32 = np.float32
 

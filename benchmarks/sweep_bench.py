@@ -35,7 +35,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 SCENES = REPO / "scenes"
 _SCRIPT = Path(sys.executable).parent / "thinfilm-render"  # the console script of this environment
-RENDER = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "thinfilm_mi.cli"]
+RENDER = [str(_SCRIPT)] if _SCRIPT.exists() else [sys.executable, "-m", "thinfilm_mi.cli.render"]
 
 
 def values(frames: int, start: int = 100, step: int = 30) -> str:
@@ -59,7 +59,7 @@ def sequential(tmp: Path, frames: int, size: str, spp: int) -> float:
 
 
 def swept(scene: Path, out: Path, workers: int, size: str, spp: int, defines=None, parameters=None):
-    from thinfilm_mi import sweeps
+    from thinfilm_mi.batch import sweeps
 
     seconds, result = timed(lambda: sweeps.sweep(scene, defines, parameters, out, workers=workers,
                                                  size=size, spp=spp, contact_sheet=False,
@@ -83,7 +83,8 @@ def fig8a_with_id(tmp: Path) -> Path:
 def frame_costs(tmp: Path, size: str, spp: int) -> dict[str, float]:
     import mitsuba as mi
 
-    from thinfilm_mi import cli, exr
+    from thinfilm_mi.cli import render as cli
+    from thinfilm_mi.batch import exr
 
     imports = timed(lambda: subprocess.run(
         [sys.executable, "-c", "import mitsuba as mi; mi.set_variant('llvm_ad_spectral'); "

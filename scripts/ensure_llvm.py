@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Set-up step: make sure Dr.Jit loads an LLVM >= 19 (see thinfilm_mi/_llvm.py).
+"""Set-up step: make sure Dr.Jit loads an LLVM >= 19 (see thinfilm_mi/llvm.py).
 
 Dr.Jit 1.5 aborts the process when it compiles with LLVM 15 or 16, which is what
 Debian 12 ships by default. Debian's ``libllvm19`` works and Dr.Jit finds it

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Copy the parameter tables (and XML examples) of the plugins' doc blocks into README.md.
 
-Each plugin file ``plugins/<name>.py`` opens with a Mitsuba-style doc block
+Each plugin file ``thinfilm_mi/plugins/<name>.py`` opens with a Mitsuba-style doc block
 holding a ``.. pluginparameters::`` list table (rows ``* - name``, ``- type``,
 ``- description``) and a ``.. code-tab:: xml`` example. This script turns every
 table into a Markdown table, puts the example above it, and rewrites the region
@@ -119,9 +119,9 @@ def render_tables(plugins: Path) -> str:
     for path in plugin_files(plugins):
         name = path.stem
         doc = plugin_doc(path)
-        rows = parse_table(doc, str(path.relative_to(plugins.parent)))
+        rows = parse_table(doc, f"thinfilm_mi/plugins/{path.name}")
         parts.append(f"#### `{name}` — {plugin_title(doc, name)}\n")
-        parts.append(f"From the doc block of `plugins/{path.name}`.\n")
+        parts.append(f"From the doc block of `thinfilm_mi/plugins/{path.name}`.\n")
         example = xml_example(doc)
         if example:
             parts.append(f"```xml\n{example}\n```\n")
@@ -149,7 +149,7 @@ def main(argv=None) -> int:
     ap.add_argument("--check", action="store_true",
                     help="do not write; exit 1 if README.md differs from the doc blocks")
     ap.add_argument("--readme", default=str(REPO / "README.md"))
-    ap.add_argument("--plugins", default=str(REPO / "plugins"))
+    ap.add_argument("--plugins", default=str(REPO / "thinfilm_mi" / "plugins"))
     args = ap.parse_args(argv)
     readme = Path(args.readme)
     text = readme.read_text(encoding="utf-8")

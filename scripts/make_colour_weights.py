@@ -2,7 +2,7 @@
 functions and the illuminants D65, A and F11 on a 1 nm grid over 360-830 nm, from
 colour-science (``colour.MSDS_CMFS``, ``colour.SDS_ILLUMINANTS``).
 
-Table builds (``thinfilm_mi.tables``) check the colour error of a band-limited
+Table builds (``thinfilm_mi.tabulate.exact``) check the colour error of a band-limited
 table against the exact reflectance under these illuminants. They read this file
 instead of importing colour-science, whose import takes ~1.6 s (once per process,
 at the first table build: the first image). tests/test_tables.py checks the file

@@ -7,7 +7,7 @@ import drjit as dr
 import mitsuba as mi
 from drjit.llvm import Float64, UInt32
 
-from thinfilm_mi import optics
+from thinfilm_mi.optics import core as optics
 
 
 def interaction(wls):

@@ -10,8 +10,9 @@ import pytest
 import mitsuba as mi
 
 import thinfilm_mi as tf
-from thinfilm_mi import kernel as K
-from thinfilm_mi import band_tables, tables
+from thinfilm_mi.render import kernel as K
+from thinfilm_mi.tabulate import band as band_tables
+from thinfilm_mi.tabulate import exact as tables
 
 
 @pytest.fixture(autouse=True)

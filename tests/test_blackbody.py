@@ -1,4 +1,4 @@
-"""``thinfilm_blackbody`` (plugins/thinfilm_blackbody.py): Planck's radiance in every variant.
+"""``thinfilm_blackbody`` (thinfilm_mi/plugins/thinfilm_blackbody.py): Planck's radiance in every variant.
 
 * Spectral variants: ``eval`` equals Mitsuba's own ``blackbody`` at the same
   wavelengths (same constants, same float32 formula: the values agree to the last
@@ -248,7 +248,7 @@ def test_bad_scale_and_unknown_property_are_refused():
 
 
 def test_cli_refuses_a_bad_temperature(tmp_path, capfd):
-    from thinfilm_mi import cli
+    from thinfilm_mi.cli import render as cli
 
     rc = cli.render_main([str(SCENE), "-D", "temperature=-5", "--variant", RGB, "--size", "8x6",
                           "--spp", "1", "--out-dir", str(tmp_path)])
@@ -282,8 +282,8 @@ def test_traversed_temperature_edits(variant):
 
 
 def test_fig8a_scene_renders_in_mono(tmp_path):
-    from thinfilm_mi import cli
-    from thinfilm_mi.exr import read_exr
+    from thinfilm_mi.cli import render as cli
+    from thinfilm_mi.batch.exr import read_exr
 
     pytest.importorskip("OpenEXR")
     rc = cli.render_main([str(SCENE), "-D", "temperature=3200", "--variant", MONO,

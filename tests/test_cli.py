@@ -11,8 +11,9 @@ import pytest
 
 OpenEXR = pytest.importorskip("OpenEXR")
 
-from thinfilm_mi import Stack, cli  # noqa: E402
-from thinfilm_mi import __main__ as tf_main  # noqa: E402
+from thinfilm_mi import Stack  # noqa: E402
+from thinfilm_mi.cli import render as cli
+from thinfilm_mi.cli import tools as tf_main  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 PREFIX = "thinfilm-render: error:"
@@ -262,7 +263,7 @@ def test_spectrum_plot_and_bad_input(tmp_path, capsys):
 
 
 def test_materials_runs(capsys):
-    from thinfilm_mi import materials
+    from thinfilm_mi.materials import catalog as materials
 
     rc = tf_main.main(["materials"])
     captured = capsys.readouterr()
@@ -281,7 +282,7 @@ def test_demo_reflectance_image(tmp_path):
 
 def test_console_script_declared():
     text = (REPO / "pyproject.toml").read_text()
-    assert 'thinfilm-render = "thinfilm_mi.cli:render_main"' in text
+    assert 'thinfilm-render = "thinfilm_mi.cli.render:render_main"' in text
 
 
 def test_teapot_mesh_loads():

@@ -1,4 +1,4 @@
-"""The coating designer's numbers (thinfilm_mi.colorimetry, `python -m thinfilm_mi colour`)
+"""The coating designer's numbers (thinfilm_mi.colour.report, `python -m thinfilm_mi colour`)
 against independent computations written here: Fresnel and single-film closed forms for
 the spectra, colour-science's own sd_to_XYZ / XYZ_to_Lab / illuminant tables / Planck
 for the colorimetry, and the sRGB encoding written out.
@@ -15,8 +15,8 @@ import pytest
 colour = pytest.importorskip("colour")
 
 from thinfilm_mi import Stack, ThinFilmError  # noqa: E402
-from thinfilm_mi import __main__ as tf_main  # noqa: E402
-from thinfilm_mi.colorimetry import (RECORD_KEYS, colour_report, integration_wavelengths,  # noqa: E402
+from thinfilm_mi.cli import tools as tf_main  # noqa: E402
+from thinfilm_mi.colour.report import (RECORD_KEYS, colour_report, integration_wavelengths,  # noqa: E402
                                      resolve_illuminant, spectrum_colour)
 
 # colour-science warns when sd_to_XYZ aligns a table to the requested shape (here on purpose)
@@ -316,7 +316,7 @@ def test_parse_angles_ranges():
     np.testing.assert_array_equal(tf_main.parse_angles("0:80:10"), np.arange(0, 81, 10.0))
     np.testing.assert_array_equal(tf_main.parse_angles("0, 30 60"), [0.0, 30.0, 60.0])
     np.testing.assert_array_equal(tf_main.parse_angles("90"), [90.0])  # spectrum allows grazing
-    from thinfilm_mi import cli
+    from thinfilm_mi.cli import render as cli
 
     with pytest.raises(cli.UsageError, match=r"--angles.*\[0, 90\)"):
         tf_main.parse_angles("90", below_90=True)

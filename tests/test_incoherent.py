@@ -1,4 +1,4 @@
-"""Incoherent thick films (thinfilm_mi/incoherent.py) against tmm.inc_tmm, closed
+"""Incoherent thick films (thinfilm_mi/optics/incoherent.py) against tmm.inc_tmm, closed
 forms, the coherent core, physics limits, and the wavelength average that the
 incoherent treatment stands for.
 
@@ -19,9 +19,9 @@ import pytest
 import drjit as dr
 from drjit.llvm import Float, Float64
 
-from thinfilm_mi import optics
-from thinfilm_mi.incoherent import incoherent_rt, incoherent_rt_sp, reference_incoherent_rt
-from thinfilm_mi.kernel import unpolarised_rt
+from thinfilm_mi.optics import core as optics
+from thinfilm_mi.optics.incoherent import incoherent_rt, incoherent_rt_sp, reference_incoherent_rt
+from thinfilm_mi.render.kernel import unpolarised_rt
 
 tmm = pytest.importorskip("tmm")
 

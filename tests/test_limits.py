@@ -12,10 +12,12 @@ import mitsuba as mi
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402
-from thinfilm_mi import cli, hemispherical, kernel  # noqa: E402
-from thinfilm_mi.__main__ import main as module_main  # noqa: E402
+from thinfilm_mi.cli import render as cli  # noqa: E402
+from thinfilm_mi.tabulate import hemispherical
+from thinfilm_mi.render import kernel
+from thinfilm_mi.cli.tools import main as module_main  # noqa: E402
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
-from thinfilm_mi.stack import MAX_FILMS  # noqa: E402
+from thinfilm_mi.materials.stack import MAX_FILMS  # noqa: E402
 
 DEEP = "; ".join(f"{2.3 if i % 2 else 1.38} {60 + i % 7}" for i in range(MAX_FILMS))
 PLUGINS = ["thinfilm_conductor", "thinfilm_dielectric", "thinfilm_diffuse",

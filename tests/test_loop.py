@@ -14,9 +14,9 @@ import mitsuba as mi
 from drjit.llvm import Float64
 
 import thinfilm_mi as tf
-from thinfilm_mi import kernel as K
-from thinfilm_mi import optics
-from thinfilm_mi.optics import Cx
+from thinfilm_mi.render import kernel as K
+from thinfilm_mi.optics import core as optics
+from thinfilm_mi.optics.core import Cx
 
 from _kernels import compiled, interaction, loop_rt
 
@@ -149,7 +149,7 @@ def test_dielectric_inside_with_loop_matches_float64(llvm):
     cos, wls = points(2000, seed=6)
     R, T = bsdf.stack.reflectance(interaction(wls), mi.Float(cos), inside=True, transmission=True)
     R, T = np.array(R), np.array(T)
-    rev = list(reversed(tf.stack.parse_layers(layers)))
+    rev = list(reversed(tf.materials.stack.parse_layers(layers)))
     ref = tf.Stack(rev, substrate=1.0, ambient=1.52)
     for i in range(4):
         r = ref.rt(wls[i], np.arccos(cos))
@@ -216,7 +216,7 @@ def test_thickness_texture_scales_the_loop_films(llvm):
     assert bsdf.stack.plan[False].loop is not None
     cos, wls = points(2000, seed=9)
     R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
-    half = [(m, d / 2) for m, d in tf.stack.parse_layers(layers)]
+    half = [(m, d / 2) for m, d in tf.materials.stack.parse_layers(layers)]
     ref = tf.Stack(half, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
     for i in range(4):
         assert np.max(np.abs(R[i] - ref.rt(wls[i], np.arccos(cos)).R)) < F32_DEEP

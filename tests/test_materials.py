@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import thinfilm_mi as tf
-from thinfilm_mi import materials as M
+from thinfilm_mi.materials import catalog as M
 from thinfilm_mi.errors import MaterialError
 
 REQUIRED = ["Au", "Ag", "Cu", "Al", "Cr", "Ti", "Ni", "Si", "a-Si", "Ge", "SiO2", "TiO2", "Ta2O5",

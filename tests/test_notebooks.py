@@ -80,7 +80,7 @@ def test_every_plugin_has_a_readme_table_and_an_xml_example():
         sys.path.pop(0)
     readme = (REPO / "README.md").read_text(encoding="utf-8")
     region = readme.split(gen.BEGIN)[1].split(gen.END)[0]
-    for path in gen.plugin_files(REPO / "plugins"):
+    for path in gen.plugin_files(REPO / "thinfilm_mi" / "plugins"):
         rows = gen.parse_table(gen.plugin_doc(path), path.name)
         assert rows, path.name
         assert f"#### `{path.stem}`" in region, f"no parameter table for {path.stem}"

@@ -1,4 +1,4 @@
-"""The optics core (thinfilm_mi/optics.py) against closed forms, physics and tmm.
+"""The optics core (thinfilm_mi/optics/core.py) against closed forms, physics and tmm.
 
 Every reference here is computed independently of the code under test: the Airy
 formula and the interface Fresnel coefficients are written out below with
@@ -20,8 +20,8 @@ import pytest
 import drjit as dr
 from drjit.llvm import Float, Float64
 
-from thinfilm_mi import optics
-from thinfilm_mi._llvm import LLVMVersionError, check_version
+from thinfilm_mi.optics import core as optics
+from thinfilm_mi.llvm import LLVMVersionError, check_version
 
 tmm = pytest.importorskip("tmm")
 
@@ -524,4 +524,4 @@ def test_llvm15_gives_a_clear_error_not_an_abort():
     assert "LLVMVersionError" in proc.stderr
     assert "libllvm19" in proc.stderr and "DRJIT_LIBLLVM_PATH" in proc.stderr
     # the last line is the Python exception, not LLVM's own abort message
-    assert proc.stderr.strip().splitlines()[-1].startswith("thinfilm_mi._llvm.LLVMVersionError")
+    assert proc.stderr.strip().splitlines()[-1].startswith("thinfilm_mi.llvm.LLVMVersionError")

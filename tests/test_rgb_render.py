@@ -55,7 +55,7 @@ worst mono block reached 1.8 % from noise alone; here 0.9 %).
 
 **Known deviation** (``diffuse_rgb_albedo``, xfail): ``thinfilm_diffuse`` in RGB
 multiplies the film's integrated transmittances by the albedo *per channel*
-(thinfilm_mi/coated_diffuse.py), while the spectral render multiplies, per
+(thinfilm_mi/tabulate/diffuse.py), while the spectral render multiplies, per
 wavelength, by the albedo's upsampled spectrum. With a saturated albedo under
 a coloured film the two differ (4x4 blocks on the sphere: ΔE2000 1.47 mean);
 :func:`test_diffuse_rgb_albedo_is_the_per_channel_albedo` shows that this is

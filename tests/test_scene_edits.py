@@ -45,7 +45,7 @@ PLUGINS = {
 }
 #: Bad values per kind of key (the last dotted parts of the key, relative to the BSDF).
 #: Each is outside the documented range: thicknesses >= 0, indices n in
-#: [1e-3, 1e3] (thinfilm_mi.materials.MIN_INDEX/MAX_INDEX), k in [0, 1e3], alpha in
+#: [1e-3, 1e3] (thinfilm_mi.materials.catalog.MIN_INDEX/MAX_INDEX), k in [0, 1e3], alpha in
 #: (0, 100], factors >= 0, albedo in [0, 1], thickness scale >= 0, all finite.
 BAD_SCALARS = {
     "thickness": [NAN, INF, -INF, -1.5],

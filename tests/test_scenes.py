@@ -24,8 +24,8 @@ import pytest
 
 pytest.importorskip("OpenEXR")
 
-from thinfilm_mi import cli  # noqa: E402
-from thinfilm_mi.exr import read_exr  # noqa: E402
+from thinfilm_mi.cli import render as cli  # noqa: E402
+from thinfilm_mi.batch.exr import read_exr  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 SCENES = sorted((REPO / "scenes").glob("*.xml"))

@@ -25,8 +25,8 @@ from drjit.llvm import Float, Float64
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from thinfilm_mi import optics
-from thinfilm_mi.kernel import unpolarised_rt, unpolarised_rt_loop
+from thinfilm_mi.optics import core as optics
+from thinfilm_mi.render.kernel import unpolarised_rt, unpolarised_rt_loop
 
 from _kernels import loop_rt
 

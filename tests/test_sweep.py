@@ -1,4 +1,4 @@
-"""Parameter sweeps on Dask (thinfilm_mi.sweeps, ``thinfilm-render sweep``).
+"""Parameter sweeps on Dask (thinfilm_mi.batch.sweeps, ``thinfilm-render sweep``).
 
 The cluster tests share one LocalCluster of 2 worker processes on 127.0.0.1
 (the embedded default, built by ``sweeps.local_cluster``) and render 3x2 grids
@@ -25,8 +25,10 @@ pytest.importorskip("distributed")
 
 import mitsuba as mi  # noqa: E402
 
-from thinfilm_mi import cli, exr, sweeps  # noqa: E402
-from thinfilm_mi.cli import UsageError  # noqa: E402
+from thinfilm_mi.cli import render as cli  # noqa: E402
+from thinfilm_mi.batch import exr
+from thinfilm_mi.batch import sweeps
+from thinfilm_mi.cli.render import UsageError  # noqa: E402
 
 TIMEOUT = 120  # seconds: bound of every sweep (they take a few seconds)
 THICKNESS = "sphere.bsdf.layers.0.thickness"

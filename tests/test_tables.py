@@ -11,7 +11,7 @@ import drjit as dr
 import mitsuba as mi
 
 import thinfilm_mi as tf
-from thinfilm_mi import kernel as K
+from thinfilm_mi.render import kernel as K
 
 from _kernels import compiled, interaction
 
@@ -39,7 +39,7 @@ def random_points(n, seed=1):
     """Directions outside the grazing sliver the table's verification leaves out
     (tables.GRAZING_COS; benchmarks/speed_vs_error.py reports the error there)."""
     rng = np.random.default_rng(seed)
-    cos = f32(rng.uniform(tf.tables.GRAZING_COS, 1.0, n))
+    cos = f32(rng.uniform(tf.tabulate.exact.GRAZING_COS, 1.0, n))
     wls = [f32(rng.uniform(360.0, 830.0, n)) for _ in range(4)]
     return cos, wls
 
@@ -279,7 +279,7 @@ def test_probe_lines_know_their_interpolation_error(ends):
     sinusoid is not even about an end), hence the 1e-4 absolute slack; checked
     for the subsamplings that resolve the sinusoid (theta < 3: more than two
     nodes a period; beyond it an extrapolated ghost is meaningless)."""
-    from thinfilm_mi import tables
+    from thinfilm_mi.tabulate import exact as tables
     intervals, min_nodes = 1024, 17
     ext = tables._ghosts(intervals, min_nodes) if ends[0] == "values" else 0
     assert tables._ghosts(intervals, min_nodes) == 3 * 64
@@ -306,7 +306,7 @@ def test_probe_lines_know_their_interpolation_error(ends):
 def test_ghost_nodes():
     """Mirrored ends copy the nodes beyond the end node; extrapolated ends continue
     the cubic through the last four nodes exactly; given ends are kept in order."""
-    from thinfilm_mi import tables
+    from thinfilm_mi.tabulate import exact as tables
     x = np.arange(10.0)
     f = x ** 3 - 2 * x
     out = tables.with_ghosts(f, "mirror", "extrapolate")
@@ -328,7 +328,7 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     alone, for a small fraction of the evaluations a failing build used to spend
     (up to tables.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
     table is tried after it; tests/test_band_tables.py covers those.)"""
-    from thinfilm_mi import tables
+    from thinfilm_mi.tabulate import exact as tables
     K._TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
@@ -350,7 +350,7 @@ def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
     """Whatever the probe says, only a verified table is kept: from a 16 x 16 first
     table the refinement reaches the target, and the lookup meets the float64
     reference within the verified error (tolerance as in the first test)."""
-    from thinfilm_mi import tables
+    from thinfilm_mi.tabulate import exact as tables
     monkeypatch.setattr(tables, "_estimate", lambda *a, **k: (16, 16))
     K._TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
@@ -373,7 +373,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     ``auto`` then renders exactly; by default it tabulates ``R_σ`` instead, which
     fits the cache (the 1 nm resolution damps the fringes of these 3 µm of optical
     thickness by exp(-2 π² (σ_ν 2 Σ n d)²) < 1 %, yet the table is 160x824)."""
-    from thinfilm_mi import tables
+    from thinfilm_mi.tabulate import exact as tables
     layers = "2.3 800; 1.46 800"
     K._TABLE_CACHE.clear()
     big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
@@ -396,7 +396,7 @@ def test_bspline_coefficients_solve_the_clamped_system(n):
     """The recursive-filter solution against a dense solve of the clamped system
     (c[i-1] + 4 c[i] + c[i+1]) / 6 = f[i], c[-1] = c[0], c[n] = c[n-1]: the
     filters' truncation (|pole|^32 = 5e-19) and rounding leave ~1e-15."""
-    from thinfilm_mi import tables
+    from thinfilm_mi.tabulate import exact as tables
     A = (np.diag(np.full(n, 4.0)) + np.diag(np.ones(n - 1), 1) + np.diag(np.ones(n - 1), -1)) / 6
     A[0, 0] += 1.0 / 6.0
     A[-1, -1] += 1.0 / 6.0
@@ -428,7 +428,7 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     loop over buffers of the films (real and complex loops): the table meets the
     independent float64 reference like the unrolled builds (tolerance as in the
     first test)."""
-    from thinfilm_mi import tables
+    from thinfilm_mi.tabulate import exact as tables
     calls = []
     loop = K.unpolarised_rt_loop
 
@@ -456,7 +456,7 @@ def test_table_cache_is_bounded_in_bytes_least_recently_used_first_out(monkeypat
     shared cache holds at most ``max_bytes`` of texture data (here 100 kB instead of
     32 MiB, so that a few small tables exceed it) and evicts the least recently used.
     Tables still used by a BSDF stay valid (the BSDF holds them)."""
-    from thinfilm_mi import tables
+    from thinfilm_mi.tabulate import exact as tables
     cache = tables.TableCache(max_bytes=100_000)
     monkeypatch.setattr(K, "_TABLE_CACHE", cache)
     bsdfs = []

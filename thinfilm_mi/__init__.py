@@ -1,20 +1,20 @@
 """thinfilm-mi: multilayer thin-film BSDFs for Mitsuba 3.
 
-The library (this package) holds the optics core (:mod:`thinfilm_mi.optics`),
-materials (:mod:`thinfilm_mi.materials`) and the public :class:`Stack` API. The
+The library (this package) holds the optics core (:mod:`thinfilm_mi.optics.core`),
+materials (:mod:`thinfilm_mi.materials.catalog`) and the public :class:`Stack` API. The
 Mitsuba plugins live in :mod:`thinfilm_mi.plugins` and are registered by
 :func:`thinfilm_mi.register` (called on import when Mitsuba is importable).
 """
 from __future__ import annotations
 
-from ._llvm import LLVMVersionError, require_llvm
-from .errors import MaterialError, ThinFilmError
-from .materials import Material, refractive_index, resolve as resolve_material
-from .stack import Layer, RTResult, Stack, parse_layers
+from thinfilm_mi.llvm import LLVMVersionError, require_llvm
+from thinfilm_mi.errors import MaterialError, ThinFilmError
+from thinfilm_mi.materials.catalog import Material, refractive_index, resolve as resolve_material
+from thinfilm_mi.materials.stack import Layer, RTResult, Stack, parse_layers
 
 __version__ = "0.1.0"
 
-from .registry import PLUGINS, register  # noqa: E402
+from thinfilm_mi.render.registry import PLUGINS, register  # noqa: E402
 
 try:  # Mitsuba is a dependency, but keep the optics usable if its import fails.
     import mitsuba as _mi  # noqa: F401
@@ -25,10 +25,10 @@ else:
 
 
 def __getattr__(name: str):
-    """``thinfilm_mi.sweep``: :func:`thinfilm_mi.sweeps.sweep`, imported on first
+    """``thinfilm_mi.sweep``: :func:`thinfilm_mi.batch.sweeps.sweep`, imported on first
     use so that importing the package does not import Dask."""
     if name == "sweep":
-        from .sweeps import sweep
+        from thinfilm_mi.batch.sweeps import sweep
 
         return sweep
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,0 +1,217 @@
+r"""
+.. _bsdf-thinfilm_conductor:
+
+Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
+----------------------------------------------------------------
+
+.. pluginparameters::
+
+ * - layers
+   - |string|
+   - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."``, e.g.
+     ``"SiO2 500"`` or ``"1.46 500; 0.42+2.47j 20"``. A material is a number,
+     a complex number ``n+kj``, or a material name (``python -m thinfilm_mi
+     materials`` lists them). Default: ``""`` (no films: a bare conductor).
+ * - thin_film_ior, thin_film_thickness
+   - |string| or |float|, |float|
+   - Shorthand for one film (index or material name, thickness in nm), named as
+     in Blender and OpenPBR. Not together with ``layers``.
+ * - material
+   - |string|
+   - The substrate: a material name, e.g. ``Au``, ``Cu``, ``Si`` (default: ``Au``).
+     Not together with ``eta``/``k``.
+ * - eta, k
+   - |spectrum| or |texture|
+   - The substrate's index ``eta + i k`` given directly, as Mitsuba's
+     ``conductor`` takes it (both must be given).
+ * - ext_ior
+   - |float| or |string|
+   - Exterior index (real), a number or a non-absorbing material name
+     (default: 1.000277, air).
+ * - specular_reflectance
+   - |spectrum| or |texture|
+   - Optional factor on the reflectance; physically it should stay 1 (default: 1.0).
+ * - thickness
+   - |float| or |texture|
+   - Optional scale on every film's thickness, evaluated at the hit (e.g. a
+     ``bitmap`` with ``raw="true"``): soap-film and oil-slick looks. Forces
+     exact evaluation.
+ * - tabulate
+   - |string| or |bool|
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
+     ``T`` where needed) is read from a verified table over (angle, wavelength) instead
+     of the recursion (a cubic B-spline, split at the critical angle where the exit
+     medium can totally reflect): its cost does not grow with the number of films.
+     ``auto`` tabulates stacks of 2 films or more in vectorised variants, unless a
+     ``thickness`` texture is given, gradients are tracked, or the target cannot be met
+     within 2^19 texels, a table that still fits the cache, by a table of the exact
+     values or one of the band-limited values (``spectral_resolution``) (then: exact).
+ * - table_error
+   - |float|
+   - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - spectral_resolution
+   - |float|
+   - Spectral resolution (nm) tables may assume, for stacks whose exact values no
+     table resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide):
+     their ``R`` and ``T`` are tabulated convolved with a Gaussian in wavenumber
+     whose standard deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm),
+     i.e. light of coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is
+     verified within ``table_error`` against the convolved values and kept only if
+     the colours of the exact and the convolved values under D65, A and F11 differ
+     by ΔE2000 <= 0.5 (default: 1; 0: tables of the exact values only). Under
+     lasers or line-spectrum emitters narrower than the resolution pass 0, or
+     ``tabulate=false``.
+ * - coherence_thickness
+   - |float|
+   - Films thicker than this (nm) are averaged incoherently, as tmm's
+     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
+     shows (default: 5000).
+
+A perfectly smooth conductor (metal or semiconductor substrate) under a stack of
+thin films, each of which may be dielectric, metallic or semiconducting (complex
+index). The reflectance is the exact composite reflectance of the multilayer
+(Rouard's recursion, Hirayama et al. eq. 1-5), evaluated at the path's
+wavelengths in the render kernel, for unpolarised light in ``*_spectral``
+variants. In ``*_spectral_polarized`` variants it returns the Mueller matrix of
+the stack's exact complex amplitudes ``r_s``, ``r_p`` (never a table), rotated
+into Mitsuba's Stokes bases as Mitsuba's ``conductor`` does; with no films it
+equals ``conductor``'s matrix.
+
+In RGB and mono variants (``*_rgb``, ``*_mono``; polarized ones are refused) the
+reflectance is the spectral reflectance integrated against colour matching: CIE 1931
+2° under D65 to linear sRGB, normalised so that a perfect reflector gives (1, 1, 1),
+or the luminance Y in mono; this is the convention of Mitsuba's spectral pipeline,
+so an RGB render and a spectral render of a scene agree. It is tabulated over the
+angle at scene load with the float64 recursion (``thinfilm_mi/tabulate/colour.py``; over
+the angle and the thickness scale with a ``thickness`` texture), so a deep stack
+costs what one film costs at render time; ``tabulate``, ``table_error`` and
+``spectral_resolution`` do not apply. ``eta``/``k`` given as ``rgb`` evaluate per
+channel, as in ``conductor`` (with no films the plugin *is* ``conductor``); films
+over them are integrated per channel with that channel's constant index.
+``specular_reflectance`` multiplies per channel. Gradients of thicknesses and
+numeric indices in ``llvm_ad_rgb``: the value is the table's, and the gradient that
+of an unbiased estimate of the same integral at stratified wavelengths per hit (the
+exact recursion through every film), traced only when a parameter carries gradients.
+
+The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
+(``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``
+as differentiable, opaque parameters: changing them does not recompile the
+render kernel (a table is rebuilt, ~10-30 ms, and its shape is a kernel input
+too). In exact mode the films are evaluated by a loop inside the kernel (from
+one film on when every film has a real index above ``ext_ior``'s, from 4 films
+otherwise), so the kernel and its compile time do not grow with the number of
+films.
+
+.. tabs::
+    .. code-tab:: xml
+
+        <bsdf type="thinfilm_conductor">
+            <string name="material" value="Si"/>
+            <string name="layers" value="SiO2 500"/>
+        </bsdf>
+
+    .. code-tab:: python
+
+        {'type': 'thinfilm_conductor', 'material': 'Si', 'layers': 'SiO2 500'}
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+
+from thinfilm_mi.render import modes
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render.kernel import (SpectralIndex, check_unqueried, check_variant, optional_texture,
+                                stack_from_props)
+from thinfilm_mi.materials.catalog import MAX_INDEX, MIN_INDEX
+from thinfilm_mi.render.params import ParameterGuard
+from thinfilm_mi.render.textures import check_texture_range, uniform
+
+NAME = "thinfilm_conductor"
+
+
+def substrate_from_props(props, plugin: str) -> SpectralIndex:
+    """The conductor substrate: ``material`` or ``eta`` + ``k`` (as Mitsuba's conductor)."""
+    has_eta, has_k = ("eta" in props), ("k" in props)
+    if ("material" in props) and (has_eta or has_k):
+        raise ThinFilmError(f"{plugin}: give either 'material' "
+                            f"({props.get('material')!r}) or 'eta' + 'k', not both")
+    if has_eta or has_k:
+        if not (has_eta and has_k):
+            raise ThinFilmError(f"{plugin}: 'eta' and 'k' must be given together "
+                                f"(only '{'eta' if has_eta else 'k'}' was given)")
+        values = {}
+        for name in ("eta", "k"):
+            v = props.get(name)
+            if isinstance(v, bool) or isinstance(v, str):
+                raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
+                                    f"spectrum/texture, got {v!r}")
+            if isinstance(v, (int, float)):
+                v = uniform(v)
+            else:
+                try:
+                    v = props.get_unbounded_texture(name)
+                except Exception as e:
+                    raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
+                                        f"spectrum/texture, got {v!r} ({e})") from None
+            # the range of every index (thinfilm_mi.materials.catalog.MIN_INDEX/MAX_INDEX)
+            check_texture_range(v, f"{plugin}: '{name}'", MIN_INDEX if name == "eta" else 0.0,
+                                MAX_INDEX)
+            values[name] = v
+        return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
+    return SpectralIndex.from_material(props.get("material", "Au"), "material")
+
+
+class ThinFilmConductor(mi.BSDF):
+    def __init__(self, props):
+        check_variant(NAME)
+        mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
+        self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
+        check_unqueried(props, NAME)
+        flags = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide
+        self.m_components = [flags]
+        self.m_flags = flags
+        self.guard = ParameterGuard(self, NAME)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        bs = dr.zeros(mi.BSDFSample3f)
+        if not ctx.is_enabled(mi.BSDFFlags.DeltaReflection):
+            return bs, mi.Spectrum(0.0)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        active = mi.Bool(active) & (cos_i > 0)
+        resp = self.mode.response(self.stack, si, cos_i, active)
+        value = resp.R
+        if self.specular_reflectance is not None:
+            value *= self.specular_reflectance.eval(si, active)
+        bs.wo = mi.reflect(si.wi)
+        bs.eta = 1.0
+        bs.pdf = 1.0
+        bs.sampled_component = mi.UInt32(0)
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DeltaReflection)
+        return bs, dr.select(active, self.mode.value(value, resp.reflection, ctx, si.wi, bs.wo),
+                             0.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        return mi.Spectrum(0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        return mi.Float(0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return mi.Spectrum(0.0), mi.Float(0.0)
+
+    def traverse(self, callback):
+        self.stack.traverse(callback)
+        if self.specular_reflectance is not None:
+            callback.put("specular_reflectance", self.specular_reflectance,
+                         mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys):
+        self.guard.changed(self, self.stack.parameters_changed, keys)
+
+    def to_string(self):
+        return (f"ThinFilmConductor[\n  layers = {self.stack.describe()},\n"
+                f"  substrate = {self.stack.substrate.label},\n"
+                f"  ext_ior = {self.stack.ambient.label}\n]")

@@ -1,0 +1,547 @@
+r"""
+.. _bsdf-thinfilm_diffuse:
+
+Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
+----------------------------------------------------------------
+
+.. pluginparameters::
+
+ * - reflectance
+   - |spectrum| or |texture|
+   - Albedo ``k_d`` of the diffuse base, in [0, 1] (default: 0.5).
+ * - layers
+   - |string|
+   - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."``, e.g.
+     ``"SiO2 500; Au 2"``. The innermost film is normally the paper's absorbing
+     film (a thin metal or semiconductor). Default: ``""`` (no films: exactly
+     Mitsuba's ``diffuse``).
+ * - thin_film_ior, thin_film_thickness
+   - |string| or |float|, |float|
+   - Shorthand for one film (index or material name, thickness in nm). Not
+     together with ``layers``.
+ * - ext_ior
+   - |float| or |string|
+   - Exterior index, real (default: 1.000277, air).
+ * - model
+   - |string|
+   - ``"multiple"`` (default): the paper's model plus the interreflection
+     between the base and the coating; ``"single"``: the paper's first-order
+     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10).
+ * - tabulate
+   - |string| or |bool|
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
+     ``T`` where needed) is read from a verified table over (angle, wavelength) instead
+     of the recursion (a cubic B-spline, split at the critical angle where the exit
+     medium can totally reflect): its cost does not grow with the number of films.
+     ``auto`` tabulates stacks of 2 films or more in vectorised variants, unless a
+     ``thickness`` texture is given, gradients are tracked, or the target cannot be met
+     within 2^19 texels, a table that still fits the cache, by a table of the exact
+     values or one of the band-limited values (``spectral_resolution``) (then: exact).
+ * - table_error
+   - |float|
+   - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - spectral_resolution
+   - |float|
+   - Spectral resolution (nm) tables may assume, for stacks whose exact values no
+     table resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide):
+     their ``R`` and ``T`` are tabulated convolved with a Gaussian in wavenumber
+     whose standard deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm),
+     i.e. light of coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is
+     verified within ``table_error`` against the convolved values and kept only if
+     the colours of the exact and the convolved values under D65, A and F11 differ
+     by ΔE2000 <= 0.5 (default: 1; 0: tables of the exact values only). Under
+     lasers or line-spectrum emitters narrower than the resolution pass 0, or
+     ``tabulate=false``.
+ * - coherence_thickness
+   - |float|
+   - Films thicker than this (nm) are averaged incoherently, as tmm's
+     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
+     shows (default: 5000).
+
+A perfectly diffuse (Lambertian) base under a stack of thin films, after
+Hirayama et al. section 2.4. Component 0 is the delta reflection of the
+coating, component 1 the diffuse lobe; the thin films are evaluated at the
+path's wavelengths in the render kernel (float32), for unpolarised light. In
+``*_spectral_polarized`` variants component 0 is the Mueller matrix of the
+coating's exact amplitudes (rotated as Mitsuba's ``conductor`` does) and
+component 1 is Mitsuba's ``depolarizer`` of the value below, as ``diffuse``.
+
+**The two parts of the stack.** With films ``1..N`` (outside in) and an
+*absorbing* innermost film ``N`` (``k > 0`` somewhere in 360-830 nm), the
+stack is split as in the paper's table step: the *coating* is films
+``1..N-1`` with film ``N`` as its (semi-infinite) exit medium, and film ``N``
+only attenuates. Then, for an angle ``θ`` measured in the ambient medium,
+
+* ``k_r(θ)``, ``k_t(θ)``: reflectance and transmittance (power entering film
+  ``N``, appendix A-21) of the coating over film ``N`` (eq. 5-6);
+* ``k_a(θ)``: the attenuation through film ``N`` along the refracted direction
+  (appendix A-18, ``exp(-4π Im(q_N) d_N / λ)`` with ``q_N = n̂_N cos θ_N``, the
+  same tangential wave vector ``n_0 sin θ``; see ``optics.film_attenuation``
+  for the A-7 sign typo);
+* ``t(θ) = k_t(θ) k_a(θ)``: the power fraction of light arriving at ``θ`` that
+  reaches the base (eq. 10).
+
+If the innermost film does not absorb (or there are no films), there is no film
+``N``: the coating is the whole stack, its exit medium is the base medium
+(index ``ext_ior``, see below), ``k_a = 1``, and ``k_r``, ``t = k_t`` are the
+exact composite reflectance and transmittance of all films. With no films
+``k_r = 0`` and ``t = 1``, and both models *are* Mitsuba's ``diffuse``
+(the kernel takes that path without any stack work: bit-identical results).
+
+**model = "single"** (eq. 8-10). With ``ω_i`` the viewing direction (the
+paper's ``θ_i``) and ``ω_o`` the light direction (``θ_l``)::
+
+    specular (component 0):  k_r(θ_i)                                 (eq. 8, I_r term)
+    diffuse  (component 1):  f = k_t(θ_i) k_a(θ_i) · k_d/π · k_a(θ_l) k_t(θ_l)
+                             (eval returns f cos θ_l)                  (eq. 8-10)
+
+Eq. 10 gives the light reaching the base, ``L' = k_a k_t(θ_l) L``; eq. 9 lets
+the base reflect ``k_d L' cos θ_l'`` and crosses film ``N`` again (second
+``k_a``, taken along the viewing direction's refracted path: ``k_a(θ_i)``);
+eq. 8 multiplies by ``k_t(θ_i)`` for the exit. The paper writes ``k_t`` and
+``k_r`` as functions of the viewing angle ``θ_i``; the exit factor
+``k_t(θ_i) k_a(θ_i)`` is the transmission of light *leaving* towards the
+viewer, equal by reciprocity to that of light arriving from the viewer. Since
+``k_t`` is a ratio of normal fluxes (A-19), ``L' cos θ_l'`` in eq. 9 is read as
+the irradiance on the base, ``k_a k_t(θ_l) L cos θ_l`` per unit solid angle of
+the light: the cosine is that of the light direction outside, which is what
+Mitsuba multiplies by. The ``1/π`` is the Lambert normalisation of ``k_d``
+(the paper's ``k_d`` is an albedo, as in ``diffuse``). **No** ``(n_N/n_0)^2``
+radiance scaling is applied: the paper applies none (eq. 10), the index of an
+absorbing film ``N`` defines no radiance invariant, and the base is treated as
+radiating into a medium matched to the ambient (index ``ext_ior``), for which
+the factor is exactly 1 — which is also what makes the film-free case equal to
+``diffuse``. The resulting ``f`` is symmetric in ``ω_i, ω_o`` (reciprocal).
+
+**model = "multiple"** (default) keeps the same ``k_r`` and ``t`` and adds the
+light that the coating reflects back onto the base, summed as a geometric
+series as Mitsuba's ``plastic`` does for a bare interface::
+
+    f = t(θ_i) t(θ_l) · k_d / (π (1 - k_d R_dh))
+
+``R_dh = 2 ∫ R_up(μ) μ dμ`` is the coating's hemispherical reflectance seen
+from the base (``μ = cos θ`` in the ambient parametrisation of the internal
+directions, which is exact for the base medium ``ext_ior``). Without film
+``N``, ``R_up`` is the exact reflectance of the reversed stack lit from the
+base medium; with film ``N``, ``R_up = k_a^2 k_r`` (down and up through film
+``N``, the coating reflecting alike from both sides: exact for a lossless
+coating, and ``R_up + t <= k_r + k_t <= 1`` in any case). ``R_dh`` is computed
+per wavelength at load time (and when a thickness changes) with the float64
+core over a Gauss-Legendre rule and stored as a ``regular`` spectrum. The
+internal light is Lambertian (the base re-diffuses everything it receives), so
+the exit factor is the same ``t(θ)`` and the radiance scaling ``1/η^2`` of
+``plastic`` is 1 (matched base medium). The albedo for light from ``θ_i`` is
+``k_r + t(θ_i) k_d T_hemi/(1 - k_d R_dh)`` with ``T_hemi = 2∫ t μ dμ``: for a
+lossless stack ``T_hemi = 1 - R_dh`` and a white base gives exactly 1; for any
+stack it is at most ``k_r + t <= 1``. ``"single"`` is the first term of the
+series, hence never brighter than ``"multiple"``.
+
+**Specular part.** Both models use the paper's ``k_r`` (coating over film
+``N``; the exact full-stack reflectance when there is no absorbing film ``N``).
+The exact reflectance of *all* films over the base medium is not used with an
+absorbing film ``N``: paired with the first-order ``t`` it can exceed energy
+conservation (e.g. 50 nm Si, where the thin-film reflectance in the red is far
+above that of bulk Si while ``k_t`` is that of bulk Si).
+
+**Sampling.** Component 0 is chosen with probability proportional to the
+spectral mean of ``k_r(θ_i)``, component 1 proportional to that of its albedo
+estimate ``t(θ_i) k_d T_hemi [/(1 - k_d R_dh)]``; the diffuse direction is
+cosine-weighted and its pdf is multiplied by the selection probability, as in
+``plastic``. When the context enables one component only, the other one's
+stack work is skipped. Thicknesses (``layers.N.thickness``) are opaque and
+exposed to ``mi.traverse``; ``R_dh`` and ``T_hemi`` are recomputed (and not
+differentiated) when they change.
+
+**RGB and mono variants** (``*_rgb``, ``*_mono``; polarized ones are refused).
+``k_r`` is the spectral reflectance integrated against colour matching (CIE 1931 2°
+under D65 to linear sRGB, a perfect reflector (1, 1, 1); the luminance Y in mono),
+as the other plugins do, so RGB and spectral renders agree. The diffuse term is the
+spectral *product* integrated: ``π f_c = ∫ ŵ_c(λ) t(λ, θ_i) t(λ, θ_o) G(k_d,c,
+R_dh(λ)) dλ`` with ``G = k_d`` ("single") or ``k_d / (1 - k_d R_dh)`` ("multiple"),
+not a product of integrated factors (the fringes of ``t(θ_i)`` and ``t(θ_o)`` line
+up at some angles and cancel at others), tabulated over both angles at scene load
+(``thinfilm_mi/tabulate/diffuse.py``). ``reflectance`` is a colour and enters per
+channel, as in Mitsuba's ``diffuse``: a constant one is integrated exactly with the
+series; a texture through a Chebyshev expansion of ``G`` in ``R_dh`` (relative error
+<= 1e-5). Thickness and index gradients in ``llvm_ad_rgb`` are those of an unbiased
+estimate of the same integrals at stratified wavelengths per hit (the value stays
+the table's); ``R_dh`` is not differentiated, as in spectral variants. The gradient
+with respect to a constant ``reflectance`` treats the series as constant (exact for
+"single"); through a texture it is exact.
+
+**Gradients.** Differentiate with ``path`` (the whole sample is differentiated,
+both components). Mitsuba's ``prb`` family samples detached and re-evaluates
+``eval`` at the sampled direction for the derivative; ``eval`` holds only the
+diffuse part, so for paths that took the delta specular component ``prb`` uses
+the diffuse term's derivative where ``k_r``'s belongs (a thickness gradient of
++5.4e-4 where ``path`` and a finite difference give -1.5e-4, in
+``tests/test_render_gradients.py``'s scene), as it does for
+Mitsuba's own ``plastic``. A BSDF cannot tell ``prb`` from ``path`` (both trace
+``sample`` with gradients suspended in their primal pass and ``eval`` with
+gradients later), so there is no run-time warning.
+
+.. tabs::
+    .. code-tab:: xml
+
+        <bsdf type="thinfilm_diffuse">
+            <rgb name="reflectance" value="0.8, 0.1, 0.1"/>
+            <string name="layers" value="SiO2 500; Au 2"/>
+        </bsdf>
+
+    .. code-tab:: python
+
+        {'type': 'thinfilm_diffuse', 'layers': 'SiO2 500; Au 2',
+         'reflectance': {'type': 'rgb', 'value': [0.8, 0.1, 0.1]}}
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+
+from thinfilm_mi.render import modes
+from thinfilm_mi.tabulate.diffuse import ColourDiffuse, DiffuseFactors
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.tabulate.hemispherical import GRID, hemispherical_factors
+from thinfilm_mi.render.colour import (GradientSampler, attach_gradient, colour_channels,
+                                       index_on_wavelengths, prepare_gradients)
+from thinfilm_mi.render.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
+                                ext_ior_from_props, films_from_props, opaque_float,
+                                stack_options_from_props)
+from thinfilm_mi.optics.core import Cx, film_attenuation
+from thinfilm_mi.render.params import ALBEDO_SLACK, ParameterGuard
+from thinfilm_mi.render.textures import check_texture_range, regular, scalar, uniform
+
+NAME = "thinfilm_diffuse"
+MODELS = ("single", "multiple")
+
+def _absorbs(index) -> bool:
+    mat = index.material
+    if mat is None:
+        return True
+    if mat.constant is not None:
+        return mat.constant.imag > 0
+    return bool(np.any(mat.index(GRID).imag > 0))
+
+
+def _reflectance_from_props(props):
+    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
+    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
+    ``1 - k_d R_dh`` approach 0)."""
+    if "reflectance" not in props:
+        return uniform(0.5)
+    value = props.get("reflectance")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if not (0.0 <= value <= 1.0):
+            raise ThinFilmError(f"{NAME}: 'reflectance' must be in [0, 1] (an albedo), "
+                                f"got {value!r}")
+    try:
+        tex = props.get_texture("reflectance")
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{NAME}: 'reflectance' must be a number, a spectrum or a texture, "
+                            f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{NAME}: 'reflectance' (an albedo, energy conservation)", 0.0,
+                        1.0 + ALBEDO_SLACK)
+    return tex
+
+
+def _spectrum(tex, values):
+    """``values`` on the 1 nm grid as a ``regular`` spectrum, updating ``tex`` in place
+    when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
+    ``regular`` spectrum refuses a zero integral). In scalar variants a new one is
+    made (their ``mi.Float`` holds one number, not the values)."""
+    values = np.asarray(values, dtype=np.float64)
+    if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
+        return uniform(0.0)
+    params = mi.traverse(tex) if tex is not None and dr.is_jit_v(mi.Float) else None
+    if params is not None and "values" in params:
+        params["values"] = mi.Float(values.astype(np.float32))
+        params.update()
+        return tex
+    return regular(values, GRID[0], GRID[-1])
+
+
+class ThinFilmDiffuse(mi.BSDF):
+    def __init__(self, props):
+        check_variant(NAME)
+        mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
+        model = props.get("model", "multiple")
+        if model not in MODELS:
+            raise ThinFilmError(f"{NAME}: 'model' must be 'single' or 'multiple', got {model!r}")
+        self.model = model
+        films = films_from_props(props, NAME)
+        ext = ext_ior_from_props(props)
+        self.reflectance = _reflectance_from_props(props)
+        options = stack_options_from_props(props, NAME, thickness_texture=False)
+        check_unqueried(props, NAME)
+
+        self.no_films = len(films) == 0
+        # RGB/mono variants read only k_r from the coating's colour table: the
+        # transmission enters through the diffuse table (coated_diffuse)
+        sides = {False: not self.mode.integrated}
+        if films and _absorbs(films[-1][0]):
+            # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
+            self.coating = KernelStack(films[:-1], ext, films[-1][0], sides=sides, **options)
+            self.film_n = films[-1][0]
+            self.film_n_thickness = opaque_float(films[-1][1])
+        else:
+            # No absorbing film N: all films over the base medium (matched to the ambient).
+            self.coating = KernelStack(films, ext, ext, sides=sides, **options)
+            self.film_n = None
+            self.film_n_thickness = None
+
+        self.t_hemi = None
+        self.r_dh = None
+        #: RGB/mono variants: the diffuse term integrated as a product (coated_diffuse)
+        self.colour = None
+        self._update_hemispherical()
+
+        self.m_components = [
+            mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide,
+            mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide,
+        ]
+        self.m_flags = self.m_components[0] | self.m_components[1]
+        self.guard = ParameterGuard(self, NAME)
+
+    # -- load-time tables ----------------------------------------------------
+    def _constant_albedo(self) -> np.ndarray | None:
+        """The base albedo per colour channel where it does not vary over the
+        surface (the colour tables then integrate the series with it), else ``None``."""
+        if self.reflectance.is_spatially_varying():
+            return None
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        return np.array(dr.ravel(self.reflectance.eval(si)), np.float64).reshape(-1)
+
+    def _update_hemispherical(self) -> None:
+        """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
+        in RGB/mono variants the integrated diffuse tables instead."""
+        if self.mode.integrated:
+            if not self.no_films:
+                thickness = None if self.film_n is None else scalar(self.film_n_thickness)
+                self.colour = ColourDiffuse(
+                    DiffuseFactors(self.coating, self.film_n, thickness), self.model,
+                    colour_channels(), self._constant_albedo())
+                if self.film_n is not None and dr.is_diff_v(mi.Float):
+                    prepare_gradients([self.film_n])
+            return
+        if self.no_films:
+            t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
+        else:
+            n_amb = self.coating.ambient.spectral_values(GRID, real=True)
+
+            def index(ix):
+                return ix.spectral_values(GRID)
+
+            def thickness(d):
+                return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
+
+            coating = [(index(ix), thickness(d))
+                       for ix, d in zip(self.coating.indices, self.coating.thickness)]
+            n_exit = index(self.coating.substrate)
+            film_n = None
+            if self.film_n is not None:
+                film_n = (index(self.film_n), thickness(self.film_n_thickness))
+            t_hemi, r_dh = hemispherical_factors(n_amb, coating, n_exit, film_n)
+        self.t_hemi = _spectrum(self.t_hemi, t_hemi)
+        self.r_dh = _spectrum(self.r_dh, r_dh)
+
+    # -- kernel helpers ------------------------------------------------------
+    def _factors(self, si, cos_theta, active, transmission: bool):
+        """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
+        and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
+        resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
+        if not transmission:
+            return resp.R, None, resp.reflection
+        k_r, k_t = resp.R, resp.T
+        if self.film_n is not None:
+            n0 = self.coating.ambient.eval_real(si, active)
+            k_t = k_t * film_attenuation(n0, cos_theta, self.film_n.eval(si, active),
+                                         self.film_n_thickness, si.wavelengths)
+        return k_r, k_t, resp.reflection
+
+    def _series(self, si, kd, active):
+        """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
+        if self.model == "single":
+            return mi.Spectrum(1.0)
+        return dr.rcp(1.0 - kd * self.r_dh.eval(si, active))
+
+    def _diffuse(self, si, kd, cos_i, cos_o, t_i, series, active):
+        """``π f`` at ``cos_o``: ``k_d t_i t_o S`` per wavelength, or its integral
+        over wavelengths in RGB/mono variants."""
+        if self.colour is not None:
+            value = self.colour.value(cos_i, cos_o, kd, active)
+            if self._colour_gradients(si, active):
+                value = attach_gradient(value, self._colour_estimate(si, kd, cos_i, cos_o,
+                                                                     active))
+            return value
+        _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
+        return kd * t_i * t_o * series
+
+    def _colour_gradients(self, si, active) -> bool:
+        """RGB/mono AD variants: whether a film thickness or index carries gradients."""
+        n = self.film_n
+        return self.coating.colour_gradients(si, active) or (n is not None and (
+            dr.grad_enabled(self.film_n_thickness) or dr.grad_enabled(n.eta.eval(si, active))
+            or dr.grad_enabled(n.k.eval(si, active))))
+
+    def _colour_estimate(self, si, kd, cos_i, cos_o, active):
+        """An unbiased estimate of the integrated diffuse term at stratified wavelengths
+        (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose gradients the
+        table's value takes; ``R_dh`` is not differentiated, as in spectral variants."""
+        sampler = GradientSampler.get()
+        wl = sampler.wavelengths(si)
+
+        def t(cos):
+            _, k_t = self.coating.at_wavelengths(False, si, cos, active, True, None, wl)
+            if self.film_n is None:
+                return k_t
+            n0, _ = index_on_wavelengths(self.coating.ambient, si, wl, active)
+            return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(self.film_n, si, wl,
+                                                                          active)),
+                                          self.film_n_thickness, wl)
+        product = t(cos_i) * t(cos_o)
+        r_dh = self.colour.r_dh_at(wl, active)
+        channels = [sampler.estimate(wl, product * self.colour.series(kd[c], r_dh))[c]
+                    for c in range(dr.size_v(mi.Spectrum))]
+        return mi.Spectrum(*channels)
+
+    def _prob_specular(self, si, k_r, t_i, kd, series, active, cos_i):
+        spec = spectral_mean(k_r)
+        if self.colour is not None:
+            diff = spectral_mean(self.colour.albedo(cos_i, kd, active))
+        else:
+            diff = spectral_mean(t_i * kd * self.t_hemi.eval(si, active) * series)
+        total = spec + diff
+        return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
+
+    # -- BSDF interface ------------------------------------------------------
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
+        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        bs = dr.zeros(mi.BSDFSample3f)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        active = mi.Bool(active) & (cos_i > 0)
+        if not (has_spec or has_diff) or (self.no_films and not has_diff):
+            return bs, mi.Spectrum(0.0)
+
+        if self.no_films:  # exactly Mitsuba's diffuse (component index 1 here)
+            bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
+            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+            bs.eta = 1.0
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+            bs.sampled_component = mi.UInt32(1)
+            value = self.mode.value(self.reflectance.eval(si, active), self.mode.depolarized,
+                                    ctx, si.wi, bs.wo)
+            return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
+
+        spectral = self.colour is None
+        k_r, t_i, spec_lobe = self._factors(si, cos_i, active,
+                                            transmission=has_diff and spectral)
+        kd = series = None
+        if has_diff:
+            kd = self.reflectance.eval(si, active)
+            series = self._series(si, kd, active) if spectral else None
+        if has_spec and has_diff:
+            # detached: a sampling decision divides the weight as a constant
+            # (the weight's gradient is then that of k_r, resp. the diffuse term)
+            prob_spec = dr.detach(self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+        else:
+            prob_spec = mi.Float(1.0 if has_spec else 0.0)
+        sel_spec = active & (sample1 < prob_spec)
+        sel_diff = active & (sample1 >= prob_spec)   # not ~sel_spec: a Python bool in scalar variants
+
+        wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
+        bs.wo = dr.select(sel_spec, mi.reflect(si.wi), wo_diff)
+        bs.eta = 1.0
+        bs.sampled_component = dr.select(sel_spec, mi.UInt32(0), mi.UInt32(1))
+        bs.sampled_type = dr.select(sel_spec, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
+                                    mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
+        pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo_diff)
+        bs.pdf = dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff)
+
+        weight = mi.UnpolarizedSpectrum(0.0)
+        if has_spec:
+            weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
+        if has_diff:
+            cos_o = mi.Frame3f.cos_theta(wo_diff)
+            # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
+            w_diff = (self._diffuse(si, kd, cos_i, cos_o, t_i, series, sel_diff)
+                      / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0))
+            weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
+        # the film's reflection is polarized, the light through the base depolarized
+        lobe = self.mode.select(sel_spec, spec_lobe, self.mode.depolarized)
+        return bs, dr.select(active & (bs.pdf > 0),
+                             self.mode.value(weight, lobe, ctx, si.wi, bs.wo), 0.0)
+
+    def _eval_pdf(self, ctx, si, wo, active, want_value: bool, want_pdf: bool):
+        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
+        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        if not has_diff:
+            return mi.Spectrum(0.0), mi.Float(0.0)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        cos_o = mi.Frame3f.cos_theta(wo)
+        active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0)
+        pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo) if want_pdf else mi.Float(0.0)
+
+        if self.no_films:  # exactly Mitsuba's diffuse
+            value = (self.reflectance.eval(si, active) * dr.inv_pi * cos_o) if want_value \
+                else mi.UnpolarizedSpectrum(0.0)
+            value = self.mode.value(value, self.mode.depolarized, ctx, si.wi, wo)
+            return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+
+        need_prob = want_pdf and has_spec
+        value = mi.Spectrum(0.0)
+        if want_value or need_prob:
+            spectral = self.colour is None
+            kd = self.reflectance.eval(si, active)
+            series = self._series(si, kd, active) if spectral else None
+            k_r, t_i, _ = self._factors(si, cos_i, active, transmission=spectral)
+        if want_value:
+            value = self.mode.value(
+                self._diffuse(si, kd, cos_i, cos_o, t_i, series, active) * dr.inv_pi * cos_o,
+                self.mode.depolarized, ctx, si.wi, wo)
+        if need_prob:
+            pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+        return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+
+    def eval(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active, True, False)[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active, False, True)[1]
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self._eval_pdf(ctx, si, wo, active, True, True)
+
+    def traverse(self, callback):
+        self.coating.traverse(callback)
+        if self.film_n is not None:
+            i = len(self.coating)
+            callback.put(f"layers.{i}.thickness", self.film_n_thickness,
+                         mi.ParamFlags.Differentiable)
+            self.film_n.traverse(callback, f"layers.{i}.")
+        callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys):
+        def refresh(changed):
+            self.coating.parameters_changed()
+            if self.film_n is not None:
+                self.film_n.parameters_changed(NAME, f"layers.{len(self.coating)}.")
+            if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
+                dr.make_opaque(self.film_n_thickness)
+            colour_albedo = self.colour is not None and self.colour.fixed
+            if changed is None or any(k.startswith("layers.") or (colour_albedo and
+                                                                  k.startswith("reflectance"))
+                                      for k in changed):
+                self._update_hemispherical()
+        self.guard.changed(self, refresh, keys)
+
+    def to_string(self):
+        layers = self.coating.describe()
+        if self.film_n is not None:
+            d = self.film_n_thickness
+            d = float(dr.ravel(d)[0]) if dr.is_array_v(d) else d
+            layers = f"{layers} over absorbing film {self.film_n.label} {d:g} nm"
+        return (f"ThinFilmDiffuse[\n  model = {self.model},\n  layers = {layers},\n"
+                f"  ext_ior = {self.coating.ambient.label}\n]")

@@ -1,0 +1,361 @@
+r"""
+.. _bsdf-thinfilm_roughconductor:
+
+Thin-film coated rough conductor (:monosp:`thinfilm_roughconductor`)
+--------------------------------------------------------------------
+
+.. pluginparameters::
+
+ * - layers
+   - |string|
+   - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."``, e.g.
+     ``"SiO2 300; TiO2 60"``. Default: ``""`` (no films: exactly Mitsuba's
+     ``roughconductor``).
+ * - thin_film_ior, thin_film_thickness
+   - |string| or |float|, |float|
+   - Shorthand for one film (index or material name, thickness in nm). Not
+     together with ``layers``.
+ * - thickness
+   - |float| or |texture|
+   - Optional scale on every film's thickness at the hit point, e.g. a bitmap
+     of a film that varies over the surface (clamped to >= 0; default: none, 1).
+ * - material
+   - |string|
+   - The substrate: a material name, e.g. ``Au``, ``Cu``, ``Si`` (default: ``Au``).
+     Not together with ``eta``/``k``.
+ * - eta, k
+   - |spectrum| or |texture|
+   - The substrate's index ``eta + i k`` given directly, as Mitsuba's
+     ``roughconductor`` takes it (both must be given).
+ * - ext_ior
+   - |float| or |string|
+   - Exterior index (real), a number or a non-absorbing material name
+     (default: 1.000277, air).
+ * - distribution
+   - |string|
+   - The microfacet normal distribution: ``beckmann`` (default) or ``ggx``.
+ * - alpha, alpha_u, alpha_v
+   - |float| or |texture|
+   - Roughness (RMS slope for Beckmann, as in Mitsuba), isotropic (``alpha``,
+     default 0.1) or along the tangent and bitangent (``alpha_u`` and
+     ``alpha_v``, both or neither, not with ``alpha``). Numbers must be > 0
+     (use ``thinfilm_conductor`` for a smooth surface). Exposed as ``alpha``
+     or ``alpha_u``/``alpha_v``, |differentiable|, |discontinuous|.
+ * - sample_visible
+   - |bool|
+   - Sample only the visible normals (Heitz and d'Eon), as Mitsuba (default: true).
+ * - specular_reflectance
+   - |spectrum| or |texture|
+   - Optional factor on the reflectance; physically it should stay 1 (default: 1.0).
+ * - tabulate
+   - |string| or |bool|
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
+     ``T`` where needed) is read from a verified table over (angle, wavelength) instead
+     of the recursion (a cubic B-spline, split at the critical angle where the exit
+     medium can totally reflect): its cost does not grow with the number of films.
+     ``auto`` tabulates stacks of 2 films or more in vectorised variants, unless a
+     ``thickness`` texture is given, gradients are tracked, or the target cannot be met
+     within 2^19 texels, a table that still fits the cache, by a table of the exact
+     values or one of the band-limited values (``spectral_resolution``) (then: exact).
+ * - table_error
+   - |float|
+   - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - spectral_resolution
+   - |float|
+   - Spectral resolution (nm) tables may assume, for stacks whose exact values no
+     table resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide):
+     their ``R`` and ``T`` are tabulated convolved with a Gaussian in wavenumber
+     whose standard deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm),
+     i.e. light of coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is
+     verified within ``table_error`` against the convolved values and kept only if
+     the colours of the exact and the convolved values under D65, A and F11 differ
+     by ΔE2000 <= 0.5 (default: 1; 0: tables of the exact values only). Under
+     lasers or line-spectrum emitters narrower than the resolution pass 0, or
+     ``tabulate=false``.
+ * - coherence_thickness
+   - |float|
+   - Films thicker than this (nm) are averaged incoherently, as tmm's
+     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
+     shows (default: 5000).
+
+A rough conductor (metal or semiconductor substrate) under a stack of thin films,
+with the microfacet model of Mitsuba's ``roughconductor`` (Walter et al. 2007;
+Smith shadowing-masking, visible-normal sampling): the films follow the
+microsurface, so each microfacet reflects with the exact composite reflectance
+``R(λ, cos θ_m)`` of the multilayer at its own angle of incidence
+``cos θ_m = dot(ω_i, m)``::
+
+    f(ω_i, ω_o) cos θ_o = R(λ, dot(ω_i, m)) D(m) G(ω_i, ω_o, m) / (4 cos θ_i)
+
+with ``m`` the half vector. ``D``, ``G``, the sampling routine and its density
+are Mitsuba's ``MicrofacetDistribution``; ``R`` is the thin-film recursion
+(Hirayama et al. eq. 1-5) for unpolarised light, evaluated at the path's
+wavelengths in the render kernel. The layer parameters appear in
+``mi.traverse`` as for ``thinfilm_conductor``. In ``*_spectral_polarized``
+variants ``R`` becomes the Mueller matrix of the stack's exact amplitudes at the
+microfacet, rotated about ``m`` as Mitsuba's ``roughconductor`` does (with no
+films: its matrix).
+
+In RGB and mono variants (``*_rgb``, ``*_mono``; polarized ones are refused) each
+microfacet's Fresnel term is the spectral reflectance integrated against colour
+matching: CIE 1931 2° under D65 to linear sRGB, normalised so that a perfect
+reflector gives (1, 1, 1), or the luminance Y in mono; this is the convention of
+Mitsuba's spectral pipeline, so an RGB render and a spectral render of a scene
+agree. It is tabulated over the angle at scene load with the float64 recursion
+(``thinfilm_mi/tabulate/colour.py``; over the angle and the thickness scale with a
+``thickness`` texture), so a deep stack costs what one film costs at render time;
+``tabulate``, ``table_error`` and ``spectral_resolution`` do not apply.
+``eta``/``k`` given as ``rgb`` evaluate per channel, as in ``roughconductor``; films
+over them are integrated per channel with that channel's constant index.
+``specular_reflectance`` multiplies per channel. Gradients of thicknesses and
+numeric indices in ``llvm_ad_rgb``: the value is the table's, and the gradient that
+of an unbiased estimate of the same integral at stratified wavelengths per hit (the
+exact recursion through every film), traced only when a parameter carries gradients.
+
+.. tabs::
+    .. code-tab:: xml
+
+        <bsdf type="thinfilm_roughconductor">
+            <string name="material" value="Au"/>
+            <string name="layers" value="SiO2 300; TiO2 60"/>
+            <string name="distribution" value="ggx"/>
+            <float name="alpha" value="0.15"/>
+        </bsdf>
+
+    .. code-tab:: python
+
+        {'type': 'thinfilm_roughconductor', 'material': 'Au',
+         'layers': 'SiO2 300; TiO2 60', 'distribution': 'ggx', 'alpha': 0.15}
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import mitsuba as mi
+
+from thinfilm_mi.render import modes
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render.kernel import (check_unqueried, check_variant, optional_texture,
+                                stack_from_props)
+from thinfilm_mi.plugins.thinfilm_conductor import substrate_from_props
+from thinfilm_mi.render.params import MAX_ALPHA, ParameterGuard
+from thinfilm_mi.render.textures import check_texture_range, uniform
+
+NAME = "thinfilm_roughconductor"
+
+#: Mitsuba's default roughness of its microfacet BSDFs.
+DEFAULT_ALPHA = 0.1
+
+
+def _alpha_texture(props, name: str, plugin: str):
+    """A roughness parameter as a texture; numbers must be finite and > 0."""
+    value = props.get(name, DEFAULT_ALPHA)
+    if isinstance(value, bool) or isinstance(value, str):
+        raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0 or a texture, "
+                            f"got {value!r}")
+    if isinstance(value, (int, float)):
+        if not math.isfinite(value) or not 0 < value <= MAX_ALPHA:
+            raise ThinFilmError(f"{plugin}: '{name}' (roughness) must be a finite number > 0 "
+                                f"and <= {MAX_ALPHA:g}, got {value!r} (for a smooth surface "
+                                "use the smooth plugin)")
+        return uniform(value)
+    try:
+        tex = props.get_texture(name)
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0 or a texture, "
+                            f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{plugin}: '{name}' (roughness)", 0.0, MAX_ALPHA, mono=True,
+                        strict=True)
+    return tex
+
+
+class Microfacet:
+    """The microfacet parameters shared by the rough thin-film BSDFs.
+
+    Reads ``distribution``, ``alpha`` or ``alpha_u`` + ``alpha_v`` and
+    ``sample_visible`` as Mitsuba's ``roughconductor``/``roughdielectric`` do,
+    validates them, and builds ``mi.MicrofacetDistribution`` at a hit.
+    """
+
+    def __init__(self, props, plugin: str):
+        dist = props.get("distribution", "beckmann")
+        types = {"beckmann": mi.MicrofacetType.Beckmann, "ggx": mi.MicrofacetType.GGX}
+        if not isinstance(dist, str) or dist.lower() not in types:
+            raise ThinFilmError(f"{plugin}: 'distribution' must be 'beckmann' or 'ggx', "
+                                f"got {dist!r}")
+        self.name = dist.lower()
+        self.type = types[self.name]
+        self.sample_visible = props.get("sample_visible", True)
+        if not isinstance(self.sample_visible, bool):
+            raise ThinFilmError(f"{plugin}: 'sample_visible' must be a boolean, "
+                                f"got {self.sample_visible!r}")
+        has_u, has_v, has_a = ("alpha_u" in props), ("alpha_v" in props), ("alpha" in props)
+        if has_a and (has_u or has_v):
+            given = ", ".join(f"{n}={props.get(n)!r}" for n in ("alpha", "alpha_u", "alpha_v")
+                              if n in props)
+            raise ThinFilmError(f"{plugin}: give either 'alpha' or 'alpha_u' + 'alpha_v', "
+                                f"not both (got {given})")
+        if has_u != has_v:
+            given, missing = ("alpha_u", "alpha_v") if has_u else ("alpha_v", "alpha_u")
+            raise ThinFilmError(f"{plugin}: '{missing}' is missing ('{given}' = "
+                                f"{props.get(given)!r}; an anisotropic roughness needs both)")
+        self.anisotropic = has_u
+        if has_u:
+            self.alpha_u = _alpha_texture(props, "alpha_u", plugin)
+            self.alpha_v = _alpha_texture(props, "alpha_v", plugin)
+        else:
+            self.alpha_u = self.alpha_v = _alpha_texture(props, "alpha", plugin)
+
+    @property
+    def flags(self):
+        """Extra BSDF flags of the lobes (``Anisotropic`` or none)."""
+        return mi.BSDFFlags.Anisotropic if self.anisotropic else mi.BSDFFlags.Empty
+
+    def distribution(self, si, active, cos_theta_i=None):
+        """``mi.MicrofacetDistribution`` at the hit. With ``cos_theta_i`` and
+        ``sample_visible = false``, the roughness is widened by
+        ``1.2 - 0.2 sqrt(|cos θ_i|)`` (Walter et al.'s trick, as Mitsuba's
+        ``roughdielectric`` does for its sampling density)."""
+        au = self.alpha_u.eval_1(si, active)
+        if self.anisotropic:
+            d = mi.MicrofacetDistribution(self.type, au, self.alpha_v.eval_1(si, active),
+                                          self.sample_visible)
+        else:  # one array for both: Mitsuba then takes its isotropic code paths
+            d = mi.MicrofacetDistribution(self.type, au, self.sample_visible)
+        if cos_theta_i is not None and not self.sample_visible:
+            d.scale_alpha(1.2 - 0.2 * dr.sqrt(dr.abs(cos_theta_i)))
+        return d
+
+    def traverse(self, callback) -> None:
+        flags = mi.ParamFlags.Differentiable | mi.ParamFlags.Discontinuous
+        if self.anisotropic:
+            callback.put("alpha_u", self.alpha_u, flags)
+            callback.put("alpha_v", self.alpha_v, flags)
+        else:
+            callback.put("alpha", self.alpha_u, flags)
+
+    def describe(self) -> str:
+        if self.anisotropic:
+            alpha = f"alpha_u = {self.alpha_u}, alpha_v = {self.alpha_v}"
+        else:
+            alpha = f"alpha = {self.alpha_u}"
+        return (f"  distribution = {self.name},\n  sample_visible = {self.sample_visible},\n"
+                f"  {alpha},\n")
+
+
+def rough_bsdf_base():
+    """A base class on the current variant's ``mi.BSDF`` (nanobind allows one base,
+    so no mixin) with the methods shared by the rough thin-film BSDFs:
+    ``eval``/``pdf``/``eval_pdf`` through the plugin's one ``_eval_pdf(ctx, si, wo,
+    active, want_value)``, traversal (stack, roughness, the factor textures named
+    in ``TEXTURES``) and parameter updates. Called when a plugin module is
+    (re)imported for a variant."""
+
+    class RoughBSDF(mi.BSDF):
+        TEXTURES = ("specular_reflectance",)
+
+        def eval(self, ctx, si, wo, active=True):
+            return self._eval_pdf(ctx, si, wo, active, True)[0]
+
+        def pdf(self, ctx, si, wo, active=True):
+            return self._eval_pdf(ctx, si, wo, active, False)[1]
+
+        def eval_pdf(self, ctx, si, wo, active=True):
+            return self._eval_pdf(ctx, si, wo, active, True)
+
+        def traverse(self, callback):
+            self.stack.traverse(callback)
+            self.microfacet.traverse(callback)
+            for name in self.TEXTURES:
+                tex = getattr(self, name)
+                if tex is not None:
+                    callback.put(name, tex, mi.ParamFlags.Differentiable)
+
+        def parameters_changed(self, keys):
+            self.guard.changed(self, self.stack.parameters_changed, keys)
+
+    return RoughBSDF
+
+
+class ThinFilmRoughConductor(rough_bsdf_base()):
+    def __init__(self, props):
+        check_variant(NAME)
+        mi.BSDF.__init__(self, props)
+        self.mode = modes.current()
+        self.microfacet = Microfacet(props, NAME)
+        self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
+        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
+        check_unqueried(props, NAME)
+        flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | self.microfacet.flags
+        self.m_components = [flags]
+        self.m_flags = flags
+        self.guard = ParameterGuard(self, NAME)
+
+    def _reflectance(self, si, cos_theta_m, active):
+        """Composite reflectance of the films at the microfacet angle (times the factor),
+        and its lobe for :meth:`modes.SpectralMode.value`."""
+        resp = self.mode.response(self.stack, si, dr.clip(cos_theta_m, 0.0, 1.0), active)
+        value = resp.R
+        if self.specular_reflectance is not None:
+            value *= self.specular_reflectance.eval(si, active)
+        return value, resp.reflection
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        bs = dr.zeros(mi.BSDFSample3f)
+        if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
+            return bs, mi.Spectrum(0.0)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        active = mi.Bool(active) & (cos_i > 0)
+        distr = self.microfacet.distribution(si, active)
+        m, bs.pdf = distr.sample(si.wi, sample2)
+        bs.wo = mi.reflect(si.wi, m)
+        bs.eta = 1.0
+        bs.sampled_component = mi.UInt32(0)
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+        cos_m = dr.dot(si.wi, m)
+        active &= (bs.pdf != 0) & (mi.Frame3f.cos_theta(bs.wo) > 0) & (cos_m > 0)
+        if self.microfacet.sample_visible:
+            weight = distr.smith_g1(bs.wo, m)
+        else:
+            weight = distr.G(si.wi, bs.wo, m) * cos_m / (cos_i * mi.Frame3f.cos_theta(m))
+        # Jacobian of the half-direction mapping
+        bs.pdf = dr.select(active, bs.pdf / (4.0 * dr.dot(bs.wo, m)), 0.0)
+        # A rejected sample has no direction (wo = 0, as Mitsuba's roughdielectric
+        # leaves it): a blendbsdf re-weighting by the other lobe's eval/pdf at wo
+        # then finds 0 there, as it finds 0 below the horizon for roughconductor.
+        bs.wo = dr.select(active, bs.wo, 0.0)
+        R, lobe = self._reflectance(si, cos_m, active)
+        value = self.mode.value(R * weight, lobe, ctx, si.wi, bs.wo, m)
+        return bs, dr.select(active, value, 0.0)
+
+    def _eval_pdf(self, ctx, si, wo, active, want_value: bool):
+        if not ctx.is_enabled(mi.BSDFFlags.GlossyReflection):
+            return mi.Spectrum(0.0), mi.Float(0.0)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        cos_o = mi.Frame3f.cos_theta(wo)
+        m = dr.normalize(wo + si.wi)
+        # Filter the cases where the micro- and macrosurface disagree on the side
+        # (smith_g1 zeroes them in eval and sample; the density must agree).
+        active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0) \
+            & (dr.dot(si.wi, m) > 0) & (dr.dot(wo, m) > 0)
+        distr = self.microfacet.distribution(si, active)
+        D = distr.eval(m)
+        if self.microfacet.sample_visible:
+            pdf = D * distr.smith_g1(si.wi, m) / (4.0 * cos_i)
+        else:
+            pdf = distr.pdf(si.wi, m) / (4.0 * dr.dot(wo, m))
+        pdf = dr.select(active, pdf, 0.0)
+        if not want_value:
+            return None, pdf
+        active &= D != 0
+        R, lobe = self._reflectance(si, dr.dot(si.wi, m), active)
+        value = self.mode.value(R * (D * distr.G(si.wi, wo, m) / (4.0 * cos_i)), lobe, ctx,
+                                si.wi, wo, m)
+        return dr.select(active, value, 0.0), pdf
+
+    def to_string(self):
+        return (f"ThinFilmRoughConductor[\n{self.microfacet.describe()}"
+                f"  layers = {self.stack.describe()},\n"
+                f"  substrate = {self.stack.substrate.label},\n"
+                f"  ext_ior = {self.stack.ambient.label}\n]")

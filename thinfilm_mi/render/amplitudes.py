@@ -1,0 +1,136 @@
+"""Exact polarised response of a :class:`~thinfilm_mi.render.kernel.KernelStack` at a hit.
+
+Polarized variants need the stack's complex amplitudes ``r_s, r_p, t_s, t_p``,
+not only its powers: the tables (:mod:`thinfilm_mi.tabulate.exact`) and the film loops
+(:func:`optics.stack_rt_loop`) hold powers only, so here every side is
+evaluated exactly with :func:`optics.stack_amplitudes` (films unrolled) at
+``si.wavelengths``, after the same skips as the unpolarised path (films of zero
+thickness dropped, nothing below an optically opaque film).
+
+The result is what a Mueller matrix needs, in Mitsuba's convention (see the
+docstring of :mod:`thinfilm_mi.optics.core`: Mitsuba's amplitudes are the complex
+conjugates of ours):
+
+* ``R`` and ``T``: the unpolarised reflectance and transmittance, formed exactly
+  as :func:`kernel.unpolarised_rt` forms them (the Mueller matrices' ``M00``;
+  the plugins use them for weights and lobe probabilities);
+* a :class:`Shape` per lobe: the Mueller matrix in the s/p frame divided by its
+  ``M00``, so that ``M = R * shape`` (:mod:`thinfilm_mi.render.modes` rotates it).
+
+Films thicker than ``coherence_thickness`` are evaluated coherently here (an
+incoherent average has no amplitude): polarized renders of such stacks show
+their fine fringes where the unpolarised ones average them.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import drjit as dr
+
+from thinfilm_mi.render.kernel import KernelStack, unpolarised_powers
+from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
+from thinfilm_mi.render.textures import _mi
+
+
+@dataclass
+class Shape:
+    """A Mueller matrix in the s/p frame over its ``M00``::
+
+        [[1, b, 0,     0    ],
+         [b, d, 0,     0    ],
+         [0, 0, c_re, -c_im ],
+         [0, 0, c_im,  c_re ]]
+
+    For a Jones pair ``(A_s, A_p)`` in Mitsuba's convention ``d = 1``,
+    ``b = (|A_s|^2 - |A_p|^2) / (|A_s|^2 + |A_p|^2)`` and ``c = 2 A_p conj(A_s)
+    / (|A_s|^2 + |A_p|^2)`` (``mueller.specular_reflection``'s ``c cos δ``,
+    ``c sin δ``). The depolarizer is ``b = d = c = 0``.
+    """
+
+    b: Any
+    d: Any
+    c_re: Any
+    c_im: Any
+
+    def select(self, mask, other: "Shape") -> "Shape":
+        """Per lane ``self`` where ``mask``, else ``other``."""
+        return Shape(*(dr.select(mask, x, y) for x, y in
+                       zip((self.b, self.d, self.c_re, self.c_im),
+                           (other.b, other.d, other.c_re, other.c_im))))
+
+
+def depolarizing_shape() -> Shape:
+    """The shape of Mitsuba's ``depolarizer``: only ``M00``."""
+    return Shape(0.0, 0.0, 0.0, 0.0)
+
+
+def jones_shape(a_s: Cx, a_p: Cx, w_s=1.0, w_p=1.0) -> Shape:
+    """The :class:`Shape` of the Jones pair ``(a_s, a_p)`` in *our* (tmm's) convention,
+    with power weights ``w_s``, ``w_p`` (the transmittance factors; 1 for reflection).
+
+    In Mitsuba's convention the amplitudes are ``conj(a)``, so
+    ``A_p conj(A_s) = conj(a_p) a_s``.
+    """
+    P_s, P_p = a_s.abs2() * w_s, a_p.abs2() * w_p
+    c = a_p.conj() * a_s
+    if not (isinstance(w_s, float) and isinstance(w_p, float)):
+        c = c * dr.sqrt(dr.maximum(w_s * w_p, 0.0))
+    total = P_s + P_p
+    inv = dr.select(total > 0, dr.rcp(dr.select(total > 0, total, 1.0)), 0.0)
+    two_inv = 2.0 * inv
+    return Shape((P_s - P_p) * inv, 1.0, c.re * two_inv, c.im * two_inv)
+
+
+@dataclass
+class Polarised:
+    """The polarised response of one stack at a hit (see the module docstring)."""
+
+    R: Any
+    T: Any | None
+    reflection: Shape
+    transmission: Shape | None
+
+    def select(self, mask, other: "Polarised") -> "Polarised":
+        T = None if self.T is None else dr.select(mask, self.T, other.T)
+        t = None if self.transmission is None else self.transmission.select(mask, other.transmission)
+        return Polarised(dr.select(mask, self.R, other.R), T,
+                         self.reflection.select(mask, other.reflection), t)
+
+
+def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
+          thickness_scale) -> Polarised:
+    mi = _mi()
+    side = stack.evaluation_side(inside, transmission)
+    n0 = side.n0.eval_real(si, active)
+    exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
+        else side.exit.eval(si, active)
+    films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
+             for ix, d, _ in side.films]
+    want_t = transmission and not side.opaque
+    a = stack_amplitudes(n0, cos_theta, films, exit_, si.wavelengths, transmission=want_t)
+    r_shape = jones_shape(a.rs, a.rp)
+    if not transmission:
+        return Polarised(unpolarised_powers(a, False), None, r_shape, None)
+    if side.opaque:
+        zero = mi.UnpolarizedSpectrum(0.0)
+        return Polarised(unpolarised_powers(a, False), zero, r_shape, depolarizing_shape())
+    R, T = unpolarised_powers(a, True)
+    q0 = dr.select(a.grazing, 1.0, a.q0)
+    t_shape = jones_shape(a.ts, a.tp, transmittance_factor_s(a.q_exit, q0),
+                          transmittance_factor_p(a.n_exit, a.q_exit, q0))
+    return Polarised(R, T, r_shape, t_shape)
+
+
+def polarised_response(stack: KernelStack, si, cos_theta, active=True, *,
+                       inside: bool | Any = False, transmission: bool = False) -> Polarised:
+    """The exact :class:`Polarised` response of ``stack`` for light arriving at
+    ``cos_theta`` (positive, measured on its own side) from the ambient
+    (``inside`` false), the substrate (true), or per lane (a mask: both sides are
+    evaluated and selected), as :meth:`KernelStack.reflectance` takes them."""
+    scale = stack.thickness_scale_at(si, active)
+    if isinstance(inside, bool):
+        return _side(stack, inside, si, cos_theta, active, transmission, scale)
+    out = _side(stack, False, si, cos_theta, active, transmission, scale)
+    return _side(stack, True, si, cos_theta, active, transmission, scale).select(inside, out)
+

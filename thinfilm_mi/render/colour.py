@@ -1,0 +1,255 @@
+"""Colour tables for the RGB and mono variants: what a planned side of a
+:class:`~thinfilm_mi.render.kernel.KernelStack` returns there, and how its gradients are
+obtained (no plugin classes here; below :mod:`kernel`, which calls it).
+
+* :func:`colour_channels` — ``"rgb"``, ``"mono"`` or ``None`` (spectral variants).
+* :func:`colour_table` — a side's ``R`` [and ``T``] integrated against colour
+  matching over the angle (:mod:`thinfilm_mi.tabulate.colour` builds it), cached by
+  the side's optics.
+* :func:`channel_mean_texture` — the colour-weighted means of a dataset's index,
+  the texture a plugin reads where it evaluates per channel.
+* :class:`GradientSampler` — gradients in RGB/mono AD variants. The table holds
+  numbers, not derivatives; where a film thickness or index carries gradients
+  the kernel adds ``X - detach(X)`` to the table's value, with ``X`` an unbiased
+  estimate of the same integral, ``X_c = (470 nm / m) Σ_k ŵ_c(λ_k) R(λ_k)`` at
+  ``m`` stratified wavelengths (3 in RGB, 1 in mono) from a hash of the hit,
+  evaluated exactly with the recursion on every film. The value is the table's
+  (unchanged); the gradient is an unbiased estimate of the derivative of the
+  integral (noisier than a spectral render's, which samples 4 wavelengths).
+"""
+from __future__ import annotations
+
+import hashlib
+import threading
+from dataclasses import replace
+
+import drjit as dr
+import numpy as np
+
+from thinfilm_mi.tabulate import colour as integrated
+from thinfilm_mi.tabulate import exact as _tables
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.materials.stack import SPECTRAL_RANGE
+from thinfilm_mi.render.textures import GRID, _mi, new_object, scalar, texture_range, uniform
+
+
+def colour_channels() -> str | None:
+    """``"rgb"`` or ``"mono"`` in the RGB and mono variants (whose plugins read
+    integrated colour tables, :mod:`thinfilm_mi.tabulate.colour`), ``None`` in the
+    spectral ones."""
+    mi = _mi()
+    if mi.is_spectral:
+        return None
+    return "mono" if mi.is_monochromatic else "rgb"
+
+
+def channel_mean_texture(wavelengths: np.ndarray, values: np.ndarray, channels: str):
+    """A constant texture holding the colour-weighted means of ``values`` (the
+    index of a dataset on ``wavelengths``): per sRGB channel, or Y in mono."""
+    w = integrated.channel_weights(channels, wavelengths) * np.gradient(wavelengths)[None, :]
+    means = (w @ values) / w.sum(axis=1)
+    if channels == "mono":
+        return uniform(float(means[0]))
+    mi = _mi()
+    return new_object("srgb", color=mi.ScalarColor3f(*[float(x) for x in means]),
+                      unbounded=True)
+
+
+def with_absorbing(data: _tables.SideData) -> _tables.SideData:
+    """``data`` with ``absorbing`` set from the 1 nm grid (one kernel per build)."""
+    data.absorbing = (tuple(bool(np.any(np.asarray(f(GRID)).imag)) for f, _ in data.films)
+                      + (bool(np.any(np.asarray(data.n_exit(GRID)).imag)),))
+    return data
+
+
+#: Colour tables shared between stacks with identical optics (RGB/mono variants).
+COLOUR_CACHE = _tables.TableCache()
+
+
+def colour_table(stack, side, side_data):
+    """The :class:`integrated.ColourTable` of the planned side ``side`` of the
+    :class:`~thinfilm_mi.render.kernel.KernelStack` ``stack`` in RGB/mono variants, shared
+    between stacks with identical optics; ``None`` where the plugin evaluates per
+    channel (no films over an index given per channel). ``side_data(side,
+    transmission, channel)`` gives the side's float64 build data
+    (:class:`tables.SideData`; ``channel`` maps media given per channel, by ``id``,
+    to the index of the channel built)."""
+    channels = colour_channels()
+    media = [side.n0] + [f[0] for f in side.films] + [side.exit]
+    h = hashlib.sha1()
+    per_channel = {}
+    for ix in media:
+        v = ix.spectral_values(GRID)
+        if v is None:
+            per_channel[id(ix)] = ix.channel_values()
+            v = per_channel[id(ix)]
+            if v is None:
+                if not side.films:
+                    return None   # per-channel Fresnel of a spatially varying eta/k
+                where = "the substrate" if ix is side.exit else "a medium"
+                raise ThinFilmError(
+                    f"{stack.plugin}: 'eta'/'k' ({where}) vary over the surface, and films "
+                    f"lie on it: in the {_mi().variant()!r} variant a spectrum or a "
+                    "constant (number, rgb) is required there, so that the films can "
+                    "be integrated over wavelengths at load time (or use a spectral "
+                    "variant)")
+        h.update(np.ascontiguousarray(v).tobytes())
+    if per_channel and not side.films:
+        return None   # per-channel Fresnel, exactly as Mitsuba's conductor
+    transmission = side.transmission and not side.opaque
+    axis = integrated.Axis()
+    n0 = side.n0.spectral_values(GRID, real=True)
+    if side.exit_real and not per_channel:
+        n_exit = side.exit.spectral_values(GRID, real=True)
+        if (np.all(n0 == n0[0]) and np.all(n_exit == n_exit[0]) and n_exit[0] < n0[0]):
+            axis = integrated.Axis("tir", float(n0[0]), float(n_exit[0]))
+    scale_max = fixed_scale = None
+    tex = stack.thickness_texture
+    if tex is not None and not tex.is_spatially_varying():
+        fixed_scale = max(scalar(tex.eval_1(dr.zeros(_mi().SurfaceInteraction3f))), 0.0)
+    elif tex is not None:
+        rng = texture_range(tex, mono=True)
+        scale_max = max(rng[1], 0.0) if rng is not None else None
+        if scale_max is None:
+            raise ThinFilmError(f"{stack.plugin}: 'thickness': its range cannot be evaluated "
+                                f"at load time, which the {_mi().variant()!r} variant needs "
+                                "(a table over the thickness scale)")
+    h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
+    h.update(repr((_mi().variant(), channels, transmission, side.exit_real, side.opaque, axis,
+                   scale_max, fixed_scale,
+                   integrated.settings())).encode())
+    key = h.hexdigest()
+    found, table = COLOUR_CACHE.get(key)
+    if found:
+        return table
+
+    def source(data, chans):
+        data = with_absorbing(data)
+
+        def evaluate(cos, scale, wl):
+            per_point = isinstance(scale, np.ndarray)   # a scale per point (2-D tables)
+            d = data if scale is None or per_point else replace(
+                data, films=[(f, t * scale) for f, t in data.films])
+            # the points' wavelengths repeat (one per angle node): indices per unique one
+            uniq, rows = np.unique(wl, return_inverse=True)
+            return _tables._evaluate(d, cos, rows, uniq, _tables._indices(d, uniq),
+                                     scale if per_point else None)
+        # the stack's optical thickness at its thickest (the largest scale)
+        optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) * sum(
+            float(np.max(np.real(f(GRID)))) * t for f, t in data.films)
+        return integrated.Source(evaluate, chans, integrated.first_step(optical))
+
+    C = 1 if channels == "mono" else 3
+    if per_channel:
+        sources = [source(side_data(side, transmission,
+                                     {k: v[c] for k, v in per_channel.items()}), [c])
+                   for c in range(C)]
+    else:
+        sources = [source(side_data(side, transmission), list(range(C)))]
+    table = integrated.build(sources, channels, transmission, axis, scale_max, fixed_scale)
+    COLOUR_CACHE.put(key, table)
+    return table
+
+
+class GradientSampler:
+    """In-kernel pieces of the colour gradients (see the module docstring): the
+    normalised channel weights ``ŵ_c(λ)`` as a float texture over 360-830 nm
+    (1 nm, linear), and stratified wavelengths from a hash of the hit. One per
+    variant, built on first use (a small texture; no kernel launch)."""
+
+    _lock = threading.Lock()
+    _by_variant: dict = {}
+
+    def __init__(self, channels: str):
+        mi = _mi()
+        w = integrated.normalised_weights(channels)       # on GRID, the 1 nm grid
+        self.C = w.shape[0]
+        self.texture = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(w.T, np.float32)),
+                                    use_accel=False, migrate=False,
+                                    filter_mode=dr.FilterMode.Linear,
+                                    wrap_mode=dr.WrapMode.Clamp)
+
+    @classmethod
+    def get(cls) -> "GradientSampler":
+        mi = _mi()
+        with cls._lock:
+            key = mi.variant()
+            if key not in cls._by_variant:
+                cls._by_variant[key] = cls(colour_channels())
+            return cls._by_variant[key]
+
+    def wavelengths(self, si):
+        """``m`` stratified wavelengths (``mi.Spectrum``, nm) from a hash of the hit."""
+        mi = _mi()
+
+        def bits(x):
+            return dr.reinterpret_array(mi.UInt32, x)
+        v0 = bits(si.p.x) ^ (bits(si.p.y) * 0x9E3779B1)
+        v1 = bits(si.p.z) ^ (bits(si.wi.x) * 0x85EBCA77) ^ (bits(si.wi.y) * 0xC2B2AE3D)
+        u = mi.sample_tea_float32(v0, v1, 4)
+        lo, hi = SPECTRAL_RANGE
+        m = dr.size_v(mi.Spectrum)
+        return mi.Spectrum(*[lo + (hi - lo) * (k + u) / m for k in range(m)])
+
+    def estimate(self, wavelengths, values):
+        """``X_c = (470 nm / m) Σ_k ŵ_c(λ_k) values_k`` (``mi.Spectrum`` colours) of
+        spectral ``values`` at the :meth:`wavelengths`."""
+        mi = _mi()
+        lo, hi = SPECTRAL_RANGE
+        m = dr.size_v(mi.Spectrum)
+        out = [0.0] * self.C
+        for k in range(m):
+            w = self.texture.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)))
+            for c in range(self.C):
+                out[c] = out[c] + w[c] * values[k]
+        return mi.Spectrum(*[(hi - lo) / m * x for x in out])
+
+
+def attach_gradient(value, estimate):
+    """``value`` with the gradients of ``estimate``: ``value + X - detach(X)``."""
+    return dr.detach(value) + (estimate - dr.detach(estimate))
+
+
+def prepare_gradients(media) -> None:
+    """Build, at scene load, what :class:`GradientSampler` and
+    :func:`index_on_wavelengths` read in the kernel for these media (the render
+    kernel is traced inside Mitsuba's symbolic loops, where no array may be
+    evaluated, so nothing can be built lazily there)."""
+    GradientSampler.get()
+    for ix in media:
+        _wavelength_texture(ix)
+
+
+def _wavelength_texture(ix):
+    """A dataset index's 1 nm values (re, im) as a float texture over 360-830 nm,
+    built once per index; ``None`` for anything else."""
+    if ix.material is None or ix.material.constant is not None:
+        return None
+    tex = getattr(ix, "_wl_texture", None)
+    if tex is None:
+        mi = _mi()
+        v = ix.material.index(GRID)
+        tex = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(
+            np.stack([v.real, v.imag], axis=1), np.float32)), use_accel=False, migrate=False,
+            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+        ix._wl_texture = tex
+    return tex
+
+
+def index_on_wavelengths(ix, si, wavelengths, active=True):
+    """The :class:`~thinfilm_mi.render.kernel.SpectralIndex` ``ix`` at ``wavelengths``
+    (``mi.Spectrum``, nm) in RGB/mono variants, as ``(re, im)``: a dataset's from
+    a float texture of its 1 nm values (built once per index), anything else
+    (numbers: ``uniform``, differentiable) as its textures evaluate."""
+    mi = _mi()
+    tex = _wavelength_texture(ix)
+    if tex is None:
+        n = ix.eval(si, active)
+        return n.re, n.im
+    lo, hi = SPECTRAL_RANGE
+    re, im = [], []
+    for k in range(dr.size_v(mi.Spectrum)):
+        v = tex.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)
+        re.append(v[0])
+        im.append(v[1])
+    return mi.Spectrum(*re), mi.Spectrum(*im)

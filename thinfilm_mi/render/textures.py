@@ -1,0 +1,177 @@
+"""Mitsuba textures made and read by the thin-film plugins (no plugin classes here).
+
+* Making: :func:`uniform`, :func:`irregular`, :func:`regular` build Mitsuba's
+  spectra through ``mi.PluginManager.create_object`` and never through
+  ``mi.load_dict``. ``load_dict`` installs a copy of the global FileResolver
+  for its duration and frees it when it returns; under Mitsuba's parallel
+  scene loading, plugin constructors run on several threads, and a C++
+  plugin (``bitmap``, ``ply``, ``hdrfilm``, or the loading of a plugin
+  library) resolving a file name on another thread at that moment reads the
+  freed copy: ``std::bad_alloc``, ``basic_string::_M_create`` or a crash.
+  ``create_object`` touches no resolver (``tests/test_parallel_load.py``).
+* Reading: :func:`texture_on_grid` (a spectrum on a wavelength grid) and
+  :func:`texture_range` (smallest and largest value over a texture's spectral
+  and spatial domain) at load time; :func:`check_texture_range` turns the
+  latter into an error naming the parameter.
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import numpy as np
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.materials.stack import SPECTRAL_RANGE
+
+#: Mitsuba's spectral range on a 1 nm grid (where datasets and checks are evaluated).
+GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
+                   int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)
+
+
+def _mi():
+    import mitsuba as mi
+    return mi
+
+
+def scalar(d) -> float:
+    """The first entry of a Dr.Jit value (or a Python number) as a float."""
+    return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
+
+
+def new_object(plugin: str, **props):
+    """A Mitsuba object of the current variant from plain properties, made by the
+    plugin manager directly (thread-safe under parallel loading; see the module
+    docstring for why not ``mi.load_dict``)."""
+    mi = _mi()
+    p = mi.Properties(plugin)
+    for k, v in props.items():
+        p[k] = v
+    return mi.PluginManager.instance().create_object(p)
+
+
+def uniform(value: float):
+    """A ``uniform`` spectrum (its ``value`` is exposed to ``mi.traverse``)."""
+    return new_object("uniform", value=float(value))
+
+
+def irregular(wavelengths, values):
+    """An ``irregular`` spectrum: linear interpolation of ``values`` at ``wavelengths``."""
+    return new_object("irregular", wavelengths=", ".join(f"{x:.12g}" for x in wavelengths),
+                      values=", ".join(f"{x:.9g}" for x in values))
+
+
+def regular(values, lo: float = GRID[0], hi: float = GRID[-1]):
+    """A ``regular`` spectrum: ``values`` equally spaced over ``[lo, hi]`` nm."""
+    return new_object("regular", wavelength_min=float(lo), wavelength_max=float(hi),
+                      values=", ".join(f"{v:.9g}" for v in values))
+
+
+def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
+    """A Mitsuba spectral texture evaluated at ``wavelengths`` (float64 numpy).
+
+    Evaluated through the texture itself (not its source data), so values edited
+    through ``mi.traverse`` are seen exactly as the render kernel sees them. A
+    uniform spectrum's one value is read as its mean, without a kernel launch
+    (~40 us each; a stack's constant films have two such textures apiece).
+    """
+    mi = _mi()
+    wl = np.asarray(wavelengths, dtype=np.float64).ravel()
+    n = wl.size
+    if tex.class_name() == "UniformSpectrum":
+        return np.full(n, scalar(tex.mean()))
+    if not dr.is_jit_v(mi.Float):   # scalar variants: four wavelengths per call
+        si = dr.zeros(mi.SurfaceInteraction3f)
+        padded = np.concatenate([wl, np.full((-n) % 4, wl[-1] if n else 500.0)])
+        out = []
+        for i in range(0, padded.size, 4):
+            si.wavelengths = mi.UnpolarizedSpectrum(*[float(x) for x in padded[i:i + 4]])
+            out.extend(float(v) for v in tex.eval(si))
+        return np.asarray(out[:n], dtype=np.float64)
+    from thinfilm_mi.optics.backend import aligned_array
+
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    # an aligned buffer: Dr.Jit compiles a kernel per alignment of its inputs
+    w = aligned_array(wl, np.float32, mi.Float)
+    si.wavelengths = mi.UnpolarizedSpectrum(w, w, w, w)
+    value = tex.eval(si)
+    return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
+
+
+def texture_range(tex, mono: bool = False):
+    """The smallest and largest value of a texture at load time (NaN where some
+    value is NaN), or ``None`` if it cannot be evaluated without a shape (e.g.
+    ``mesh_attribute``).
+
+    Evaluated on Mitsuba's spectral grid (360-830 nm, 1 nm) and, for a spatially
+    varying texture, at every texel centre of its resolution (at least a 64 x 64
+    UV grid; 16 x 16 and a 10 nm grid in scalar variants): exact for bitmaps
+    (bilinear interpolation is a convex combination of texels) and uniform or
+    tabulated spectra, a dense sample for procedural textures. ``mono``:
+    evaluate ``eval_1`` (as a scale texture is read) instead of ``eval``.
+    """
+    mi = _mi()
+    if tex.class_name() == "UniformSpectrum":
+        v = scalar(tex.mean())
+        return v, v
+    jit = dr.is_jit_v(mi.Float)
+    wl = GRID if jit else GRID[::10]
+    if tex.is_spatially_varying():
+        res = [int(r) for r in tex.resolution()]
+        nu, nv = (max(res[0], 64), max(res[1], 64)) if jit else (16, 16)
+        nu, nv = min(nu, 4096), min(nv, 4096)
+        u, v = np.meshgrid((np.arange(nu) + 0.5) / nu, (np.arange(nv) + 0.5) / nv)
+        u, v = u.ravel(), v.ravel()
+    else:
+        u = v = np.full(1, 0.5)
+    if not mi.is_spectral:   # RGB/mono variants: no wavelengths (Color0f)
+        wl = wl[:1]
+    nw = dr.size_v(mi.UnpolarizedSpectrum) if mi.is_spectral else 1   # per sample
+    n = max(u.size, -(-wl.size // nw))
+    i = np.arange(n)
+    uu, vv = u[i % u.size], v[i % v.size]
+    lam = [wl[(nw * i + c) % wl.size] for c in range(nw)]
+    try:
+        if jit:
+            si = dr.zeros(mi.SurfaceInteraction3f, n)
+            si.uv = mi.Point2f(mi.Float(uu), mi.Float(vv))
+            if mi.is_spectral:
+                si.wavelengths = mi.UnpolarizedSpectrum(*[mi.Float(x) for x in lam])
+            val = tex.eval_1(si) if mono else tex.eval(si)
+            arr = np.array(val, dtype=np.float64)
+        else:
+            vals = []
+            for j in range(n):
+                si = dr.zeros(mi.SurfaceInteraction3f)
+                si.uv = mi.Point2f(float(uu[j]), float(vv[j]))
+                if mi.is_spectral:
+                    si.wavelengths = mi.UnpolarizedSpectrum(*[float(x[j]) for x in lam])
+                val = tex.eval_1(si) if mono else tex.eval(si)
+                vals.extend([float(val)] if mono else list(np.ravel(val)))
+            arr = np.asarray(vals)
+    except Exception:  # noqa: BLE001 - textures that need a shape cannot be checked here
+        return None
+    if not arr.size:
+        return None
+    if np.any(np.isnan(arr)):
+        return math.nan, math.nan
+    return float(np.min(arr)), float(np.max(arr))
+
+
+def check_texture_range(tex, what: str, lo: float = -math.inf, hi: float = math.inf, *,
+                        mono: bool = False, strict: bool = False) -> None:
+    """Raise :class:`ThinFilmError` naming ``what`` unless the texture's values
+    (:func:`texture_range`) are finite and within ``[lo, hi]`` (``lo`` excluded
+    with ``strict``)."""
+    rng = texture_range(tex, mono)
+    if rng is None:
+        return
+    vmin, vmax = rng
+    bad = (not (math.isfinite(vmin) and math.isfinite(vmax)) or vmin < lo or vmax > hi
+           or (strict and vmin <= lo))
+    if bad:
+        low = f"{'>' if strict else '>='} {lo:g}" if math.isfinite(lo) else ""
+        high = f"<= {hi:g}" if math.isfinite(hi) else ""
+        want = " and ".join(x for x in (low, high) if x) or "finite"
+        raise ThinFilmError(f"{what} must be finite and {want} everywhere, got a texture with "
+                            f"values in [{vmin!r}, {vmax!r}]")

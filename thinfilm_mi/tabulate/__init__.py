@@ -1,0 +1,11 @@
+"""The tabulation layer: verified tables that replace the recursion in render kernels.
+
+* :mod:`thinfilm_mi.tabulate.exact` -- cubic B-spline tables of the exact ``R``/``T`` over
+  (angle, wavelength), their verification, and the table cache.
+* :mod:`thinfilm_mi.tabulate.band` -- tables of ``R``/``T`` convolved with a Gaussian in
+  wavenumber (deep stacks).
+* :mod:`thinfilm_mi.tabulate.colour` -- colour tables: ``R``/``T`` integrated against colour
+  matching over the angle (RGB and mono variants).
+* :mod:`thinfilm_mi.tabulate.diffuse` -- the coated-diffuse product film-in x base x film-out.
+* :mod:`thinfilm_mi.tabulate.hemispherical` -- hemispherical terms ``R_dh``, ``T_hemi``.
+"""

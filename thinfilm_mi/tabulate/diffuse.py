@@ -1,0 +1,330 @@
+"""``thinfilm_diffuse`` in RGB and mono variants: the coated Lambertian term
+integrated over wavelengths as a product (no plugin classes here).
+
+In a spectral variant the plugin multiplies, per wavelength,
+``f = k_d t(θ_i) t(θ_o) S / π`` with ``t = k_t k_a`` and the interreflection
+series ``S = 1/(1 - k_d R_dh)`` ("multiple") or ``1`` ("single"). An RGB value
+must be the *integral of that product* against colour matching, not a product
+of integrated factors (the fringes of ``t(θ_i)`` and ``t(θ_o)`` line up at some
+angles and cancel at others). ``k_d`` is the user's colour (``reflectance``,
+per channel as in Mitsuba's ``diffuse``), so with ``ŵ_c`` the channel weights
+of :mod:`thinfilm_mi.tabulate.colour` (unit integral):
+
+    π f_c(θ_i, θ_o) = ∫ ŵ_c(λ) t(λ, θ_i) t(λ, θ_o) G(k_d,c, R_dh(λ)) dλ,
+    G(k, r) = k / (1 - k r)   ("multiple"),   G(k, r) = k   ("single").
+
+``G`` is interpolated in ``r`` over the range of ``R_dh`` by a polynomial on
+:math:`K` Chebyshev nodes ``r_j`` (``K`` chosen so that the interpolation is
+within :data:`SERIES_TOLERANCE` relative for every ``k_d`` in [0, 1]; ``G`` is
+analytic in ``r`` up to its pole at ``1/k_d >= 1``), which separates ``k_d``
+from the wavelengths exactly up to that error:
+
+    π f_c = Σ_j G(k_d,c, r_j) M_jc(θ_i, θ_o),   M_jc = ∫ ŵ_c t t ℓ_j(R_dh) dλ
+
+with ``ℓ_j`` the Lagrange basis. Where ``reflectance`` does not vary over the
+surface the expansion is not needed: ``G`` is integrated with the albedo itself
+(one basis function, ``M_c = ∫ ŵ_c t t S_c dλ``, ``S_c = G(k_d,c, R_dh)/k_d,c``)
+and the kernel multiplies by ``k_d``. The ``M_jc`` are a 2-D table over both
+angles (uniform in the angle coordinate of :func:`tables.u_texel`): the angle
+nodes are doubled until the 4-point rule predicts the new ones within
+:data:`LEVEL_ABS` (at most :data:`MAX_NODES`), then subdivided for the linear
+lookup until it is within :data:`LINEAR_ABS` (at most :data:`MAX_TABLE_FLOATS`);
+the albedo estimate of the lobe-selection probability, ``Σ_j G(k_d, r_j)
+A_jc(θ_i)`` with ``A_jc = ∫ ŵ_c t T_hemi ℓ_j(R_dh) dλ``, is a 1-D table. ``R_dh``
+and ``T_hemi`` are the float64 hemispherical factors of
+:mod:`thinfilm_mi.tabulate.hemispherical`. The wavelength grid is uniform, halved from
+1 nm until ``π f`` at ``k_d = 1`` changes by at most :data:`LEVEL_ABS` (at most
+1/16 nm).
+"""
+from __future__ import annotations
+
+import math
+
+import drjit as dr
+import numpy as np
+
+from thinfilm_mi.tabulate import colour as integrated
+from thinfilm_mi.materials.stack import SPECTRAL_RANGE
+from thinfilm_mi.tabulate.exact import u_texel
+from thinfilm_mi.render.textures import _mi
+
+#: Relative error of the Chebyshev interpolation of ``G(k_d, r)`` in ``r``.
+SERIES_TOLERANCE = 1e-5
+#: Most Chebyshev nodes in ``r``.
+MAX_SERIES_NODES = 24
+#: Angle nodes of the first grid, and the most nodes per axis.
+FIRST_NODES = 17
+MAX_NODES = 129
+#: Most floats in the 2-D table (16 MiB), which bounds the linear refinement.
+MAX_TABLE_FLOATS = 1 << 22
+#: Finest wavelength step (nm): 2^-MAX_LEVEL.
+MAX_LEVEL = 4
+#: Largest change per channel of ``π f`` (at ``k_d = 1``) accepted between two
+#: wavelength steps, and between a grid and its 4-point prediction. Absolute, not
+#: CIEDE2000: ``π f`` falls to 0 towards grazing incidence, where ΔE2000 of a
+#: near-black colour (~4000 x the abs error) would refine for no visible change;
+#: 1e-4 of a white diffuse is ΔE2000 <= 0.05 wherever Y >= 0.01.
+LEVEL_ABS = 1e-4
+#: Largest abs error of the lookup's linear interpolation (against the 4-point rule):
+#: 3e-4 of ``π f`` is ΔE2000 <= 0.1 wherever the colour's Y >= 0.05 (L* varies as
+#: Y^(1/3)); darker values lie towards grazing incidence, where ``cos θ_o`` dims them.
+LINEAR_ABS = 3e-4
+
+
+def _linear_error(values: np.ndarray, axis: int) -> float:
+    f = np.moveaxis(values, axis, 0)
+    mid = np.moveaxis(integrated._midpoints4(values, axis, True), axis, 0)
+    return float(np.max(np.abs(0.5 * (f[:-1] + f[1:]) - mid)))
+
+
+def series_nodes(r_min: float, r_max: float, model: str, kd_max: float = 1.0) -> np.ndarray:
+    """The Chebyshev nodes ``r_j`` on ``[r_min, r_max]`` for ``G`` (one node for
+    "single", or when ``R_dh`` is constant)."""
+    if model == "single" or r_max - r_min < 1e-12:
+        return np.array([0.5 * (r_min + r_max)])
+    kd = np.linspace(0.0, kd_max, 65)[1:, None]
+    r = np.linspace(r_min, r_max, 257)[None, :]
+    exact = kd / (1.0 - kd * r)
+    for K in range(2, MAX_SERIES_NODES + 1):
+        nodes = _chebyshev(r_min, r_max, K)
+        approx = _g(kd, nodes[None, :], model) @ lagrange_basis(nodes, r[0]).T
+        if np.max(np.abs(approx - exact) / exact) <= SERIES_TOLERANCE:
+            return nodes
+    return nodes
+
+
+def _chebyshev(lo: float, hi: float, K: int) -> np.ndarray:
+    x = np.cos((2 * np.arange(K) + 1) * math.pi / (2 * K))
+    return 0.5 * (lo + hi) + 0.5 * (hi - lo) * x
+
+
+def _g(kd, r, model: str):
+    return kd if model == "single" else kd / (1.0 - kd * r)
+
+
+def lagrange_basis(nodes: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """``ℓ_j(r)``, shape ``(len r, len nodes)``."""
+    r = np.asarray(r, np.float64)
+    out = np.ones((r.size, nodes.size))
+    for j, rj in enumerate(nodes):
+        for m, rm in enumerate(nodes):
+            if m != j:
+                out[:, j] *= (r - rm) / (rj - rm)
+    return out
+
+
+def _subdivide(values: np.ndarray, axis: int) -> np.ndarray:
+    """Nodes doubled along ``axis`` by the 4-point rule (an angle axis: even ends)."""
+    return integrated._interleave(values, integrated._midpoints4(values, axis, True), axis)
+
+
+class DiffuseFactors:
+    """The spectral factors of a ``thinfilm_diffuse`` for :class:`ColourDiffuse`:
+    ``t(cos, wl)`` (shape ``(len cos, len wl)``) and ``hemispherical(wl) ->
+    (R_dh, T_hemi)`` (over ``wl``), for the coating ``coating`` (a
+    :class:`~thinfilm_mi.render.kernel.KernelStack`) over the absorbing film ``film_n``
+    (a ``SpectralIndex``) of ``film_n_thickness`` nm, or over the base medium
+    (``film_n`` ``None``)."""
+
+    def __init__(self, coating, film_n, film_n_thickness: float | None):
+        self.coating, self.film_n, self.film_n_thickness = coating, film_n, film_n_thickness
+
+    def t(self, cos, wl):
+        from thinfilm_mi.render.kernel import side_rt
+
+        _, T = side_rt(self.coating, False, cos, wl)
+        if self.film_n is None:
+            return T
+        n0 = self.coating.ambient.spectral_values(wl, real=True)
+        n_f = self.film_n.spectral_values(wl)
+        beta2 = (n0 ** 2)[None, :] * (1.0 - cos ** 2)[:, None]
+        q = np.sqrt((n_f ** 2)[None, :] - beta2 + 0j)
+        q = np.where(q.imag < 0, -q, q)           # the decaying root
+        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness)
+
+    def hemispherical(self, wl):
+        from thinfilm_mi.tabulate.hemispherical import hemispherical_factors
+        from thinfilm_mi.render.textures import scalar
+
+        c = self.coating
+        n0 = c.ambient.spectral_values(wl, real=True)
+        coat = [(ix.spectral_values(wl), scalar(d)) for ix, d in zip(c.indices, c.thickness)]
+        fn = None if self.film_n is None else (self.film_n.spectral_values(wl),
+                                               self.film_n_thickness)
+        t_hemi, r_dh = hemispherical_factors(n0, coat, c.substrate.spectral_values(wl), fn,
+                                             wavelengths=wl)
+        return r_dh, t_hemi
+
+
+class ColourDiffuse:
+    """The integrated diffuse term and albedo estimate of one ``thinfilm_diffuse``
+    (``factors``: a :class:`DiffuseFactors`).
+
+    ``kd``: the base albedo per channel where it does not vary over the surface;
+    then the series is integrated with it exactly (``M_c = ∫ ŵ_c t t S_c dλ``,
+    ``S_c = G(k_d,c, R_dh) / k_d,c``, one basis function) and the kernel
+    multiplies by ``k_d``; ``None`` for a texture: the Chebyshev expansion
+    in ``R_dh`` of the module docstring."""
+
+    def __init__(self, factors: DiffuseFactors, model: str, channels: str,
+                 kd: np.ndarray | None = None):
+        mi = _mi()
+        self.model = model
+        C = 1 if channels == "mono" else 3
+        self.C = C
+        self.fixed = kd is not None
+        lo, hi = SPECTRAL_RANGE
+        axis = integrated.Axis()
+        levels = {}
+
+        def level_data(level):
+            """Wavelengths, normalised weights ``(C, n)`` and the hemispherical factors."""
+            if level not in levels:
+                n = int(round((hi - lo) * (1 << level)))
+                wl = lo + np.arange(n + 1) * ((hi - lo) / n)
+                w = integrated.channel_weights(channels, wl) * integrated.trapezoid_weights(wl)[None, :]
+                if level - 1 in levels:     # the coarser level's wavelengths are every other one
+                    _, _, r_c, t_c = levels[level - 1]
+                    r_new, t_new = factors.hemispherical(wl[1::2])
+                    r_dh, t_hemi = np.empty(wl.size), np.empty(wl.size)
+                    r_dh[0::2], r_dh[1::2], t_hemi[0::2], t_hemi[1::2] = r_c, r_new, t_c, t_new
+                else:
+                    r_dh, t_hemi = factors.hemispherical(wl)
+                levels[level] = (wl, w / w.sum(axis=1, keepdims=True), r_dh, t_hemi)
+            return levels[level]
+
+        def basis(level):
+            """``(nodes, b)``: ``b[l, j, c] = ŵ_c(λ_l) x`` the ``j``-th function of ``R_dh``."""
+            wl, w, r_dh, _ = level_data(level)
+            if self.fixed:
+                k = np.asarray(kd, np.float64).reshape(C, 1)
+                s = 1.0 if model == "single" else 1.0 / (1.0 - k * r_dh[None, :])
+                return np.zeros(1), (w * s).T[:, None, :]
+            nodes = series_nodes(float(r_dh.min()), float(r_dh.max()), model)
+            return nodes, lagrange_basis(nodes, r_dh)[:, :, None] * w.T[:, None, :]
+
+        def tables(level, t):
+            _, _, _, t_hemi = level_data(level)
+            nodes, b = basis(level)
+            # M[i, o, j, c] = sum_l t[i, l] t[o, l] b[l, j, c]: one matrix product
+            # per (j, c) (BLAS; einsum's path search alone costs more at these sizes)
+            K = b.shape[1]
+            M = np.empty((t.shape[0], t.shape[0], K, C))
+            for j in range(K):
+                for c in range(C):
+                    M[:, :, j, c] = (t * b[:, j, c][None, :]) @ t.T
+            A = ((t * t_hemi[None, :]) @ b.reshape(b.shape[0], -1)).reshape(t.shape[0], K, C)
+            return M, A, nodes
+
+        level, nu = 0, FIRST_NODES
+        cos = axis.cos(nu)
+        t = factors.t(cos, level_data(level)[0])
+        M, A, nodes = tables(level, t)
+        # wavelengths: halve the step until the table (of the single-scattering
+        # term, G = k_d = 1, and of the series at k_d = 1) stops changing
+        while level < MAX_LEVEL:
+            t2 = factors.t(cos, level_data(level + 1)[0])
+            M2, A2, nodes2 = tables(level + 1, t2)
+            same = self._close(M, nodes, M2, nodes2)
+            level, t, M, A, nodes = level + 1, t2, M2, A2, nodes2
+            if same:
+                break
+        # angles: double until the 4-point rule predicts the midpoints (t at the
+        # new nodes only)
+        wl = level_data(level)[0]
+        while nu < MAX_NODES:
+            t = integrated._interleave(t, factors.t(axis.midpoints(nu), wl), 0)
+            M2, A2, nodes2 = tables(level, t)
+            pred = _subdivide(_subdivide(M, 0), 1)
+            same = self._close(pred, nodes, M2, nodes2)
+            nu, M, A, nodes = 2 * nu - 1, M2, A2, nodes2
+            if same:
+                break
+        # texels for the linear lookup (judged on the values at k_d = 1)
+        while nu < 4 * MAX_NODES and (2 * nu - 1) ** 2 * M.shape[2] * C <= MAX_TABLE_FLOATS:
+            m = self._at_one(M, nodes)
+            if max(_linear_error(m, ax) for ax in (0, 1)) <= LINEAR_ABS:
+                break
+            M, A = _subdivide(_subdivide(M, 0), 1), _subdivide(A, 0)
+            nu = 2 * nu - 1
+        self.nodes = nodes
+        self.nu = nu
+        self.values = M                       # (nu, nu, K, C): for tests
+        self.albedo_values = A                # (nu, K, C)
+        K = nodes.size
+        self.nbytes = (M.size + A.size) * 4
+        self._M = mi.Texture2f(mi.TensorXf(np.ascontiguousarray(
+            M.reshape(nu, nu, K * C), np.float32)), use_accel=False, migrate=False,
+            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+        self._A = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(
+            A.reshape(nu, K * C), np.float32)), use_accel=False, migrate=False,
+            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+
+        def constant(value):
+            return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else mi.Float(value)
+        self._nu = constant(nu)
+        self._inv_u = constant(1.0 / nu)
+        self._r = [constant(float(r)) for r in nodes]
+        #: R_dh on the 1 nm grid, for the gradient estimate (not differentiated,
+        #: as in spectral variants)
+        r_dh = level_data(0)[2]
+        self._r_dh = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(r_dh[:, None], np.float32)),
+                                  use_accel=False, migrate=False,
+                                  filter_mode=dr.FilterMode.Linear,
+                                  wrap_mode=dr.WrapMode.Clamp)
+
+    def _at_one(self, M, nodes):
+        """``π f`` at ``k_d = 1`` (the series) and the single term (the ``ℓ_j`` sum
+        to 1), shape ``(nu, nu, 2 C)``; with a fixed ``k_d``: ``M`` (twice)."""
+        g = np.ones(1) if self.fixed else _g(1.0, nodes, self.model)
+        return np.concatenate([np.einsum("iojc,j->ioc", M, g), M.sum(axis=2)], axis=-1)
+
+    def _close(self, M, nodes, M2, nodes2) -> bool:
+        a, b = self._at_one(M, nodes), self._at_one(M2, nodes2)
+        if a.shape != b.shape:
+            return False
+        return float(np.max(np.abs(a - b))) <= LEVEL_ABS
+
+    def _u(self, cos):
+        cos = dr.clip(cos, 0.0, 1.0)
+        sin = dr.safe_sqrt((1.0 - cos) * (1.0 + cos))
+        return (u_texel(cos, sin, 1.0, 1.0, "plain", self._nu) + 0.5) * self._inv_u
+
+    def _weights(self, kd):
+        """``G(k_d, r_j)`` per node ``j``, as ``mi.Spectrum`` (per channel); with a
+        fixed ``k_d``: ``[k_d]`` (the table holds the rest)."""
+        if self.fixed:
+            return [kd]
+        return [_g(kd, r, self.model) for r in self._r]
+
+    def _combine(self, res, kd):
+        mi = _mi()
+        C = self.C
+        out = mi.Spectrum(0.0)
+        for j, g in enumerate(self._weights(kd)):
+            vals = res[j * C:(j + 1) * C]
+            out += g * (mi.Spectrum(*vals) if C > 1 else mi.Spectrum(vals[0]))
+        return out   # not clamped: see integrated.ColourTable.lookup
+
+    def r_dh_at(self, wavelengths, active=True):
+        """``R_dh`` at ``wavelengths`` (``mi.Spectrum``, nm), detached."""
+        mi = _mi()
+        lo, hi = SPECTRAL_RANGE
+        return dr.detach(mi.Spectrum(*[
+            self._r_dh.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)[0]
+            for k in range(dr.size_v(mi.Spectrum))]))
+
+    def series(self, kd, r_dh):
+        """``G(k_d, R_dh)`` of the model (per channel ``k_d``, spectral ``R_dh``)."""
+        return _g(kd, r_dh, self.model)
+
+    def value(self, cos_i, cos_o, kd, active=True):
+        """``π f`` (``mi.Spectrum``): the diffuse term without ``1/π`` and ``cos θ_o``."""
+        mi = _mi()
+        res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
+        return self._combine(res, kd)
+
+    def albedo(self, cos_i, kd, active=True):
+        """``∫ f cos θ_o dω_o``: the diffuse lobe's albedo for light from ``cos_i``."""
+        mi = _mi()
+        return self._combine(self._A.eval(mi.Point1f(self._u(cos_i)), active), kd)
