@@ -210,6 +210,30 @@ def test_one_line_condenses_plugin_tracebacks():
                                  'of type "x": ValueError: thickness: must be >= 0, got -3')
 
 
+def test_one_line_keeps_a_multi_line_exception_message():
+    # the exception's whole message, not only its last line (issue 30: a YAML error's
+    # last line was 'in "<unicode string>", line 3, column 9)', without the file)
+    msg = ('At s.xml (line 3, col 25): failed to instantiate bsdf plugin of type "x": '
+           'Traceback (most recent call last):\n  File "p.py", line 7, in __init__\n'
+           '    self.films = films_from_props(props)\n             ^^^^^^^^^^^^^^^^\n'
+           "MaterialError: material file 'f.yml': not valid\n  in line 2\nsecond line")
+    assert cli.one_line(msg) == ('At s.xml (line 3, col 25): failed to instantiate bsdf plugin of '
+                                 "type \"x\": MaterialError: material file 'f.yml': not valid "
+                                 "in line 2 second line")
+
+
+def test_scene_with_a_malformed_material_file_names_it(tmp_path, capfd):
+    (tmp_path / "film.yml").write_text("DATA:\n  - type: [tabulated nk\n    data: 1\n")
+    bad = tmp_path / "yml.xml"
+    bad.write_text(SCENE.replace(
+        '<bsdf type="conductor"><string name="material" value="Au"/></bsdf>',
+        f'<bsdf type="thinfilm_conductor"><string name="layers" value="{tmp_path / "film.yml"} 100"/></bsdf>'))
+    rc = cli.render_main([str(bad), "-o", str(tmp_path / "yml.exr")])
+    lines = _error_lines(capfd.readouterr().err)
+    assert rc == 2 and len(lines) == 1
+    assert f"{tmp_path / 'film.yml'}" in lines[0] and "line 3, column 9" in lines[0], lines[0]
+
+
 @pytest.mark.parametrize("spp,pixels,cap", [(1, 100, 1 << 22), (7, 100, 1 << 22),
                                             (1000, 1000, 10_000), (64, 1 << 22, 1 << 22)])
 def test_plan_passes(spp, pixels, cap):

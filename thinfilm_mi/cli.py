@@ -123,11 +123,26 @@ def one_line(message: str) -> str:
     marker = "Traceback (most recent call last):"
     if marker in text:
         head, _, tail = text.partition(marker)
-        lines = [l.strip() for l in tail.splitlines() if l.strip()]
-        text = head + (lines[-1] if lines else "")
+        text = head + _exception_text(tail)
     text = re.sub(r"\s*\n\s*-\s*", " ", text)  # Mitsuba's "  - item" lists
     text = " ".join(text.split())
     return text or "unknown error"
+
+
+def _exception_text(traceback_text: str) -> str:
+    """The exception (type and whole message, which may span lines) that ends a
+    formatted Python traceback: what follows its last ``File "..."`` frame line
+    and that frame's source lines (indented by 4 spaces or more)."""
+    lines = traceback_text.splitlines()
+    frames = [i for i, line in enumerate(lines) if line.lstrip().startswith('File "')]
+    start = frames[-1] + 1 if frames else 0
+    while start < len(lines) and (lines[start].startswith("    ") or not lines[start].strip()):
+        start += 1
+    rest = [line.strip() for line in lines[start:] if line.strip()]
+    if rest:
+        return " ".join(rest)
+    tail = [line.strip() for line in lines if line.strip()]
+    return tail[-1] if tail else ""
 
 
 def root_cause(e: BaseException) -> BaseException:
