@@ -26,8 +26,9 @@ What it does, in order:
    ``retarder`` or ``circular`` BSDF, which they reduce to neutral filters),
    found by parsing the file with its ``<include>`` files and parameters, is
    rendered in the polarized variant of the requested one's family
-   (:func:`scene_variant`), said in one line on stderr. Then the variant is set and the thin-film plugins are registered
-   (:func:`thinfilm_mi.register`; registration follows later variant switches).
+   (:func:`scene_variant`), said in one line on stderr. Then the variant is
+   set and the thin-film plugins are registered (:func:`thinfilm_mi.register`;
+   registration follows later variant switches).
 3. The scene is loaded with Mitsuba's scene-graph parser
    (:mod:`mitsuba.parser`: ``parse_file`` -> edit -> ``transform_all`` ->
    ``instantiate``, which is what ``load_file`` does internally). Between
