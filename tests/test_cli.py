@@ -148,6 +148,97 @@ def test_errors_are_one_line(case, scene, tmp_path, capfd):
         assert "no_such_bsdf" in lines[0]
 
 
+# -- scenes that need a polarized variant (issue 30, section 3) ---------------------------
+STOKES = SCENE.replace(
+    '<integrator type="path"><integer name="max_depth" value="3"/></integrator>',
+    '<integrator type="stokes"><integrator type="path"><integer name="max_depth" value="3"/>'
+    '</integrator></integrator>').replace(
+    '<bsdf type="conductor"><string name="material" value="Au"/></bsdf>',
+    '<bsdf type="thinfilm_dielectric"><string name="layers" value="Au 10"/></bsdf>')
+
+
+@pytest.fixture
+def _restore_variant():
+    import mitsuba as mi
+
+    previous = mi.variant()
+    yield
+    if previous is not None:
+        mi.set_variant(previous)
+
+
+@pytest.mark.parametrize("requested", ["llvm_ad_spectral", "llvm_ad_rgb"])
+def test_scene_that_needs_a_polarized_variant_renders_as_written(requested, tmp_path, capfd,
+                                                                 _restore_variant):
+    # The README's `thinfilm-render scenes/*.xml ...` exited 2 on polarized_brewster.xml
+    # (the stokes integrator refuses unpolarized variants). Now it is rendered in the
+    # polarized spectral variant of the requested backend (thin films refuse polarized
+    # RGB), said in one line, and the next scene goes back to the requested variant.
+    (tmp_path / "a_stokes.xml").write_text(STOKES)
+    (tmp_path / "b_plain.xml").write_text(SCENE)
+    out = tmp_path / "out"
+    rc = cli.render_main([str(tmp_path / "a_stokes.xml"), str(tmp_path / "b_plain.xml"),
+                          "--variant", requested, "--spp", "2", "--size", "12x8",
+                          "--out-dir", str(out)])
+    err = capfd.readouterr().err
+    assert rc == 0, err
+    notices = [line for line in err.splitlines() if "polarized" in line]
+    assert notices == [f"thinfilm-render: {tmp_path / 'a_stokes.xml'} uses the 'stokes' integrator, "
+                       "which needs a polarized variant: rendering it in "
+                       f"llvm_ad_spectral_polarized instead of {requested}"], err
+    channels, header = _read_exr(out / "a_stokes.exr")
+    assert header["variant"] == "llvm_ad_spectral_polarized"
+    stokes = [f"S{i}.{c}" for i in range(4) for c in "RGB"]
+    assert set(stokes) <= set(channels), sorted(channels)
+    # the sphere's reflection polarizes: S1 is not zero everywhere (0 without a polarized render)
+    assert np.abs(channels["S1.G"]).max() > 1e-3
+    plain, header = _read_exr(out / "b_plain.exr")
+    assert header["variant"] == requested and sorted(plain) == ["B", "G", "R"]
+
+
+def test_polarization_is_found_through_includes_and_parameters(tmp_path):
+    # Mitsuba's parser reads the file as the loader will: <include>s, $parameters,
+    # <default>s; nothing is instantiated, no variant is set
+    (tmp_path / "inc").mkdir()
+    (tmp_path / "inc" / "integrator.xml").write_text(
+        '<scene version="3.0.0"><integrator type="$integ"/></scene>')
+    included = tmp_path / "included.xml"
+    included.write_text(SCENE.replace(
+        '<integrator type="path"><integer name="max_depth" value="3"/></integrator>',
+        '<default name="integ" value="path"/><include filename="inc/integrator.xml"/>'))
+    polarizer = tmp_path / "polarizer.xml"
+    polarizer.write_text(SCENE.replace('<bsdf type="conductor"><string name="material" value="Au"/>'
+                                       '</bsdf>', '<bsdf type="polarizer"/>'))
+    plain = tmp_path / "plain.xml"
+    plain.write_text(SCENE)
+    assert ("Integrator", "path") in cli.scene_plugins(included)
+    assert cli.scene_variant(included, {}, "llvm_ad_spectral") == ("llvm_ad_spectral", None)
+    variant, notice = cli.scene_variant(included, {"integ": "stokes"}, "llvm_ad_spectral")
+    assert variant == "llvm_ad_spectral_polarized" and "'stokes' integrator" in notice
+    # no thin-film plugin: the mono family keeps its colour
+    variant, notice = cli.scene_variant(polarizer, {}, "llvm_ad_mono")
+    assert variant == "llvm_ad_mono_polarized" and "'polarizer' BSDF" in notice
+    assert cli.scene_variant(polarizer, {}, "llvm_ad_spectral_polarized") == \
+        ("llvm_ad_spectral_polarized", None)
+    assert cli.scene_variant(plain, {}, "llvm_ad_rgb") == ("llvm_ad_rgb", None)
+    # a scene that does not parse keeps the variant; loading it reports the error
+    assert cli.scene_variant(plain, {"nosuch": "1"}, "llvm_ad_spectral") == ("llvm_ad_spectral", None)
+
+
+@pytest.mark.parametrize("variant, thin_films, expected", [
+    ("llvm_ad_spectral", True, "llvm_ad_spectral_polarized"),
+    ("llvm_ad_rgb", True, "llvm_ad_spectral_polarized"),
+    ("scalar_mono", True, "scalar_spectral_polarized"),
+    ("cuda_ad_rgb", False, "cuda_ad_rgb_polarized"),
+    ("llvm_ad_mono_polarized", True, "llvm_ad_mono_polarized"),
+])
+def test_polarized_variant_of_a_family(variant, thin_films, expected):
+    assert cli.polarized_variant(variant, thin_films) == expected
+    if not thin_films:  # not in the build: the spectral one of the same backend
+        assert cli.polarized_variant(variant, False, ["cuda_ad_spectral_polarized"]) == \
+            "cuda_ad_spectral_polarized"
+
+
 def test_files_resolved_next_to_the_scene(tmp_path, monkeypatch, capfd):
     # a mesh named relative to the scene file loads whatever the working directory
     (tmp_path / "scene" / "m").mkdir(parents=True)
@@ -209,6 +300,30 @@ def test_one_line_condenses_plugin_tracebacks():
            'ValueError: thickness: must be >= 0, got -3')
     assert cli.one_line(msg) == ('At s.xml (line 12, col 25): failed to instantiate bsdf plugin '
                                  'of type "x": ValueError: thickness: must be >= 0, got -3')
+
+
+def test_one_line_keeps_a_multi_line_exception_message():
+    # the exception's whole message, not only its last line (issue 30: a YAML error's
+    # last line was 'in "<unicode string>", line 3, column 9)', without the file)
+    msg = ('At s.xml (line 3, col 25): failed to instantiate bsdf plugin of type "x": '
+           'Traceback (most recent call last):\n  File "p.py", line 7, in __init__\n'
+           '    self.films = films_from_props(props)\n             ^^^^^^^^^^^^^^^^\n'
+           "MaterialError: material file 'f.yml': not valid\n  in line 2\nsecond line")
+    assert cli.one_line(msg) == ('At s.xml (line 3, col 25): failed to instantiate bsdf plugin of '
+                                 "type \"x\": MaterialError: material file 'f.yml': not valid "
+                                 "in line 2 second line")
+
+
+def test_scene_with_a_malformed_material_file_names_it(tmp_path, capfd):
+    (tmp_path / "film.yml").write_text("DATA:\n  - type: [tabulated nk\n    data: 1\n")
+    bad = tmp_path / "yml.xml"
+    bad.write_text(SCENE.replace(
+        '<bsdf type="conductor"><string name="material" value="Au"/></bsdf>',
+        f'<bsdf type="thinfilm_conductor"><string name="layers" value="{tmp_path / "film.yml"} 100"/></bsdf>'))
+    rc = cli.render_main([str(bad), "-o", str(tmp_path / "yml.exr")])
+    lines = _error_lines(capfd.readouterr().err)
+    assert rc == 2 and len(lines) == 1
+    assert f"{tmp_path / 'film.yml'}" in lines[0] and "line 3, column 9" in lines[0], lines[0]
 
 
 @pytest.mark.parametrize("spp,pixels,cap", [(1, 100, 1 << 22), (7, 100, 1 << 22),

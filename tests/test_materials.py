@@ -321,6 +321,34 @@ def test_bad_csv_files_name_the_problem(tmp_path, text, words):
     assert "film.csv" in str(err.value)
 
 
+@pytest.mark.parametrize("text, where", [
+    # an unclosed flow list: PyYAML reports where it gave up and where the list opened
+    ("DATA:\n  - type: [tabulated nk\n    data: |\n      0.5 1.5 0\n",
+     "at line 3, column 9: did not find expected ',' or ']' (while parsing a flow sequence at line 2, column 11)"),
+    ("DATA:\n  - type: tabulated nk\n\tdata: 1\n",
+     "at line 3, column 1: found a tab character that violates indentation"),
+])
+def test_malformed_yaml_names_the_file_and_the_line(tmp_path, text, where):
+    # issue 30: PyYAML's own message says 'in "<unicode string>", line 2, column 6'
+    p = tmp_path / "film.yml"
+    p.write_text(text)
+    with pytest.raises(MaterialError) as err:
+        M.resolve(str(p))
+    msg = str(err.value)
+    assert str(p) in msg and "not valid YAML " + where in msg, msg
+    assert "unicode string" not in msg and "\n" not in msg
+    # the same through a stack's layers (how scenes name a file)
+    with pytest.raises(tf.ThinFilmError, match="film.yml.*line 3"):
+        tf.Stack(layers=f"{p} 100", substrate=1.5)
+
+
+def test_binary_yaml_file_is_named(tmp_path):
+    p = tmp_path / "film.yml"
+    p.write_bytes(b"\xff\xfe\x00DATA")
+    with pytest.raises(MaterialError, match="film.yml.*not UTF-8 text"):
+        M.resolve(str(p))
+
+
 def test_missing_file_is_named(tmp_path):
     with pytest.raises(MaterialError, match="nope.csv.*no such file"):
         M.resolve(str(tmp_path / "nope.csv"))

@@ -6,10 +6,12 @@ later are covered without editing this file. Each EXR must read back with the
 requested size, RGB channels, finite pixels that are not all black and have
 no negative luminance, and its metadata (scene path, variant, spp, seed, no parameters).
 Scenes that use Mitsuba's ``stokes`` integrator (which refuses unpolarized variants) are
-rendered in a second subprocess in ``llvm_ad_spectral_polarized`` and must also carry the
-S0..S3 channels, with S0 equal to the RGB image. Every other scene is also rendered
-in ``llvm_ad_rgb`` (the project requires that every scene renders there), by a third
-subprocess for all of them at once, with the same checks. The
+rendered by the same command in ``llvm_ad_spectral_polarized`` (the CLI switches to the
+polarized variant of the requested family and says so) and must also carry the S0..S3
+channels, with S0 equal to the RGB image. Every scene is also rendered with
+``--variant llvm_ad_rgb`` (the project requires that every scene renders there), by a
+second subprocess for all of them at once, with the same checks; there too the
+``stokes`` scenes go to ``llvm_ad_spectral_polarized`` (thin films refuse polarized RGB). The
 error paths of the CLI (bad -D, missing file, unknown plugin) are in
 tests/test_cli.py.
 """
@@ -40,8 +42,8 @@ def needs_polarized(scene: Path) -> bool:
     return 'type="stokes"' in scene.read_text()
 
 
-def variant_of(scene: Path) -> str:
-    return POLARIZED_VARIANT if needs_polarized(scene) else cli.DEFAULT_VARIANT
+def variant_of(scene: Path, requested: str = cli.DEFAULT_VARIANT) -> str:
+    return POLARIZED_VARIANT if needs_polarized(scene) else requested
 
 
 def render_all(scenes: list[Path], variant: str, out: Path) -> str:
@@ -59,23 +61,15 @@ def render_all(scenes: list[Path], variant: str, out: Path) -> str:
 def rendered(tmp_path_factory):
     """Render every scene once; returns (output folder, the CLI's stderr)."""
     out = tmp_path_factory.mktemp("scenes")
-    err = ""
-    for variant in (cli.DEFAULT_VARIANT, POLARIZED_VARIANT):
-        scenes = [p for p in SCENES if variant_of(p) == variant]
-        if scenes:
-            err += render_all(scenes, variant, out)
-    return out, err
-
-
-RGB_SCENES = [p for p in SCENES if not needs_polarized(p)]
+    return out, render_all(SCENES, cli.DEFAULT_VARIANT, out)
 
 
 @pytest.fixture(scope="module")
 def rendered_rgb(tmp_path_factory):
-    """Every scene that does not need a polarized variant, rendered in llvm_ad_rgb by
-    one CLI subprocess; returns (output folder, the CLI's stderr)."""
+    """Every scene rendered with --variant llvm_ad_rgb by one CLI subprocess; returns
+    (output folder, the CLI's stderr)."""
     out = tmp_path_factory.mktemp("scenes_rgb")
-    return out, render_all(RGB_SCENES, RGB_VARIANT, out)
+    return out, render_all(SCENES, RGB_VARIANT, out)
 
 
 def check_image(scene: Path, exr: Path, variant: str, err: str, stokes: list[str]) -> np.ndarray:
@@ -111,13 +105,13 @@ def test_scenes_exist():
     assert any(n.startswith("fig10") for n in names)
 
 
-@pytest.mark.parametrize("scene", SCENES, ids=[p.stem for p in SCENES])
-def test_scene_renders(scene, rendered):
-    out, err = rendered
+def _check_scene(scene: Path, out: Path, err: str, requested: str) -> None:
     exr = out / f"{scene.stem}.exr"
     stokes = [f"{s}.{c}" for s in STOKES for c in "RGB"] if needs_polarized(scene) else []
-    image = check_image(scene, exr, variant_of(scene), err, stokes)
+    image = check_image(scene, exr, variant_of(scene, requested), err, stokes)
     if stokes:
+        assert (f"{scene} uses the 'stokes' integrator, which needs a polarized variant: "
+                f"rendering it in {POLARIZED_VARIANT} instead of {requested}") in err
         channels, _ = read_exr(exr)
         S = np.stack([np.stack([channels[f"{s}.{c}"] for c in "RGB"], -1) for s in STOKES])
         assert np.all(np.isfinite(S))
@@ -127,10 +121,14 @@ def test_scene_renders(scene, rendered):
         assert np.abs(S[1:]).max() > 0   # the stokes channels are filled
 
 
-@pytest.mark.parametrize("scene", RGB_SCENES, ids=[p.stem for p in RGB_SCENES])
+@pytest.mark.parametrize("scene", SCENES, ids=[p.stem for p in SCENES])
+def test_scene_renders(scene, rendered):
+    _check_scene(scene, *rendered, cli.DEFAULT_VARIANT)
+
+
+@pytest.mark.parametrize("scene", SCENES, ids=[p.stem for p in SCENES])
 def test_scene_renders_in_rgb(scene, rendered_rgb):
-    out, err = rendered_rgb
-    check_image(scene, out / f"{scene.stem}.exr", RGB_VARIANT, err, [])
+    _check_scene(scene, *rendered_rgb, RGB_VARIANT)
 
 
 def test_several_scenes_need_out_dir_not_o(tmp_path):

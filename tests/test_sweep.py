@@ -319,3 +319,17 @@ def test_cli_sweep_on_a_running_cluster(scene, tmp_path, client, capfd):
                           "--out-dir", str(out), "--timeout", str(TIMEOUT)])
     assert rc == 0 and "3 rendered, 0 already done" in capfd.readouterr().err
     assert exr.read_exr(out / _manifest(out)[0]["exr"])[1]["spp"] == 3
+
+
+def test_grid_that_needs_a_polarized_variant_gets_one(tmp_path):
+    # issue 30: as thinfilm-render, for any -D combination of the grid (a worker
+    # process holds one variant, and a polarized variant renders the others too)
+    path = tmp_path / "pol.xml"
+    path.write_text(SCENE.replace('<integrator type="path">', '<integrator type="$integ">')
+                    .replace('<default name="material"', '<default name="integ" value="path"/>'
+                             '<default name="material"'))
+    grid = sweeps.build_frames(sweeps._parse_axes({"integ": "path,stokes"}, "define"))
+    variant, notice = sweeps._grid_variant(path, grid, "llvm_ad_spectral")
+    assert variant == "llvm_ad_spectral_polarized" and "'stokes' integrator" in notice
+    plain = sweeps.build_frames(sweeps._parse_axes({"integ": "path"}, "define"))
+    assert sweeps._grid_variant(path, plain, "llvm_ad_spectral") == ("llvm_ad_spectral", None)

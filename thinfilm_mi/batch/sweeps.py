@@ -53,6 +53,12 @@ exist. After Ctrl-C (or a ``timeout``) the manifest holds the frames finished so
 far, the worker processes are stopped (an external cluster is waited for until
 its running frames end) and temporary files are removed.
 
+A scene that needs a polarized variant (a ``stokes`` integrator, a ``polarizer``:
+:func:`thinfilm_mi.cli.scene_variant`, for any of the grid's ``-D`` combinations)
+is rendered in the polarized variant of the requested one's family, as
+``thinfilm-render`` does; it is said on the progress stream and ``sweep.json``
+records it.
+
 ``cuda_*`` variants: the local cluster starts one worker per visible GPU, each
 with its own ``CUDA_VISIBLE_DEVICES`` (:func:`gpu_worker_envs`); on an external
 cluster start one worker per GPU the same way (or with dask-cuda).
@@ -819,6 +825,20 @@ def _connect(workers: int | None, scheduler: str | None, client, variant: str):
         raise
 
 
+def _grid_variant(scene: Path, frames: Sequence[Frame], variant: str) -> tuple[str, str | None]:
+    """:func:`~thinfilm_mi.cli.scene_variant` over the grid's ``-D`` combinations: the
+    first that needs a polarized variant sets it for every frame (a polarized variant
+    renders the others too; a worker process holds one variant)."""
+    seen: set = set()
+    for frame in frames:
+        if frame.defines not in seen:
+            seen.add(frame.defines)
+            chosen, notice = cli.scene_variant(scene, dict(frame.defines), variant)
+            if notice:
+                return chosen, notice
+    return variant, None
+
+
 def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] | None = None,
           parameters: Mapping[str, Any] | Sequence[str] | None = None,
           out_dir: str | os.PathLike = DEFAULT_OUT_DIR, *,
@@ -881,6 +901,9 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
         raise UsageError(f"--variant {variant!r}: not a Mitsuba variant name (e.g. {DEFAULT_VARIANT})")
     axes = _parse_axes(defines, "define") + _parse_axes(parameters, "traverse")
     frames = build_frames(axes)
+    variant, notice = _grid_variant(scene_file, frames, variant)
+    if notice:
+        log(notice)
     names = [a.name for a in axes]
     out = Path(out_dir).resolve()
     (out / FRAMES_DIR).mkdir(parents=True, exist_ok=True)
@@ -1056,7 +1079,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--spp", type=int, metavar="N", help="samples per pixel")
     parser.add_argument("--size", metavar="WxH", help="film size in pixels, e.g. 320x240")
     parser.add_argument("--variant", default=DEFAULT_VARIANT,
-                        help=f"Mitsuba variant (default {DEFAULT_VARIANT})")
+                        help=f"Mitsuba variant (default {DEFAULT_VARIANT}); a scene that needs a "
+                             "polarized one is rendered in the polarized variant of its family")
     parser.add_argument("--seed", type=int, default=0, help="random seed of every frame (default 0)")
     parser.add_argument("--sensor", type=int, default=0, metavar="INDEX",
                         help="which sensor to render (default 0)")

@@ -20,8 +20,15 @@ What it does, in order:
    ``mitsuba.load_file(path, name=value)``); a name the scene does not
    declare is an error, as in Mitsuba.
 2. For an ``llvm_*`` variant, :func:`thinfilm_mi.require_llvm` checks that
-   Dr.Jit loaded an LLVM that can compile our kernels; then the variant is set
-   and the thin-film plugins are registered (:func:`thinfilm_mi.register`).
+   Dr.Jit loaded an LLVM that can compile our kernels. A scene that needs a
+   polarized variant (:data:`POLARIZED_PLUGINS`: Mitsuba's ``stokes``
+   integrator, which unpolarized variants refuse, or a ``polarizer``,
+   ``retarder`` or ``circular`` BSDF, which they reduce to neutral filters),
+   found by parsing the file with its ``<include>`` files and parameters, is
+   rendered in the polarized variant of the requested one's family
+   (:func:`scene_variant`), said in one line on stderr. Then the variant is
+   set and the thin-film plugins are registered (:func:`thinfilm_mi.register`;
+   registration follows later variant switches).
 3. The scene is loaded with Mitsuba's scene-graph parser
    (:mod:`mitsuba.parser`: ``parse_file`` -> edit -> ``transform_all`` ->
    ``instantiate``, which is what ``load_file`` does internally). Between
@@ -52,6 +59,7 @@ rendered; the exit status is then the highest of the failures'.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import inspect
 import math
 import os
@@ -79,6 +87,7 @@ MIN_PASSES = 8
 
 __all__ = [
     "render_main", "run", "add_render_arguments", "setup_llvm_only", "setup_variant", "build_parser", "render_file", "load_scene",
+    "scene_plugins", "scene_variant", "polarized_variant", "POLARIZED_PLUGINS",
     "parse_defines", "parse_size", "plan_passes", "plan_outputs", "output_attributes", "RenderResult", "CLIError",
 ]
 
@@ -123,11 +132,26 @@ def one_line(message: str) -> str:
     marker = "Traceback (most recent call last):"
     if marker in text:
         head, _, tail = text.partition(marker)
-        lines = [l.strip() for l in tail.splitlines() if l.strip()]
-        text = head + (lines[-1] if lines else "")
+        text = head + _exception_text(tail)
     text = re.sub(r"\s*\n\s*-\s*", " ", text)  # Mitsuba's "  - item" lists
     text = " ".join(text.split())
     return text or "unknown error"
+
+
+def _exception_text(traceback_text: str) -> str:
+    """The exception (type and whole message, which may span lines) that ends a
+    formatted Python traceback: what follows its last ``File "..."`` frame line
+    and that frame's source lines (indented by 4 spaces or more)."""
+    lines = traceback_text.splitlines()
+    frames = [i for i, line in enumerate(lines) if line.lstrip().startswith('File "')]
+    start = frames[-1] + 1 if frames else 0
+    while start < len(lines) and (lines[start].startswith("    ") or not lines[start].strip()):
+        start += 1
+    rest = [line.strip() for line in lines[start:] if line.strip()]
+    if rest:
+        return " ".join(rest)
+    tail = [line.strip() for line in lines if line.strip()]
+    return tail[-1] if tail else ""
 
 
 def root_cause(e: BaseException) -> BaseException:
@@ -185,7 +209,9 @@ def add_render_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentPa
                         help="samples per pixel (default: the scene's sampler sample_count)")
     parser.add_argument("--size", metavar="WxH", help="film size in pixels, e.g. 640x480")
     parser.add_argument("--variant", default=DEFAULT_VARIANT,
-                        help=f"Mitsuba variant (default {DEFAULT_VARIANT})")
+                        help=f"Mitsuba variant (default {DEFAULT_VARIANT}); a scene that needs a "
+                             "polarized one (a stokes integrator, a polarizer) is rendered in the "
+                             "polarized variant of its family, said on stderr")
     parser.add_argument("-D", dest="defines", action="append", default=[], metavar="name=value",
                         help="set the scene parameter $name (repeatable)")
     parser.add_argument("--seed", type=int, default=0, help="base random seed (default 0)")
@@ -309,6 +335,97 @@ def _apply_overrides(state, size: tuple[int, int] | None, spp: int | None,
             node.props["sample_count"] = int(spp)
 
 
+@contextlib.contextmanager
+def _files_beside(path: Path):
+    """Like ``mi.load_file``: files named in the scene (includes, meshes, textures,
+    data) are looked up next to the scene file first; the search path is restored after."""
+    import mitsuba as mi
+
+    resolver = mi.file_resolver()
+    saved = [str(p) for p in resolver]
+    resolver.prepend(str(path.resolve().parent))
+    try:
+        yield
+    finally:
+        resolver.clear()
+        for p in saved:
+            resolver.append(p)
+
+
+#: Mitsuba plugins that act on polarization only, by (object type, plugin name): the
+#: ``stokes`` integrator refuses unpolarized variants, and in them the polarizers and
+#: retarders are neutral filters (what they do to the image is lost)
+POLARIZED_PLUGINS = {
+    ("Integrator", "stokes"): "the 'stokes' integrator",
+    ("BSDF", "polarizer"): "a 'polarizer' BSDF",
+    ("BSDF", "retarder"): "a 'retarder' BSDF",
+    ("BSDF", "circular"): "a 'circular' polarizer BSDF",
+}
+
+
+def scene_plugins(path: str | os.PathLike, params: Mapping[str, str] | None = None,
+                  variant: str = DEFAULT_VARIANT) -> list[tuple[str, str]]:
+    """``(object type, plugin name)`` of every object a scene file declares, its
+    ``<include>`` files and ``$name`` parameters resolved by Mitsuba's own parser
+    (nothing is instantiated and no variant needs to be set). Raises what the
+    parser raises for a malformed scene."""
+    import mitsuba as mi
+
+    path = Path(path)
+    with _files_beside(path):
+        state = mi.parser.parse_file(mi.parser.ParserConfig(variant), str(path),
+                                     **dict(params or {}))
+    return [(node.type.name, node.props.plugin_name()) for node in state.nodes]
+
+
+def polarized_variant(variant: str, thin_films: bool = True,
+                      available: Sequence[str] | None = None) -> str:
+    """The polarized variant of ``variant``'s family: ``X_spectral`` ->
+    ``X_spectral_polarized``; ``X_rgb``/``X_mono`` -> ``X_spectral_polarized``
+    when the scene has thin-film plugins (they refuse polarized RGB/mono
+    variants: a Mueller matrix integrated over wavelengths is not one built from
+    integrated amplitudes), else ``X_rgb_polarized``/``X_mono_polarized`` where
+    ``available`` has it. A polarized variant is returned unchanged."""
+    m = re.fullmatch(r"(.+?)_(spectral|rgb|mono)(_polarized)?", variant)
+    if m is None or m.group(3):
+        return variant
+    own = f"{m.group(1)}_{m.group(2)}_polarized"
+    if not thin_films and (available is None or own in available):
+        return own
+    return f"{m.group(1)}_spectral_polarized"
+
+
+def scene_variant(path: str | os.PathLike, params: Mapping[str, str] | None,
+                  variant: str) -> tuple[str, str | None]:
+    """The variant to render the scene file ``path`` in, and a one-line notice when
+    it is not ``variant``: the polarized variant of its family
+    (:func:`polarized_variant`) when the scene holds a plugin of
+    :data:`POLARIZED_PLUGINS` and ``variant`` is not polarized. A scene that does
+    not parse keeps ``variant`` (loading it then reports the error)."""
+    import mitsuba as mi
+
+    from .registry import PLUGINS, TEXTURES
+
+    available = list(mi.variants())
+    if variant not in available or variant.endswith("_polarized"):
+        return variant, None
+    try:
+        plugins = scene_plugins(path, params, variant)
+    except Exception:  # noqa: BLE001 - load_scene reports it
+        return variant, None
+    needs = [POLARIZED_PLUGINS[p] for p in plugins if p in POLARIZED_PLUGINS]
+    if not needs:
+        return variant, None
+    thin_films = any(name in PLUGINS or name in TEXTURES for _, name in plugins)
+    target = polarized_variant(variant, thin_films, available)
+    if target not in available:
+        raise UsageError(f"{path} uses {needs[0]}, which needs a polarized variant, and "
+                         f"{target} is not available in this Mitsuba build "
+                         f"(choose one of {', '.join(v for v in available if 'polarized' in v)})")
+    return target, (f"{path} uses {needs[0]}, which needs a polarized variant: "
+                    f"rendering it in {target} instead of {variant}")
+
+
 def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
                size: tuple[int, int] | None = None, spp: int | None = None,
                variant: str | None = None, log: Callable[[str], None] | None = None):
@@ -326,24 +443,16 @@ def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
     # no nested mi.load_dict (see thinfilm_mi.render.textures), so they are safe beside
     # C++ plugins resolving files on other loader threads.
     config = mi.parser.ParserConfig(variant or mi.variant())
-    # Like mi.load_file: files named in the scene (meshes, textures, data) are
-    # looked up next to the scene file first; the search path is restored after.
-    resolver = mi.file_resolver()
-    saved = [str(p) for p in resolver]
-    resolver.prepend(str(path.resolve().parent))
     try:
-        state = mi.parser.parse_file(config, str(path), **dict(params or {}))
-        _apply_overrides(state, size, spp, log)
-        mi.parser.transform_all(config, state)
-        scene = mi.parser.instantiate(config, state)
+        with _files_beside(path):
+            state = mi.parser.parse_file(config, str(path), **dict(params or {}))
+            _apply_overrides(state, size, spp, log)
+            mi.parser.transform_all(config, state)
+            scene = mi.parser.instantiate(config, state)
     except CLIError:
         raise
     except Exception as e:  # Mitsuba reports parse, parameter and plugin errors as exceptions
         raise UsageError(f"cannot load scene {path}: {one_line(e)}") from e
-    finally:
-        resolver.clear()
-        for p in saved:
-            resolver.append(p)
     if not isinstance(scene, mi.Scene):
         raise UsageError(f"{path} describes a {type(scene).__name__}, not a <scene>")
     return scene
@@ -509,6 +618,11 @@ def render_file(scene_path: str | os.PathLike, output: str | os.PathLike | None 
         if verbose:
             print(f"{PROG}: {msg}", file=sys.stderr)
 
+    if variant.startswith("llvm_"):
+        setup_llvm_only()
+    variant, notice = scene_variant(scene_file, params, variant)
+    if notice:
+        print(f"{PROG}: {notice}", file=sys.stderr)
     setup_variant(variant)
     import mitsuba as mi
 

@@ -308,14 +308,36 @@ class DispersiveMaterial(Material):
 # ---------------------------------------------------------------------------
 # refractiveindex.info YAML format
 # ---------------------------------------------------------------------------
-def _yaml_load(text: str, where: str):
+def _yaml_load(path: Path, where: str):
+    """The YAML document in ``path``. A malformed file raises :class:`MaterialError`
+    naming ``where``, the file and the line and column of the fault (PyYAML's own
+    message says only ``in "<unicode string>"``)."""
     import yaml
 
     loader = getattr(yaml, "CBaseLoader", yaml.BaseLoader)
+    named = where if str(path) in where else f"{where} ({str(path)!r})"
     try:
-        return yaml.load(text, Loader=loader)
+        return yaml.load(path.read_text(encoding="utf-8"), Loader=loader)
+    except UnicodeDecodeError as exc:
+        raise MaterialError(f"{named}: not UTF-8 text ({exc})") from None
     except yaml.YAMLError as exc:
-        raise MaterialError(f"{where}: not valid YAML ({exc})") from None
+        raise MaterialError(f"{named}: not valid YAML{_yaml_fault(exc)}") from None
+
+
+def _yaml_fault(exc) -> str:
+    """`` at line L, column C: PROBLEM (CONTEXT at line L', column C')`` from a PyYAML
+    error (lines and columns counted from 1), without its ``in "<unicode string>"``."""
+    def at(mark) -> str:
+        return f"line {mark.line + 1}, column {mark.column + 1}"
+
+    mark, problem = getattr(exc, "problem_mark", None), getattr(exc, "problem", None)
+    if mark is None or not problem:
+        return ": " + " ".join(str(exc).replace('in "<unicode string>", ', "at ").split())
+    text = f" at {at(mark)}: {problem}"
+    context, context_mark = getattr(exc, "context", None), getattr(exc, "context_mark", None)
+    if context:
+        text += f" ({context}" + (f" at {at(context_mark)}" if context_mark is not None else "") + ")"
+    return text
 
 
 def _strip_html(text: str) -> str:
@@ -416,7 +438,7 @@ def _load_builtin(name: str) -> Material:
     if "constant" in entry:
         return ConstantMaterial(complex(entry["constant"]), name=name, reference=entry["reference"])
     path = _DATA_DIR / entry["file"]
-    doc = _yaml_load(path.read_text(encoding="utf-8"), str(path))
+    doc = _yaml_load(path, f"material {name!r}")
     mat = _material_from_rii(doc, name, f"material {name!r} ({entry['dataset']})",
                              source=f"refractiveindex.info {entry['dataset']} (shipped extract)")
     mat.dataset = entry["dataset"]
@@ -457,7 +479,7 @@ def _ri_catalog() -> dict[tuple[str, str, str], tuple[str, str]]:
     global _catalog_cache
     if _catalog_cache is None:
         db = _ri_database_path()
-        doc = _yaml_load((db / "catalog-nk.yml").read_text(encoding="utf-8"), "refractiveindex.info catalog")
+        doc = _yaml_load(db / "catalog-nk.yml", "refractiveindex.info catalog")
         out = {}
         for shelf in doc:
             if "SHELF" not in shelf:
@@ -496,7 +518,7 @@ def _load_ri_page(spec: str) -> Material:
         key = found[0]
     rel, title = catalog[key]
     path = _ri_database_path() / "data" / rel
-    doc = _yaml_load(path.read_text(encoding="utf-8"), f"material {spec!r} ({path})")
+    doc = _yaml_load(path, f"material {spec!r}")
     ident = "/".join(key)
     mat = _material_from_rii(doc, ident, f"material {ident!r}",
                              source=f"refractiveindex.info {ident} (database {ri_database_version()})")
@@ -699,7 +721,7 @@ def _load_file(path: Path) -> Material:
     if not path.is_file():
         raise MaterialError(f"{where}: no such file")
     if name.endswith((".yml", ".yaml")):
-        doc = _yaml_load(path.read_text(encoding="utf-8"), where)
+        doc = _yaml_load(path, where)
         return _material_from_rii(doc, path.stem, where, source=str(path))
     return _load_csv(path, where)
 

@@ -17,6 +17,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import drjit as dr
 import numpy as np
@@ -98,15 +99,69 @@ def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
     return np.broadcast_to(np.array(value[0], dtype=np.float64).ravel(), (n,)).copy()
 
 
+#: Mitsuba's ``luminance()`` of a linear sRGB colour (the Y row of its sRGB-to-XYZ matrix)
+LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
+
+
+def _bitmap(tex):
+    """``(texels, raw)`` of a ``bitmap`` texture (texels as stored: H x W x C,
+    float32), or ``None`` for any other texture."""
+    if not tex.class_name().startswith("BitmapTextureImpl"):
+        return None
+    try:
+        data = _mi().traverse(tex)["data"]
+    except Exception:  # noqa: BLE001 - not the bitmap we know
+        return None
+    arr = np.asarray(np.array(data), dtype=np.float32)
+    if arr.ndim != 3:
+        return None
+    raw = re.search(r"\braw = (\d)", str(tex))
+    return arr, (None if raw is None else raw.group(1) == "1")
+
+
+def _texel_range(tex, mono: bool):
+    """The range of a ``bitmap`` texture's values read from its texels, exact for
+    any ``to_uv``, filter or wrap mode (what it returns is a convex combination of
+    texels: bilinear or nearest interpolation), or ``None`` where the texels are not
+    the values: another texture, or RGB in spectral variants (stored as coefficients
+    of Mitsuba's sRGB upsampling model unless ``raw``; a raw one has no spectrum)."""
+    mi = _mi()
+    found = _bitmap(tex)
+    if found is None:
+        return None
+    texels, raw = found
+    if texels.shape[2] == 3:
+        if mi.is_spectral and not (mono and raw):
+            return None
+        if mono or mi.is_monochromatic:   # eval_1, and mono variants, read luminance
+            texels = texels @ LUMINANCE.astype(np.float32)
+    elif texels.shape[2] != 1:
+        return None
+    if not texels.size:
+        return None
+    if np.any(np.isnan(texels)):
+        return math.nan, math.nan
+    return float(np.min(texels)), float(np.max(texels))
+
+
+def _centred(res: int, at_least: int) -> int:
+    """A number of UV samples per axis that hits every texel centre of ``res``
+    texels: ``res`` times the smallest odd factor reaching ``at_least``."""
+    k = max(1, -(-at_least // res))
+    return res * (k + 1 - k % 2)
+
+
 def texture_range(tex, mono: bool = False):
     """The smallest and largest value of a texture at load time (NaN where some
     value is NaN), or ``None`` if it cannot be evaluated without a shape (e.g.
     ``mesh_attribute``).
 
-    Evaluated on Mitsuba's spectral grid (360-830 nm, 1 nm) and, for a spatially
-    varying texture, at every texel centre of its resolution (at least a 64 x 64
-    UV grid; 16 x 16 and a 10 nm grid in scalar variants): exact for bitmaps
-    (bilinear interpolation is a convex combination of texels) and uniform or
+    A ``bitmap`` is read from its texels (exact; :func:`_texel_range`) except for
+    RGB in spectral variants. Others are evaluated on Mitsuba's spectral grid
+    (360-830 nm, 1 nm) and, for a spatially varying texture, at every texel
+    centre of its resolution (an odd multiple of it, at least 64 per axis, at
+    most 4096; 16 x 16 and a 10 nm grid in scalar variants): exact for a
+    spectrally upsampled RGB bitmap with the identity ``to_uv`` and for uniform or
     tabulated spectra, a dense sample for procedural textures. ``mono``:
     evaluate ``eval_1`` (as a scale texture is read) instead of ``eval``.
     """
@@ -114,11 +169,14 @@ def texture_range(tex, mono: bool = False):
     if tex.class_name() == "UniformSpectrum":
         v = scalar(tex.mean())
         return v, v
+    texels = _texel_range(tex, mono)
+    if texels is not None:
+        return texels
     jit = dr.is_jit_v(mi.Float)
     wl = GRID if jit else GRID[::10]
     if tex.is_spatially_varying():
         res = [int(r) for r in tex.resolution()]
-        nu, nv = (max(res[0], 64), max(res[1], 64)) if jit else (16, 16)
+        nu, nv = (_centred(res[0], 64), _centred(res[1], 64)) if jit else (16, 16)
         nu, nv = min(nu, 4096), min(nv, 4096)
         u, v = np.meshgrid((np.arange(nu) + 0.5) / nu, (np.arange(nv) + 0.5) / nv)
         u, v = u.ravel(), v.ravel()
@@ -165,6 +223,11 @@ def check_texture_range(tex, what: str, lo: float = -math.inf, hi: float = math.
     with ``strict``)."""
     rng = texture_range(tex, mono)
     if rng is None:
+        found = _bitmap(tex)
+        if found is not None and not mono and found[0].shape[2] == 3 and _mi().is_spectral:
+            raise ThinFilmError(f"{what}: an RGB bitmap with raw=true has no spectrum in the "
+                                f"{_mi().variant()!r} variant (Mitsuba refuses to evaluate it "
+                                "when rendering); drop raw, or give a one-channel bitmap")
         return
     vmin, vmax = rng
     bad = (not (math.isfinite(vmin) and math.isfinite(vmax)) or vmin < lo or vmax > hi
