@@ -32,7 +32,7 @@ import pytest
 pytest.importorskip("OpenEXR")
 
 from thinfilm_mi import Stack  # noqa: E402
-from thinfilm_mi.exr import read_exr  # noqa: E402
+from thinfilm_mi.batch.exr import read_exr  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 README = REPO / "README.md"

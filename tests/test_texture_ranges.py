@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
-from thinfilm_mi.textures import LUMINANCE, texture_range
+from thinfilm_mi.render.textures import LUMINANCE, texture_range
 
 SPECTRAL = "llvm_ad_spectral"
 

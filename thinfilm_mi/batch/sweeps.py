@@ -54,7 +54,7 @@ far, the worker processes are stopped (an external cluster is waited for until
 its running frames end) and temporary files are removed.
 
 A scene that needs a polarized variant (a ``stokes`` integrator, a ``polarizer``:
-:func:`thinfilm_mi.cli.scene_variant`, for any of the grid's ``-D`` combinations)
+:func:`thinfilm_mi.cli.render.scene_variant`, for any of the grid's ``-D`` combinations)
 is rendered in the polarized variant of the requested one's family, as
 ``thinfilm-render`` does; it is said on the progress stream and ``sweep.json``
 records it.
@@ -826,7 +826,7 @@ def _connect(workers: int | None, scheduler: str | None, client, variant: str):
 
 
 def _grid_variant(scene: Path, frames: Sequence[Frame], variant: str) -> tuple[str, str | None]:
-    """:func:`~thinfilm_mi.cli.scene_variant` over the grid's ``-D`` combinations: the
+    """:func:`~thinfilm_mi.cli.render.scene_variant` over the grid's ``-D`` combinations: the
     first that needs a polarized variant sets it for every frame (a polarized variant
     renders the others too; a worker process holds one variant)."""
     seen: set = set()

@@ -404,7 +404,7 @@ def scene_variant(path: str | os.PathLike, params: Mapping[str, str] | None,
     not parse keeps ``variant`` (loading it then reports the error)."""
     import mitsuba as mi
 
-    from .registry import PLUGINS, TEXTURES
+    from thinfilm_mi.render.registry import PLUGINS, TEXTURES
 
     available = list(mi.variants())
     if variant not in available or variant.endswith("_polarized"):
