@@ -64,7 +64,7 @@ import mitsuba as mi
 import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.tabulate.colour import trapezoid_weights, xyz_to_srgb_matrix
+from thinfilm_mi.colour.cie import colour_weights, trapezoid_weights, xyz_to_srgb_matrix
 
 NAME = "thinfilm_blackbody"
 
@@ -183,7 +183,6 @@ class ThinFilmBlackbody(mi.Texture):
                wavelength_range: tuple[float, float] = (CIE_MIN, CIE_MAX)) -> np.ndarray:
         """CIE XYZ of the radiance with Mitsuba's normalisation: what a spectral
         render with an RGB film converts it to (before ``xyz_to_srgb``)."""
-        from thinfilm_mi.tabulate.exact import colour_weights
 
         W = colour_weights()                  # 1 nm, 360-830 nm
         lam, cmf = W[:, 0], W[:, 1:4].T

@@ -26,6 +26,7 @@ from dataclasses import replace
 import drjit as dr
 import numpy as np
 
+from thinfilm_mi.colour import cie
 from thinfilm_mi.tabulate import colour as integrated
 from thinfilm_mi.tabulate import exact as _tables
 from thinfilm_mi.errors import ThinFilmError
@@ -46,7 +47,7 @@ def colour_channels() -> str | None:
 def channel_mean_texture(wavelengths: np.ndarray, values: np.ndarray, channels: str):
     """A constant texture holding the colour-weighted means of ``values`` (the
     index of a dataset on ``wavelengths``): per sRGB channel, or Y in mono."""
-    w = integrated.channel_weights(channels, wavelengths) * np.gradient(wavelengths)[None, :]
+    w = cie.channel_weights(channels, wavelengths) * np.gradient(wavelengths)[None, :]
     means = (w @ values) / w.sum(axis=1)
     if channels == "mono":
         return uniform(float(means[0]))
@@ -162,7 +163,7 @@ class GradientSampler:
 
     def __init__(self, channels: str):
         mi = _mi()
-        w = integrated.normalised_weights(channels)       # on GRID, the 1 nm grid
+        w = cie.normalised_weights(channels)       # on GRID, the 1 nm grid
         self.C = w.shape[0]
         self.texture = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(w.T, np.float32)),
                                     use_accel=False, migrate=False,

@@ -63,10 +63,11 @@ import math
 import drjit as dr
 import numpy as np
 
+from thinfilm_mi.colour import cie
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.tabulate.exact import (GHOST, GRAZING_COS, HALF_PI, MAX_U, MAX_V, SIGMA_MAX, SIGMA_MIN, SPLIT_ENDS,
-                     SideData, Table, _bspline_midpoints, band_cos, _evaluate, _indices, _lab,
-                     bspline_coefficients, colour_weights, delta_e2000, tir_kind,
+                     SideData, Table, _bspline_midpoints, band_cos, _evaluate, _indices, 
+                     bspline_coefficients,  tir_kind,
                      with_ghosts)
 from thinfilm_mi.tabulate import exact as _tables
 
@@ -486,7 +487,7 @@ class Rows:
         if not keep.any():
             return np.zeros(3)
         bins = bins[keep]
-        cw = colour_weights()
+        cw = cie.colour_weights()
         grid = cw[:, 0]
         inside = (wl_b >= grid[0]) & (wl_b <= grid[-1])
         jac = wl_b ** 2 * inside                              # dλ = dν / ν²
@@ -502,7 +503,7 @@ class Rows:
             xyz = np.einsum("rbc,bk->rck", bins, wgt)
             xyz_s = np.einsum("rbc,bk->rck", bins, wgt_s)
             ref = 100.0 * white / white[1]
-            de = delta_e2000(_lab(100.0 * xyz / white[1], ref), _lab(100.0 * xyz_s / white[1], ref))
+            de = cie.delta_e2000(cie.lab(100.0 * xyz / white[1], ref), cie.lab(100.0 * xyz_s / white[1], ref))
             worst[i] = float(np.max(de))
         return worst
 

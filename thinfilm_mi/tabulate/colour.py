@@ -48,7 +48,9 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
-from thinfilm_mi.tabulate.exact import _u_nodes_cos, colour_weights, u_texel
+from thinfilm_mi.colour.cie import (colour_differences, colour_weights, normalised_weights,
+                                    trapezoid_weights)
+from thinfilm_mi.tabulate.exact import _u_nodes_cos, u_texel
 from thinfilm_mi.render.textures import _mi
 
 #: The nodes are dense enough when the 4-point rule predicts the integrals at
@@ -107,47 +109,6 @@ def settings() -> tuple:
             LINEAR_ABS, FIRST_NODES, FIRST_SCALE_NODES, MAX_NODES, MAX_NODES_2D, MAX_TEXELS_2D)
 
 
-def xyz_to_srgb_matrix() -> np.ndarray:
-    """Mitsuba's XYZ -> linear sRGB matrix (rows: R, G, B)."""
-    mi = _mi()
-    cols = [np.array(mi.xyz_to_srgb(mi.ScalarColor3f(*e)), np.float64).ravel()
-            for e in np.eye(3)]
-    return np.stack(cols, axis=1)
-
-
-def channel_weights(channels: str, wavelengths: np.ndarray) -> np.ndarray:
-    """``w_c(λ)`` at ``wavelengths`` (shape ``(C, n)``; not normalised): linear sRGB
-    (``channels="rgb"``) or luminance Y (``"mono"``) under D65. The 1 nm data are
-    interpolated linearly, as Mitsuba interpolates its CMF table."""
-    W = colour_weights()
-    lam = W[:, 0]
-    cmf = np.stack([np.interp(wavelengths, lam, W[:, i]) for i in (1, 2, 3)])
-    d65 = np.interp(wavelengths, lam, W[:, 4])
-    if channels == "mono":
-        return (cmf[1] * d65)[None, :]
-    return (xyz_to_srgb_matrix() @ cmf) * d65[None, :]
-
-
-_WHITE = None
-
-
-def colour_differences(a: np.ndarray, b: np.ndarray, channels: int) -> np.ndarray:
-    """CIEDE2000 between colours ``a`` and ``b`` (last axis: ``k * channels``
-    values, ``k`` colours of linear sRGB, or Y, relative to a perfect reflector):
-    shape ``a.shape[:-1] + (k,)``."""
-    from thinfilm_mi.tabulate.exact import _lab, delta_e2000
-
-    global _WHITE
-    if _WHITE is None:
-        _WHITE = np.linalg.inv(xyz_to_srgb_matrix())
-    a = a.reshape(a.shape[:-1] + (-1, channels))
-    b = b.reshape(b.shape[:-1] + (-1, channels))
-    if channels == 1:
-        a, b = np.repeat(a, 3, axis=-1), np.repeat(b, 3, axis=-1)
-    white = _WHITE.sum(axis=1)          # XYZ of RGB (1, 1, 1)
-    return delta_e2000(_lab(a @ _WHITE.T, white), _lab(b @ _WHITE.T, white))
-
-
 def close_each(a: np.ndarray, b: np.ndarray, channels: int, axis: int,
                de: float = None, abs_: float = None) -> np.ndarray:
     """Per index along ``axis``: whether every colour there agrees within ``de``
@@ -174,24 +135,6 @@ def first_step(optical_thickness: float) -> float:
     step = SPECTRAL_RANGE[0] ** 2 / (2.0 * optical_thickness) / 16.0
     k = int(np.floor(np.log2(max(step, FIRST_STEP) / FIRST_STEP)))
     return float(min(FIRST_STEP * 2 ** k, MAX_FIRST_STEP))
-
-
-def trapezoid_weights(x: np.ndarray) -> np.ndarray:
-    """Weights of the trapezoid rule on the increasing nodes ``x``."""
-    x = np.asarray(x, np.float64)
-    w = np.empty_like(x)
-    w[1:-1] = 0.5 * (x[2:] - x[:-2])
-    w[0] = 0.5 * (x[1] - x[0])
-    w[-1] = 0.5 * (x[-1] - x[-2])
-    return w
-
-
-def normalised_weights(kind: str) -> np.ndarray:
-    """``ŵ_c`` on the 1 nm grid of the colour data (shape ``(C, 471)``): the channel
-    weights of :func:`channel_weights` scaled to a unit integral."""
-    lam = colour_weights()[:, 0]
-    w = channel_weights(kind, lam)
-    return w / (w * trapezoid_weights(lam)[None, :]).sum(axis=1, keepdims=True)
 
 
 @dataclass

@@ -43,6 +43,7 @@ import math
 import drjit as dr
 import numpy as np
 
+from thinfilm_mi.colour import cie
 from thinfilm_mi.tabulate import colour as integrated
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
 from thinfilm_mi.tabulate.exact import u_texel
@@ -182,7 +183,7 @@ class ColourDiffuse:
             if level not in levels:
                 n = int(round((hi - lo) * (1 << level)))
                 wl = lo + np.arange(n + 1) * ((hi - lo) / n)
-                w = integrated.channel_weights(channels, wl) * integrated.trapezoid_weights(wl)[None, :]
+                w = cie.channel_weights(channels, wl) * cie.trapezoid_weights(wl)[None, :]
                 if level - 1 in levels:     # the coarser level's wavelengths are every other one
                     _, _, r_c, t_c = levels[level - 1]
                     r_new, t_new = factors.hemispherical(wl[1::2])

@@ -901,65 +901,6 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     return None
 
 
-
-# -- colour data (the band-limited and colour tables' checks) ------------------------
-_COLOUR = None
-
-
-def colour_weights() -> np.ndarray:
-    """Columns wavelength (nm, 360-830 every 1 nm), xbar, ybar, zbar, D65, A, F11
-    (thinfilm_mi/data/colour_weights.csv, from colour-science by
-    scripts/make_colour_weights.py)."""
-    global _COLOUR
-    if _COLOUR is None:
-        import importlib.resources
-        text = importlib.resources.files("thinfilm_mi.data").joinpath("colour_weights.csv")
-        _COLOUR = np.loadtxt(str(text), delimiter=",")
-    return _COLOUR
-
-
-def _lab(XYZ: np.ndarray, white: np.ndarray) -> np.ndarray:
-    """CIE L*a*b* of ``XYZ`` (last axis) relative to ``white``."""
-    t = XYZ / white
-    d = 6.0 / 29.0
-    f = np.where(t > d ** 3, np.cbrt(np.maximum(t, 0.0)), t / (3 * d * d) + 4.0 / 29.0)
-    return np.stack([116.0 * f[..., 1] - 16.0, 500.0 * (f[..., 0] - f[..., 1]),
-                     200.0 * (f[..., 1] - f[..., 2])], axis=-1)
-
-
-def delta_e2000(lab1: np.ndarray, lab2: np.ndarray) -> np.ndarray:
-    """CIEDE2000 colour difference (Sharma, Wu and Dalal, Color Res. Appl. 30, 2005;
-    kL = kC = kH = 1) between L*a*b* arrays (last axis)."""
-    L1, a1, b1 = np.moveaxis(lab1, -1, 0)
-    L2, a2, b2 = np.moveaxis(lab2, -1, 0)
-    Cb = 0.5 * (np.hypot(a1, b1) + np.hypot(a2, b2))
-    G = 0.5 * (1.0 - np.sqrt(Cb ** 7 / (Cb ** 7 + 25.0 ** 7)))
-    a1p, a2p = (1.0 + G) * a1, (1.0 + G) * a2
-    C1p, C2p = np.hypot(a1p, b1), np.hypot(a2p, b2)
-    h1p = np.degrees(np.arctan2(b1, a1p)) % 360.0
-    h2p = np.degrees(np.arctan2(b2, a2p)) % 360.0
-    dLp, dCp = L2 - L1, C2p - C1p
-    dh = h2p - h1p
-    dh = np.where(dh > 180.0, dh - 360.0, np.where(dh < -180.0, dh + 360.0, dh))
-    dh = np.where(C1p * C2p == 0.0, 0.0, dh)
-    dHp = 2.0 * np.sqrt(C1p * C2p) * np.sin(np.radians(dh / 2.0))
-    Lbp, Cbp = 0.5 * (L1 + L2), 0.5 * (C1p + C2p)
-    hs = h1p + h2p
-    hbp = np.where(np.abs(h1p - h2p) > 180.0,
-                   np.where(hs < 360.0, (hs + 360.0) / 2.0, (hs - 360.0) / 2.0), hs / 2.0)
-    hbp = np.where(C1p * C2p == 0.0, hs, hbp)
-    T = (1.0 - 0.17 * np.cos(np.radians(hbp - 30.0)) + 0.24 * np.cos(np.radians(2.0 * hbp))
-         + 0.32 * np.cos(np.radians(3.0 * hbp + 6.0)) - 0.20 * np.cos(np.radians(4.0 * hbp - 63.0)))
-    dtheta = 30.0 * np.exp(-(((hbp - 275.0) / 25.0) ** 2))
-    Rc = 2.0 * np.sqrt(Cbp ** 7 / (Cbp ** 7 + 25.0 ** 7))
-    SL = 1.0 + 0.015 * (Lbp - 50.0) ** 2 / np.sqrt(20.0 + (Lbp - 50.0) ** 2)
-    SC = 1.0 + 0.045 * Cbp
-    SH = 1.0 + 0.015 * Cbp * T
-    RT = -np.sin(np.radians(2.0 * dtheta)) * Rc
-    return np.sqrt((dLp / SL) ** 2 + (dCp / SC) ** 2 + (dHp / SH) ** 2
-                   + RT * (dCp / SC) * (dHp / SH))
-
-
 class TableCache:
     """Built tables (or ``None`` for a stack that cannot be tabulated) by key, shared
     between BSDFs with identical optics; least recently used first out.
