@@ -76,7 +76,7 @@ def build() -> None:
     d["layers"] = d["layers"].replace("2.3 ", "2.31 ")
     mi.load_dict(d)                      # compiles the build kernels
     for L in (10, 30):
-        K._TABLE_CACHE.clear()
+        K.TABLE_CACHE.clear()
         t = time.perf_counter()
         b = mi.load_dict(bsdf(L, "default"))
         dt = time.perf_counter() - t

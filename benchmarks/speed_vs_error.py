@@ -11,7 +11,7 @@ the L-film stack uses the first L) on a metal (default Al), ambient air
 For each stack and way it reports the time per (cos theta, lambda) point and
 the max / RMS absolute error in R against the float64 reference
 (``thinfilm_mi.Stack(...).rt``) on the same points, and the max error outside
-the grazing sliver (cos theta >= ``tables.GRAZING_COS``) that table builds verify:
+the grazing sliver (cos theta >= ``tabulate_base.GRAZING_COS``) that table builds verify:
 
 * exact: ``bsdf.stack.reflectance(si, cos, active)`` with ``tabulate`` false,
   the float32 recursion as traced into the render kernels (llvm_ad_spectral,
@@ -22,7 +22,7 @@ the grazing sliver (cos theta >= ``tables.GRAZING_COS``) that table builds verif
   (first build, which includes compiling the float64 build kernels, and a
   second build of the same stack with the table cache cleared), the verified
   error the build reports, and the measured errors. A stack whose sharp resonances cannot be resolved within
-  ``tables.MAX_TEXELS`` texels and ``tables.MAX_BUILD_POINTS`` evaluations gets
+  ``tabulate_base.MAX_TEXELS`` texels and ``tabulate_base.MAX_BUILD_POINTS`` evaluations gets
   no table: the row says so. Every target is tried (a failing build took
   0.02-0.06 s in our runs: the probe rejects it); with --stop-at-failure
   the smaller targets of a stack are skipped once one has failed;
@@ -45,7 +45,6 @@ table to stdout and benchmarks/speed_vs_error.png (time vs max error, log-log).
 from __future__ import annotations
 
 import argparse
-import math
 import os
 import time
 import warnings
@@ -58,6 +57,7 @@ mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
 from thinfilm_mi.render import kernel as tf_kernel  # noqa: E402
 from thinfilm_mi.tabulate import exact as tables
+from thinfilm_mi.tabulate import base as tabulate_base
 
 AMBIENT = 1.000277
 ERRORS = (1e-2, 3e-3, 1e-3, 3e-4)
@@ -82,15 +82,15 @@ def band_reference(bsdf, cos64, wl64, n, step=0.002):
     evaluator on a grid of ``step`` nm over ±6 σ_ν, Gaussian-weighted."""
     from thinfilm_mi.tabulate import band as band_tables
     from thinfilm_mi.render import kernel
-    side = kernel._side_data(bsdf.stack.plan[False], False)
+    side = kernel.side_data(bsdf.stack.plan[False], False)
     sig = band_tables.sigma_nu(bsdf.stack.spectral_resolution)
     cos, wl = np.broadcast_to(cos64[None, :], wl64.shape).ravel()[:n], wl64.ravel()[:n]
     out = np.empty(n)
     for i in range(n):
         nu0 = 1.0 / wl[i]
         lam = np.arange(1.0 / (nu0 + 6 * sig), 1.0 / (nu0 - 6 * sig), step)
-        R = tables._evaluate(side, np.full(lam.size, cos[i]), np.arange(lam.size), lam,
-                             tables._indices(side, lam))[:, 0]
+        R = tabulate_base.evaluate_side(side, np.full(lam.size, cos[i]), np.arange(lam.size), lam,
+                             tabulate_base.side_indices(side, lam))[:, 0]
         g = np.exp(-0.5 * ((1.0 / lam - nu0) / sig) ** 2) / (lam * lam)    # dν = dλ / λ²
         out[i] = float(np.sum(R * g) / np.sum(g))
     return out
@@ -139,7 +139,7 @@ def errors(R, ref, cos=None):
     out = (float(e.max()), float(np.sqrt(np.mean(e * e))))
     if cos is None:
         return out
-    keep = np.broadcast_to(cos >= tables.GRAZING_COS, e.shape)
+    keep = np.broadcast_to(cos >= tabulate_base.GRAZING_COS, e.shape)
     return out + (float(e[keep].max()),)
 
 
@@ -182,7 +182,7 @@ def main():
     print(f"mitsuba {mi.__version__}, drjit {dr.__version__}, LLVM "
           f"{'.'.join(map(str, dr.detail.llvm_version()))}, {dr.thread_count()} threads; "
           f"{npts} (cos, lambda) points, median of {args.repeats}; substrate {args.material}; "
-          f"MAX_TEXELS = {tables.MAX_TEXELS}\n")
+          f"MAX_TEXELS = {tabulate_base.MAX_TEXELS}\n")
     print("| films | method | table_error | nu x nv | build 1st / 2nd (s) | verified err "
           "| ns/pt | max err | max err, cos ≥ 0.02 | RMS err |")
     print("|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|")
@@ -206,7 +206,7 @@ def main():
                 print(f"| {L} | table | {e:g} | **no table** (not tried: a larger "
                       f"table_error already failed) | – | – | – | – | – | – |", flush=True)
                 continue
-            tf_kernel._TABLE_CACHE.clear()
+            tf_kernel.TABLE_CACHE.clear()
             t0 = time.perf_counter()
             b = load(films, args.material, tabulate=True, table_error=e, spectral_resolution=0.0)
             t_first = time.perf_counter() - t0
@@ -220,7 +220,7 @@ def main():
             t_b = time.perf_counter()
             b0 = load(films, args.material, tabulate=False)
             t_noload = time.perf_counter() - t_b
-            tf_kernel._TABLE_CACHE.clear()
+            tf_kernel.TABLE_CACHE.clear()
             t0 = time.perf_counter()
             b = load(films, args.material, tabulate=True, table_error=e, spectral_resolution=0.0)
             t_second = time.perf_counter() - t0 - t_noload
@@ -254,7 +254,7 @@ def band_rows(L, films, args, si, cos, cos64, wl64, results):
     n = args.band_points
     ref = None
     for e in BAND_ERRORS:
-        tf_kernel._TABLE_CACHE.clear()
+        tf_kernel.TABLE_CACHE.clear()
         t0 = time.perf_counter()
         b = load(films, args.material, tabulate=True, table_error=e)
         t_build = time.perf_counter() - t0
@@ -272,7 +272,7 @@ def band_rows(L, films, args, si, cos, cos64, wl64, results):
             ref = band_reference(b, cos64, wl64, n)
         t, R = time_reflectance(b.stack, si, cos, args.repeats)
         got = R.ravel()[:n]
-        keep = np.broadcast_to(cos64[None, :], wl64.shape).ravel()[:n] >= tables.GRAZING_COS
+        keep = np.broadcast_to(cos64[None, :], wl64.shape).ravel()[:n] >= tabulate_base.GRAZING_COS
         err = np.abs(got - ref)
         ns = t / wl64.size * 1e9
         colours = " / ".join(f"{v:.3f}" for v in stats["colour_errors"].values())

@@ -14,6 +14,7 @@ from thinfilm_mi.colour import cie
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.tabulate import band as band_tables
 from thinfilm_mi.tabulate import exact as tables
+from thinfilm_mi.tabulate import base as tabulate_base
 
 
 @pytest.fixture(autouse=True)
@@ -35,11 +36,11 @@ def _resonant_side(monkeypatch, films=10):
         return build(side, *args, **kwargs)
 
     monkeypatch.setattr(tables, "build_table", capture)
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     with pytest.warns(UserWarning):
         mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "layers": layers,
                       "ext_ior": 1.0, "tabulate": True, "spectral_resolution": 0.0})
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     return captured["side"]
 
 
@@ -50,8 +51,8 @@ def _brute_force(side, cos, nu_out, sigma_nu, step=0.0005):
     for nu in nu_out:
         half = 7.0 * sigma_nu
         lam = np.arange(1.0 / (nu + half), 1.0 / (nu - half), step)
-        R = tables._evaluate(side, np.full(lam.size, cos), np.arange(lam.size), lam,
-                             tables._indices(side, lam))[:, 0]
+        R = tabulate_base.evaluate_side(side, np.full(lam.size, cos), np.arange(lam.size), lam,
+                             tabulate_base.side_indices(side, lam))[:, 0]
         x = 1.0 / lam
         g = np.exp(-0.5 * ((x - nu) / sigma_nu) ** 2) * x * x   # dν = dλ / λ²
         out.append(float(np.sum(R * g) / np.sum(g)))
@@ -74,7 +75,7 @@ def test_band_limited_values_match_a_brute_force_convolution(monkeypatch):
     vals = rows.values(xs)
     bins = rows.b0 + np.array([100, 600, 1100, 1500])
     for i, x in enumerate(xs):
-        cos = float(tables.band_cos(x))
+        cos = float(tabulate_base.band_cos(x))
         ref = _brute_force(side, cos, rows.wavenumbers[bins], rows.sigma)
         np.testing.assert_allclose(vals[i, bins, 0], ref, atol=1e-4, rtol=0)
 
@@ -85,7 +86,7 @@ def test_a_resonant_stack_gets_a_verified_band_limited_table(monkeypatch):
     brute-force R_σ within the verified error (plus the float32 texture's
     rounding), and its colours under D65/A/F11 pass the check."""
     side = _resonant_side(monkeypatch)
-    table = band_tables.build_table(side, 1e-3, K.GRID, tables.MAX_TEXELS, 1.0)
+    table = band_tables.build_table(side, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0)
     stats = tables.last_build
     assert table is not None, stats
     assert stats["exact_attempt"]["result"] != "table"
@@ -107,12 +108,12 @@ def test_band_limiting_is_off_by_default_and_leaves_thin_stacks_alone(monkeypatc
     exactly); with a resolution, a 3-film stack keeps its table of the exact
     values (band-limiting only applies where that fails)."""
     assert K.DEFAULT_SPECTRAL_RESOLUTION == 1.0
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     b = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "tabulate": True,
                       "layers": "2.3 130; 1.46 101; 2.3 105", "spectral_resolution": 1.0})
     assert b.stack.mode() == "table"
     assert tables.last_build["result"] == "table" and tables.last_build["resolution"] == 0.0
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
 
 
 def test_near_zeros_finds_a_narrow_pole():
@@ -123,7 +124,7 @@ def test_near_zeros_finds_a_narrow_pole():
     for z0, found in ((17.3 + 0.01j, True), (25.6 - 0.4j, True), (10.2 + 9.0j, False)):
         f = (x - z0) * (1.0 + 0.02 * x)
         samples = np.stack([f.real, f.imag], axis=-1)[None]
-        r, pos, dist = band_tables._near_zeros(samples, 0)
+        r, pos, dist = band_tables.near_zeros(samples, 0)
         assert (r.size == 1) == found
         if found:
             assert abs(pos[0] - z0.real) < 1e-6 and abs(dist[0] - abs(z0.imag)) < 1e-6
@@ -137,8 +138,8 @@ def test_smooth_terms_give_the_exact_reflectance(monkeypatch):
     side = _resonant_side(monkeypatch, films=10)
     wl = np.linspace(400.0, 700.0, 301)
     cos = np.full(wl.size, 0.8)
-    R = band_tables._powers_of(band_tables._smooth_terms(side, cos, np.arange(wl.size), wl,
-                                                         tables._indices(side, wl)), False)[:, 0]
+    R = band_tables.powers_of(band_tables.smooth_terms(side, cos, np.arange(wl.size), wl,
+                                                         tabulate_base.side_indices(side, wl)), False)[:, 0]
     layers = [(n(np.array([500.0]))[0].real, d) for n, d in side.films]
     ref = tf.Stack(layers=layers, substrate=complex(1.2, 7.0), ambient=1.0).rt(wl, math.acos(0.8)).R
     assert np.max(np.abs(R - ref)) < 1e-7
@@ -191,13 +192,13 @@ def test_band_table_of_a_side_lit_from_inside_glass(monkeypatch):
         return build(side, *args, **kwargs)
 
     monkeypatch.setattr(tables, "build_table", capture)
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     mi.load_dict({"type": "thinfilm_dielectric", "int_ior": 1.5, "ext_ior": 1.0,
                   "layers": layers, "tabulate": True, "spectral_resolution": 0.0})
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     inside = [s for s in sides if np.all(np.asarray(s.n0(np.array([500.0]))) > 1.2)][0]
     assert inside.transmission
-    table = band_tables.build_band_table(inside, 1e-3, K.GRID, tables.MAX_TEXELS, 1.0)
+    table = band_tables.build_band_table(inside, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0)
     assert table is not None and table.kind == "tir" and table.channels == 2
     assert table.error <= 1e-3
     sig = band_tables.sigma_nu(1.0)
@@ -206,8 +207,8 @@ def test_band_table_of_a_side_lit_from_inside_glass(monkeypatch):
         for w in (471.3, 633.7):
             nu0 = 1.0 / w
             lam = np.arange(1.0 / (nu0 + 7 * sig), 1.0 / (nu0 - 7 * sig), 0.0005)
-            RT = tables._evaluate(inside, np.full(lam.size, cos), np.arange(lam.size), lam,
-                                  tables._indices(inside, lam))
+            RT = tabulate_base.evaluate_side(inside, np.full(lam.size, cos), np.arange(lam.size), lam,
+                                  tabulate_base.side_indices(inside, lam))
             g = np.exp(-0.5 * ((1.0 / lam - nu0) / sig) ** 2) / (lam * lam)
             ref = (RT * g[:, None]).sum(axis=0) / g.sum()
             n0 = float(inside.n0(np.array([w]))[0])
@@ -231,7 +232,7 @@ def test_band_builds_on_parallel_loader_threads():
         f'<shape type="sphere"><point name="center" value="{j}, 0, 0"/>'
         f'<bsdf type="thinfilm_conductor"><string name="material" value="Al"/>'
         f'<string name="layers" value="{s}"/></bsdf></shape>' for j, s in enumerate(stacks))
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     scene = mi.load_string(f'<scene version="3.0.0">{shapes}</scene>', parallel=True)
     got = {}
     for shape in scene.shapes():
@@ -239,7 +240,7 @@ def test_band_builds_on_parallel_loader_threads():
         assert table is not None and table.resolution > 0
         got[round(float(shape.bbox().center().x))] = np.array(table.texture.tensor())
     for j, s in enumerate(stacks):
-        K._TABLE_CACHE.clear()
+        K.TABLE_CACHE.clear()
         b = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "layers": s})
         np.testing.assert_array_equal(got[j], np.array(b.stack.plan[False].table.texture.tensor()))
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()

@@ -1,7 +1,6 @@
 """The command-line tools: thinfilm-render and python -m thinfilm_mi."""
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from pathlib import Path

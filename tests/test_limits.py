@@ -14,7 +14,6 @@ mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402
 from thinfilm_mi.cli import render as cli  # noqa: E402
 from thinfilm_mi.tabulate import hemispherical
-from thinfilm_mi.render import kernel
 from thinfilm_mi.cli.tools import main as module_main  # noqa: E402
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
 from thinfilm_mi.materials.stack import MAX_FILMS  # noqa: E402

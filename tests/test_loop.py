@@ -235,7 +235,7 @@ def test_tabulated_sides_build_no_loop_buffers(llvm):
     assert exact.stack.plan[False].loop is not None
 
 
-# --- the real-amplitude loop (optics._stack_rt_loop_real) ----------------------
+# --- the real-amplitude loop (optics.stack_rt_loop_real) ----------------------
 # Films of real index above the ambient's: the kernels' loop then divides each
 # Rouard step by a_j + a_j+1 and works with real Fresnel amplitudes.
 
@@ -252,12 +252,12 @@ def real_loop_rt(n0, cos, n, d, n_exit, wl, Arr=Float64, films_max="count"):
 def real_path_calls(monkeypatch):
     """Counts the calls of the real-amplitude loop (so a test knows it ran)."""
     calls = []
-    original = optics._stack_rt_loop_real
+    original = optics.stack_rt_loop_real
 
     def spy(*args, **kw):
         calls.append(kw.get("films_max"))
         return original(*args, **kw)
-    monkeypatch.setattr(optics, "_stack_rt_loop_real", spy)
+    monkeypatch.setattr(optics, "stack_rt_loop_real", spy)
     return calls
 
 
@@ -269,7 +269,7 @@ def test_real_loop_is_the_unrolled_recursion(count, n0, n_exit, real_path_calls)
     """Same Rouard step divided by a_j + a_j+1 instead of multiplied by it, so the
     results differ by float64 rounding, amplified by the conditioning of
     |N|^2 / |D|^2 near resonances (~1e6 here): 1e-9. Both with the rescaling and
-    without it (films_max within the bound of _real_loop_rescale). The exit-tir
+    without it (films_max within the bound of real_loop_rescale). The exit-tir
     case is lit from glass (n0 = 1.5) with air below: q of the exit is
     imaginary beyond 41.8 degrees."""
     rng = np.random.default_rng(100 + count)
@@ -304,13 +304,13 @@ def test_real_loop_matches_tmm():
 
 def test_real_loop_without_rescaling_stays_in_float32_range():
     """The largest contrast the bound allows (films of n = 1.0011 and 6 over an
-    ambient of 1): _real_loop_rescale(...) films without rescaling, in float32,
+    ambient of 1): real_loop_rescale(...) films without rescaling, in float32,
     stay finite and agree with float64 (which has no range problem) to the
     float32 conditioning of such a stack (measured ~1e-4; 1e-3 allowed). One
     film more forces the rescaling back on (checked by the same call with
     films_max = None, which must agree too)."""
     from drjit.llvm import Float
-    every = optics._real_loop_rescale(1.0, 1.0011, 6.0)
+    every = optics.real_loop_rescale(1.0, 1.0011, 6.0)
     assert 2 <= every < 30
     n = np.array([1.0011 if i % 2 == 0 else 6.0 for i in range(every)])
     d = np.full(every, 37.0)
@@ -361,11 +361,11 @@ def test_films_below_the_ambient_index_keep_the_complex_loop(llvm, real_path_cal
 @pytest.mark.parametrize("n0, lo, hi", [(1.0, 1.0011, 6.0), (1.000277, 1.38, 2.6),
                                         (1.5, 1.52, 2.5), (1.0, 1.46, 2.3)])
 def test_rescale_bound_covers_every_interface(n0, lo, hi):
-    """_real_loop_rescale's film count keeps |D| and |T|^2 within 2^+-100: every
+    """real_loop_rescale's film count keeps |D| and |T|^2 within 2^+-100: every
     interface between two films of index in [lo, hi] at any angle has an
     amplitude |r| (s and p) with 2 max(log2(1 + |r|), -log2(1 - |r|)) * count
     <= 100 (sampled independently of the function's own grid)."""
-    every = optics._real_loop_rescale(n0, lo, hi)
+    every = optics.real_loop_rescale(n0, lo, hi)
     rng = np.random.default_rng(5)
     na, nb = rng.uniform(lo, hi, (2, 200_000))
     na[:4], nb[:4] = [lo, lo, hi, hi], [hi, hi, lo, lo]

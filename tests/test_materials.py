@@ -14,6 +14,7 @@ import pytest
 
 import thinfilm_mi as tf
 from thinfilm_mi.materials import catalog as M
+from thinfilm_mi.materials import sources
 from thinfilm_mi.errors import MaterialError
 
 REQUIRED = ["Au", "Ag", "Cu", "Al", "Cr", "Ti", "Ni", "Si", "a-Si", "Ge", "SiO2", "TiO2", "Ta2O5",
@@ -130,11 +131,11 @@ def test_every_listed_name_covers_the_range_and_is_listed():
 def test_shipped_extract_matches_the_installed_database():
     # The shipped pages are verbatim copies; if a database release revises one, this
     # fails so that updating the defaults is a deliberate decision.
-    for name, entry in M._registry()["materials"].items():
+    for name, entry in sources.builtin_registry()["materials"].items():
         if "constant" in entry:
             continue
-        ours = M._load_builtin(name)
-        theirs = M._load_ri_page(entry["dataset"])
+        ours = sources.load_builtin(name)
+        theirs = sources.load_ri_page(entry["dataset"])
         np.testing.assert_array_equal(ours.index(VISIBLE), theirs.index(VISIBLE), err_msg=name)
 
 
@@ -286,7 +287,7 @@ def test_file_round_trip(tmp_path, suffix):
 
 
 def test_mitsuba_spd_file_equals_preset():
-    d = M._mitsuba_ior_dir()
+    d = sources.mitsuba_ior_dir()
     assert d is not None
     via_file = M.resolve(d / "Cu.eta.spd")
     np.testing.assert_array_equal(via_file.index(VISIBLE), M.resolve("mitsuba:Cu").index(VISIBLE))

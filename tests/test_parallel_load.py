@@ -12,7 +12,6 @@ before the fix. After it, none may fail.
 """
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor

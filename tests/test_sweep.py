@@ -120,20 +120,20 @@ def test_values_ranges_lists_and_errors():
 
 def test_axes_names_and_values_are_checked():
     with pytest.raises(UsageError, match="not a valid parameter name"):
-        sweeps._parse_axes(["2x=1"], "define")
+        sweeps.parse_axes(["2x=1"], "define")
     with pytest.raises(UsageError, match="expected name=VALUES"):
-        sweeps._parse_axes(["thickness"], "define")
+        sweeps.parse_axes(["thickness"], "define")
     with pytest.raises(UsageError, match="given twice"):
-        sweeps._parse_axes(["a=1", "a=2"], "define")
+        sweeps.parse_axes(["a=1", "a=2"], "define")
     with pytest.raises(UsageError, match="must be numbers"):
-        sweeps._parse_axes({THICKNESS: "thick"}, "traverse")
+        sweeps.parse_axes({THICKNESS: "thick"}, "traverse")
     with pytest.raises(UsageError, match="clash"):
-        sweeps.build_frames(sweeps._parse_axes(["status=1,2"], "define"))
+        sweeps.build_frames(sweeps.parse_axes(["status=1,2"], "define"))
 
 
 def test_frames_are_named_and_grouped_by_scene_load():
-    axes = (sweeps._parse_axes({"material": "Au,Ag", "spp": 4}, "define")
-            + sweeps._parse_axes({THICKNESS: "100:300:100"}, "traverse"))
+    axes = (sweeps.parse_axes({"material": "Au,Ag", "spp": 4}, "define")
+            + sweeps.parse_axes({THICKNESS: "100:300:100"}, "traverse"))
     frames = sweeps.build_frames(axes)
     assert [f.index for f in frames] == list(range(6))
     assert frames[1].params == {"material": "Au", "spp": "4", THICKNESS: "200"}
@@ -146,7 +146,7 @@ def test_frames_are_named_and_grouped_by_scene_load():
         assert all(len({f.defines for f in t}) == 1 for t in tasks)  # one scene load per task
         assert [f.index for t in tasks for f in t] == list(range(6))
     # values that differ only in characters a file name cannot hold
-    odd = sweeps.build_frames(sweeps._parse_axes({"name": ["a b", "a/b"]}, "define"))
+    odd = sweeps.build_frames(sweeps.parse_axes({"name": ["a b", "a/b"]}, "define"))
     assert odd[0].exr != odd[1].exr and odd[0].exr.startswith("frames/frame-")
 
 
@@ -179,9 +179,9 @@ def test_traverse_values_are_checked_on_the_scene(scene):
     mi.set_variant(cli.DEFAULT_VARIANT)
     loaded = cli.load_scene(scene)
     with pytest.raises(UsageError, match="did you mean sphere.bsdf.layers.0.thickness"):
-        sweeps._set_parameters(loaded, None, [("sphere.bsdf.layers.0.thicknes", "3")])
+        sweeps.set_parameters(loaded, None, [("sphere.bsdf.layers.0.thicknes", "3")])
     with pytest.raises(UsageError, match="single numbers"):
-        sweeps._set_parameters(loaded, None, [("sphere.bsdf.layers.0.eta.values", "1.5")])
+        sweeps.set_parameters(loaded, None, [("sphere.bsdf.layers.0.eta.values", "1.5")])
 
 
 def test_sweep_arguments_are_checked(scene, tmp_path):
@@ -328,8 +328,8 @@ def test_grid_that_needs_a_polarized_variant_gets_one(tmp_path):
     path.write_text(SCENE.replace('<integrator type="path">', '<integrator type="$integ">')
                     .replace('<default name="material"', '<default name="integ" value="path"/>'
                              '<default name="material"'))
-    grid = sweeps.build_frames(sweeps._parse_axes({"integ": "path,stokes"}, "define"))
-    variant, notice = sweeps._grid_variant(path, grid, "llvm_ad_spectral")
+    grid = sweeps.build_frames(sweeps.parse_axes({"integ": "path,stokes"}, "define"))
+    variant, notice = sweeps.grid_variant(path, grid, "llvm_ad_spectral")
     assert variant == "llvm_ad_spectral_polarized" and "'stokes' integrator" in notice
-    plain = sweeps.build_frames(sweeps._parse_axes({"integ": "path"}, "define"))
-    assert sweeps._grid_variant(path, plain, "llvm_ad_spectral") == ("llvm_ad_spectral", None)
+    plain = sweeps.build_frames(sweeps.parse_axes({"integ": "path"}, "define"))
+    assert sweeps.grid_variant(path, plain, "llvm_ad_spectral") == ("llvm_ad_spectral", None)

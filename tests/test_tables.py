@@ -37,7 +37,7 @@ def f32(x):
 
 def random_points(n, seed=1):
     """Directions outside the grazing sliver the table's verification leaves out
-    (tables.GRAZING_COS; benchmarks/speed_vs_error.py reports the error there)."""
+    (tabulate_base.GRAZING_COS; benchmarks/speed_vs_error.py reports the error there)."""
     rng = np.random.default_rng(seed)
     cos = f32(rng.uniform(tf.tabulate.exact.GRAZING_COS, 1.0, n))
     wls = [f32(rng.uniform(360.0, 830.0, n)) for _ in range(4)]
@@ -281,14 +281,14 @@ def test_probe_lines_know_their_interpolation_error(ends):
     nodes a period; beyond it an extrapolated ghost is meaningless)."""
     from thinfilm_mi.tabulate import exact as tables
     intervals, min_nodes = 1024, 17
-    ext = tables._ghosts(intervals, min_nodes) if ends[0] == "values" else 0
-    assert tables._ghosts(intervals, min_nodes) == 3 * 64
+    ext = tables.ghost_count(intervals, min_nodes) if ends[0] == "values" else 0
+    assert tables.ghost_count(intervals, min_nodes) == 3 * 64
     omega = 2.0 * np.pi / 37.3
     x = np.arange(-ext, intervals + ext + 1.0)
     f = np.cos(omega * x + 0.4)[:, None, None]
     ok = np.zeros((x.size, 1), bool)
     ok[ext + 256:ext + 768] = True
-    (levels,) = tables._line_levels(f, ok, intervals, min_nodes, ends)
+    (levels,) = tables.line_levels(f, ok, intervals, min_nodes, ends)
     assert [k for k, _, _ in levels] == [2, 4, 8, 16, 32, 64]
     for k, err, at in levels:
         theta = omega * k
@@ -306,18 +306,18 @@ def test_probe_lines_know_their_interpolation_error(ends):
 def test_ghost_nodes():
     """Mirrored ends copy the nodes beyond the end node; extrapolated ends continue
     the cubic through the last four nodes exactly; given ends are kept in order."""
-    from thinfilm_mi.tabulate import exact as tables
+    from thinfilm_mi.tabulate import base as tabulate_base
     x = np.arange(10.0)
     f = x ** 3 - 2 * x
-    out = tables.with_ghosts(f, "mirror", "extrapolate")
+    out = tabulate_base.with_ghosts(f, "mirror", "extrapolate")
     assert np.array_equal(out[:3], f[[3, 2, 1]])
     xr = np.arange(10.0, 13.0)
     assert np.allclose(out[-3:], xr ** 3 - 2 * xr, rtol=0, atol=1e-9)
-    out = tables.with_ghosts(f, "extrapolate", "mirror")
+    out = tabulate_base.with_ghosts(f, "extrapolate", "mirror")
     xl = np.arange(-3.0, 0.0)
     assert np.allclose(out[:3], xl ** 3 - 2 * xl, rtol=0, atol=1e-9)
     assert np.array_equal(out[-3:], f[[8, 7, 6]])
-    out = tables.with_ghosts(f, np.array([1.0, 2.0, 3.0]), np.array([7.0, 8.0, 9.0]))
+    out = tabulate_base.with_ghosts(f, np.array([1.0, 2.0, 3.0]), np.array([7.0, 8.0, 9.0]))
     assert np.array_equal(out, np.concatenate([[1, 2, 3], f, [7, 8, 9]]))
 
 
@@ -326,10 +326,11 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     stack no table of the exact values within the budgets resolves -- 30 random
     films on Al, with cavity resonances ~0.1 nm wide -- is rejected by the probe
     alone, for a small fraction of the evaluations a failing build used to spend
-    (up to tables.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
+    (up to tabulate_base.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
     table is tried after it; tests/test_band_tables.py covers those.)"""
     from thinfilm_mi.tabulate import exact as tables
-    K._TABLE_CACHE.clear()
+    from thinfilm_mi.tabulate import base as tabulate_base
+    K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
     assert bsdf.stack.mode() == "table"
@@ -343,7 +344,7 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     assert deep.stack.mode() == "exact"
     assert tables.last_build["result"] == "rejected by the probe"
     assert tables.last_build["rounds"] == 0
-    assert tables.last_build["points"] < 0.05 * tables.MAX_BUILD_POINTS
+    assert tables.last_build["points"] < 0.05 * tabulate_base.MAX_BUILD_POINTS
 
 
 def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
@@ -352,10 +353,10 @@ def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
     reference within the verified error (tolerance as in the first test)."""
     from thinfilm_mi.tabulate import exact as tables
     monkeypatch.setattr(tables, "_estimate", lambda *a, **k: (16, 16))
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     table = bsdf.stack.plan[False].table
     assert table is not None and table.error <= 1e-3
     assert tables.last_build["rounds"] > 1
@@ -374,12 +375,13 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     fits the cache (the 1 nm resolution damps the fringes of these 3 µm of optical
     thickness by exp(-2 π² (σ_ν 2 Σ n d)²) < 1 %, yet the table is 160x824)."""
     from thinfilm_mi.tabulate import exact as tables
+    from thinfilm_mi.tabulate import base as tabulate_base
     layers = "2.3 800; 1.46 800"
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                         "tabulate": True})
     table = big.stack.plan[False].table
-    assert table is not None and K.AUTO_MAX_TEXELS < table.texels <= tables.MAX_TEXELS
+    assert table is not None and K.AUTO_MAX_TEXELS < table.texels <= tabulate_base.MAX_TEXELS
     assert table.resolution == 0.0
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                          "spectral_resolution": 0.0})
@@ -396,14 +398,14 @@ def test_bspline_coefficients_solve_the_clamped_system(n):
     """The recursive-filter solution against a dense solve of the clamped system
     (c[i-1] + 4 c[i] + c[i+1]) / 6 = f[i], c[-1] = c[0], c[n] = c[n-1]: the
     filters' truncation (|pole|^32 = 5e-19) and rounding leave ~1e-15."""
-    from thinfilm_mi.tabulate import exact as tables
+    from thinfilm_mi.tabulate import base as tabulate_base
     A = (np.diag(np.full(n, 4.0)) + np.diag(np.ones(n - 1), 1) + np.diag(np.ones(n - 1), -1)) / 6
     A[0, 0] += 1.0 / 6.0
     A[-1, -1] += 1.0 / 6.0
     f = np.random.default_rng(n).uniform(-1.0, 1.0, (n, 5, 2))
     ref = np.linalg.solve(A, f.reshape(n, -1)).reshape(f.shape)
-    assert np.max(np.abs(tables.bspline_coefficients(f, axis=0) - ref)) < 1e-13
-    assert np.max(np.abs(tables.bspline_coefficients(np.moveaxis(f, 0, 1), axis=1)
+    assert np.max(np.abs(tabulate_base.bspline_coefficients(f, axis=0) - ref)) < 1e-13
+    assert np.max(np.abs(tabulate_base.bspline_coefficients(np.moveaxis(f, 0, 1), axis=1)
                          - np.moveaxis(ref, 0, 1))) < 1e-13
 
 
@@ -424,11 +426,12 @@ def test_a_table_build_does_not_import_scipy():
 @pytest.mark.parametrize("layers", ["1.46 100; 2.3 60; 1.38 90; 2.1 50; 1.46 80",
                                     "1.46 100; 2.3 60; 0.2+3j 6; 2.1 50; 1.46 80"])
 def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
-    """From tables.BUILD_LOOP_MIN_FILMS films the build evaluates the stack as a
+    """From tabulate_base.BUILD_LOOP_MIN_FILMS films the build evaluates the stack as a
     loop over buffers of the films (real and complex loops): the table meets the
     independent float64 reference like the unrolled builds (tolerance as in the
     first test)."""
     from thinfilm_mi.tabulate import exact as tables
+    from thinfilm_mi.tabulate import base as tabulate_base
     calls = []
     loop = K.unpolarised_rt_loop
 
@@ -436,13 +439,13 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
         calls.append(k["film_n_min"])
         return loop(*a, **k)
     monkeypatch.setattr(K, "unpolarised_rt_loop", counted)
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
                          "tabulate": True})
-    K._TABLE_CACHE.clear()
+    K.TABLE_CACHE.clear()
     table = bsdf.stack.plan[False].table
     assert table is not None and tables.last_build["result"] == "table"
-    assert len(layers.split(";")) >= tables.BUILD_LOOP_MIN_FILMS and calls
+    assert len(layers.split(";")) >= tabulate_base.BUILD_LOOP_MIN_FILMS and calls
     assert all((m is None) == ("j" in layers) for m in calls)   # complex loop iff absorbing
     cos, wls = random_points(20000, seed=8)
     R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32))))
@@ -456,9 +459,9 @@ def test_table_cache_is_bounded_in_bytes_least_recently_used_first_out(monkeypat
     shared cache holds at most ``max_bytes`` of texture data (here 100 kB instead of
     32 MiB, so that a few small tables exceed it) and evicts the least recently used.
     Tables still used by a BSDF stay valid (the BSDF holds them)."""
-    from thinfilm_mi.tabulate import exact as tables
-    cache = tables.TableCache(max_bytes=100_000)
-    monkeypatch.setattr(K, "_TABLE_CACHE", cache)
+    from thinfilm_mi.tabulate import base as tabulate_base
+    cache = tabulate_base.TableCache(max_bytes=100_000)
+    monkeypatch.setattr(K, "TABLE_CACHE", cache)
     bsdfs = []
     for i in range(12):
         bsdfs.append(mi.load_dict({"type": "thinfilm_conductor", "material": "Al",

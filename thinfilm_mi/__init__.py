@@ -9,7 +9,8 @@ from __future__ import annotations
 
 from thinfilm_mi.llvm import LLVMVersionError, require_llvm
 from thinfilm_mi.errors import MaterialError, ThinFilmError
-from thinfilm_mi.materials.catalog import Material, refractive_index, resolve as resolve_material
+from thinfilm_mi.materials.model import Material
+from thinfilm_mi.materials.catalog import refractive_index, resolve as resolve_material
 from thinfilm_mi.materials.stack import Layer, RTResult, Stack, parse_layers
 
 __version__ = "0.1.0"

@@ -226,7 +226,7 @@ def _value_text(value: Any, option: str) -> str:
     return _format_number(number)
 
 
-def _parse_axes(items: Mapping[str, Any] | Sequence[str] | None, kind: str) -> list[Axis]:
+def parse_axes(items: Mapping[str, Any] | Sequence[str] | None, kind: str) -> list[Axis]:
     """``-D``/``-P`` items (``["name=VALUES", ...]`` or a mapping) -> axes."""
     flag = "-D" if kind == "define" else "-P"
     if items is None:
@@ -471,7 +471,7 @@ class _SceneCache:
 _SCENES = _SceneCache()
 
 
-def _set_parameters(scene, params, values: Sequence[tuple[str, str]]):
+def set_parameters(scene, params, values: Sequence[tuple[str, str]]):
     """Set ``-P`` values on a loaded scene (``params``: its ``mi.traverse``, or
     None to make it) and apply them; returns the parameters object."""
     import drjit as dr
@@ -542,7 +542,7 @@ def _render_one(job: Job, frame: Frame) -> dict[str, Any]:
     try:
         scene, params, row["scene_loaded"] = _SCENES.get(job, frame.defines)
         if frame.traverse:
-            _SCENES.params = _set_parameters(scene, params, frame.traverse)
+            _SCENES.params = set_parameters(scene, params, frame.traverse)
         sensors = scene.sensors()
         if not 0 <= job.sensor < len(sensors):
             raise UsageError(f"--sensor {job.sensor}: the scene has {len(sensors)} sensor(s)")
@@ -825,7 +825,7 @@ def _connect(workers: int | None, scheduler: str | None, client, variant: str):
         raise
 
 
-def _grid_variant(scene: Path, frames: Sequence[Frame], variant: str) -> tuple[str, str | None]:
+def grid_variant(scene: Path, frames: Sequence[Frame], variant: str) -> tuple[str, str | None]:
     """:func:`~thinfilm_mi.cli.render.scene_variant` over the grid's ``-D`` combinations: the
     first that needs a polarized variant sets it for every frame (a polarized variant
     renders the others too; a worker process holds one variant)."""
@@ -899,9 +899,9 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
             raise UsageError(f"size {size!r}: expected (width, height)") from None
     if not isinstance(variant, str) or not re.fullmatch(r"[a-z]+(_[a-z0-9]+)+", variant):
         raise UsageError(f"--variant {variant!r}: not a Mitsuba variant name (e.g. {DEFAULT_VARIANT})")
-    axes = _parse_axes(defines, "define") + _parse_axes(parameters, "traverse")
+    axes = parse_axes(defines, "define") + parse_axes(parameters, "traverse")
     frames = build_frames(axes)
-    variant, notice = _grid_variant(scene_file, frames, variant)
+    variant, notice = grid_variant(scene_file, frames, variant)
     if notice:
         log(notice)
     names = [a.name for a in axes]
@@ -1050,7 +1050,7 @@ def _drain(client, prefix: str, timeout: float) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = cli._ArgumentParser(
+    parser = cli.ArgumentParser(
         prog=PROG,
         description="Render a scene over a grid of parameter values on Dask (a local cluster "
                     "of worker processes, or a running cluster), one EXR + PNG per frame, "

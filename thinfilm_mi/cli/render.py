@@ -114,7 +114,7 @@ class RenderFailure(CLIError):
     code = 1
 
 
-class _ArgumentParser(argparse.ArgumentParser):
+class ArgumentParser(argparse.ArgumentParser):
     """argparse that raises :class:`UsageError` instead of printing the usage and exiting,
     so every error is the same single line."""
 
@@ -226,7 +226,7 @@ def add_render_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentPa
 
 
 def build_parser(prog: str = PROG) -> argparse.ArgumentParser:
-    parser = _ArgumentParser(
+    parser = ArgumentParser(
         prog=prog,
         description="Render a Mitsuba 3 scene with the thin-film BSDFs of thinfilm-mi "
                     "into a linear EXR and an sRGB PNG preview.",

@@ -333,7 +333,7 @@ def _add_stack_arguments(p: argparse.ArgumentParser, angles_help: str) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = cli._ArgumentParser(prog=PROG, description="thinfilm-mi command-line tools")
+    parser = cli.ArgumentParser(prog=PROG, description="thinfilm-mi command-line tools")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 

@@ -17,13 +17,13 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
-from typing import Any, Iterable, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 
 from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.catalog import Material
+from thinfilm_mi.materials.model import Material
 
 __all__ = ["Layer", "Stack", "RTResult", "parse_layers", "check_thickness"]
 

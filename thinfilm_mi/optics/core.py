@@ -235,7 +235,7 @@ class StackAmplitudes:
     grazing: Any       # mask: cos(theta0) <= 0 (R = 1, T = 0 exactly)
 
 
-def _is_zero(v) -> bool:
+def is_zero(v) -> bool:
     """True if ``v`` is a Python number equal to 0 (known at trace time)."""
     return isinstance(v, (int, float)) and v == 0
 
@@ -244,11 +244,11 @@ def _is_literal(v) -> bool:
     return isinstance(v, (int, float))
 
 
-def _cmul(a: Cx, b: Cx) -> Cx:
+def cmul(a: Cx, b: Cx) -> Cx:
     """``a * b``, skipping the products with imaginary parts that are a literal 0."""
-    if _is_zero(b.im):
-        return Cx(a.re * b.re, 0.0 if _is_zero(a.im) else a.im * b.re)
-    if _is_zero(a.im):
+    if is_zero(b.im):
+        return Cx(a.re * b.re, 0.0 if is_zero(a.im) else a.im * b.re)
+    if is_zero(a.im):
         return Cx(a.re * b.re, a.re * b.im)
     return Cx(a.re * b.re - a.im * b.im, a.re * b.im + a.im * b.re)
 
@@ -256,7 +256,7 @@ def _cmul(a: Cx, b: Cx) -> Cx:
 def _exp_i(delta: Cx) -> Cx:
     """``exp(i delta)`` for ``Im delta >= 0``: modulus ``exp(-Im delta) <= 1``."""
     s, c = dr.sincos(delta.re)
-    if _is_zero(delta.im):
+    if is_zero(delta.im):
         return Cx(c, s)
     mag = dr.exp(-delta.im)
     return Cx(mag * c, mag * s)
@@ -298,20 +298,20 @@ def _sincos_turns(x):
     return sin, cos
 
 
-def _phase_factor(q: Cx, u, twice: bool) -> Cx:
+def phase_factor(q: Cx, u, twice: bool) -> Cx:
     """``exp(i m 2 pi q u)`` with ``m = 2`` if ``twice`` else ``1``; ``u = d / lambda``.
 
     ``Im q >= 0`` so the modulus ``exp(-m 2 pi Im(q) u)`` is at most 1.
     """
     m = 2.0 if twice else 1.0
     s, c = _sincos_turns(q.re * (m * u))
-    if _is_zero(q.im):
+    if is_zero(q.im):
         return Cx(c, s)
     mag = dr.exp((-2.0 * math.pi * m) * (q.im * u))
     return Cx(mag * c, mag * s)
 
 
-def _normal_index(n: Cx, beta2, beta2_max, n2_min=None) -> Cx:
+def normal_index_bounded(n: Cx, beta2, beta2_max, n2_min=None) -> Cx:
     """:func:`normal_index`, specialised at trace time where the index is known.
 
     For a real index ``n`` (a literal, or an array with a literal zero
@@ -321,7 +321,7 @@ def _normal_index(n: Cx, beta2, beta2_max, n2_min=None) -> Cx:
     index (literal, or an array with a literal zero imaginary part) the decaying
     root of the real number ``n^2 - beta^2`` is ``sqrt(x)`` or ``i sqrt(-x)``.
     """
-    if _is_zero(n.im) and (_is_literal(n.re) or n2_min is not None):
+    if is_zero(n.im) and (_is_literal(n.re) or n2_min is not None):
         x = n.re * n.re - beta2
         lower = n.re * n.re if _is_literal(n.re) else n2_min
         if _is_literal(beta2_max) and lower >= beta2_max:
@@ -332,7 +332,7 @@ def _normal_index(n: Cx, beta2, beta2_max, n2_min=None) -> Cx:
     return normal_index(n, beta2)
 
 
-def _inv(z: Cx) -> Cx:
+def cinv(z: Cx) -> Cx:
     """``1 / z`` (evaluated in Python for literals)."""
     if _is_literal(z.re) and _is_literal(z.im):
         w = 1.0 / complex(z.re, z.im)
@@ -349,8 +349,8 @@ def _inv(z: Cx) -> Cx:
 _RESCALE = 3
 
 
-def _rouard_step(a: Cx, b: Cx, E_b: Cx, N: Cx, D: Cx):
-    """One Rouard step of :func:`_recursion` in projective form: ``(N, D)`` of the
+def rouard_step(a: Cx, b: Cx, E_b: Cx, N: Cx, D: Cx):
+    """One Rouard step of :func:`rouard_recursion` in projective form: ``(N, D)`` of the
     stack seen from medium ``b`` (``gamma_b = N / D``) to those seen from the
     medium ``a`` above it; ``E_b = exp(2 i delta_b)`` is ``b``'s phase factor.
 
@@ -358,11 +358,11 @@ def _rouard_step(a: Cx, b: Cx, E_b: Cx, N: Cx, D: Cx):
     ``M = D - X``: the paper's ``gamma <- (r + gamma E) / (1 + r gamma E)`` with
     ``r = (a - b)/(a + b)``, multiplied through by ``(a + b) D``.
     """
-    X = _cmul(E_b, N)
+    X = cmul(E_b, N)
     P = D + X
     M = D - X
-    aP = _cmul(a, P)
-    bM = _cmul(b, M)
+    aP = cmul(a, P)
+    bM = cmul(b, M)
     return aP - bM, aP + bM
 
 
@@ -390,7 +390,7 @@ def _inverse_power_of_two(x):
     return dr.reinterpret_array(type(x), U(0x7FE0000000000000) - (bits & U(0x7FF0000000000000)))
 
 
-def _recursion(a: list, E: list, e1: list | None, t_power: list | None, zero_pairs: list):
+def rouard_recursion(a: list, E: list, e1: list | None, t_power: list | None, zero_pairs: list):
     """The recursion in projective form, for one polarisation.
 
     ``a[j]`` is the admittance of medium ``j`` (``q_j`` for s, ``q_j / n_j^2``
@@ -444,9 +444,9 @@ def _recursion(a: list, E: list, e1: list | None, t_power: list | None, zero_pai
     steps = 0
     for j in range(last - 1, -1, -1):
         aj, bj = pair(j)
-        N, D = _rouard_step(aj, bj, E[j + 1], N, D)
+        N, D = rouard_step(aj, bj, E[j + 1], N, D)
         if e1 is not None:
-            T = _cmul(_cmul(aj, e1[j + 1]), T)
+            T = cmul(cmul(aj, e1[j + 1]), T)
         elif t_power is not None:
             T = T * t_power[j]
         steps += 1
@@ -459,38 +459,38 @@ def _recursion(a: list, E: list, e1: list | None, t_power: list | None, zero_pai
     return N, D, T
 
 
-def _guard_zero_q(m: Cx, q: Cx, beta, like) -> Cx:
-    """A film's ``q`` moved off 0 where it is within rounding of 0 (see :func:`_prepare`);
+def guard_zero_q(m: Cx, q: Cx, beta, like) -> Cx:
+    """A film's ``q`` moved off 0 where it is within rounding of 0 (see :func:`prepare_stack`);
     ``like`` is any array of the working precision (float32 or wider)."""
     eps = 2.0 ** -24 if _is_float32(like) else 2.0 ** -53
     size = dr.abs(m.re) + dr.abs(m.im) + beta
     eps_q = (2.0 * math.sqrt(eps)) * size
     small = q.abs2() < eps_q * eps_q
-    return Cx(dr.select(small, eps_q, q.re), q.im if _is_zero(q.im) else dr.select(small, 0.0, q.im))
+    return Cx(dr.select(small, eps_q, q.re), q.im if is_zero(q.im) else dr.select(small, 0.0, q.im))
 
 
-def _incidence(n0, cos0):
+def incidence(n0, cos0):
     """``(cos0, beta^2, q0)``: the cosine clipped to [0, 1], the squared tangential
     index ``n0^2 sin^2`` (without cancellation) and ``q0 = n0 cos0``."""
     cos0 = dr.clip(cos0, 0.0, 1.0)
     return cos0, n0 * n0 * ((1.0 - cos0) * (1.0 + cos0)), n0 * cos0
 
 
-def _exit_admittances(n_exit, beta2, beta2_max):
+def exit_admittances(n_exit, beta2, beta2_max):
     """``(n_exit, q_exit, {pol: admittance})`` of the exit medium (``q`` for s,
     ``q / n^2`` for p), as :class:`Cx`."""
     n_ex = Cx.of(n_exit)
-    q_ex = _normal_index(n_ex, beta2, beta2_max)
-    return n_ex, q_ex, {"s": q_ex, "p": _cmul(q_ex, _inv(n_ex.square()))}
+    q_ex = normal_index_bounded(n_ex, beta2, beta2_max)
+    return n_ex, q_ex, {"s": q_ex, "p": cmul(q_ex, cinv(n_ex.square()))}
 
 
-def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission):
+def prepare_stack(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission):
     """Everything the recursion needs, shared by both polarisations."""
-    cos0, beta2, q0 = _incidence(n0, cos0)
+    cos0, beta2, q0 = incidence(n0, cos0)
     beta2_max = n0 * n0 if _is_literal(n0) else None
 
     media = [Cx.of(n0)] + [Cx.of(n) for n, _ in films] + [Cx.of(n_exit)]
-    qs = [Cx(q0, 0.0)] + [_normal_index(m, beta2, beta2_max) for m in media[1:]]
+    qs = [Cx(q0, 0.0)] + [normal_index_bounded(m, beta2, beta2_max) for m in media[1:]]
     # A film whose q is within rounding of 0 (|q|^2 below the rounding error
     # ~eps (|n|^2 + beta^2) of q^2 = n^2 - beta^2: exactly at, or within rounding
     # of, its critical angle) makes the Rouard step 0/0: gamma -> -1 and
@@ -501,7 +501,7 @@ def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission
     # at q = 0 (the same medium) then get r = 0 as they should.
     beta = dr.sqrt(beta2)
     for j in range(1, len(media) - 1):
-        qs[j] = _guard_zero_q(media[j], qs[j], beta, cos0)
+        qs[j] = guard_zero_q(media[j], qs[j], beta, cos0)
     inv_wl = 1.0 / wavelength
     E = [None] * len(media)
     e1 = [None] * len(media) if (amplitudes and transmission) else None
@@ -509,11 +509,11 @@ def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission
     for j, (_, d) in enumerate(films):
         q, u = qs[j + 1], d * inv_wl
         if e1 is not None:
-            e1[j + 1] = _phase_factor(q, u, False)
-            E[j + 1] = _cmul(e1[j + 1], e1[j + 1])
+            e1[j + 1] = phase_factor(q, u, False)
+            E[j + 1] = cmul(e1[j + 1], e1[j + 1])
         else:
-            E[j + 1] = _phase_factor(q, u, True)
-            if not _is_zero(q.im):
+            E[j + 1] = phase_factor(q, u, True)
+            if not is_zero(q.im):
                 mag2[j + 1] = dr.exp((-4.0 * math.pi) * (q.im * u))
 
     zero_pairs = [None] * (len(media) - 1)
@@ -523,7 +523,7 @@ def _prepare(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission
         adm["s"] = qs
     if p:
         adm["p"] = [qs[0] * (1.0 / (n0 * n0))] + \
-            [_cmul(q, _inv(m.square())) for q, m in zip(qs[1:], media[1:])]
+            [cmul(q, cinv(m.square())) for q, m in zip(qs[1:], media[1:])]
 
     tpow = {}
     if transmission and not amplitudes:
@@ -573,22 +573,22 @@ def stack_amplitudes(
     ``gamma <- (r_j + gamma E_j) / (1 + r_j gamma E_j)`` and
     ``tau <- t_j tau sqrt(E_j) / (1 + r_j gamma E_j)`` with
     ``E_j = exp(2 i delta_j)``, ``delta_j = 2 pi q_j d_j / lambda``, evaluated
-    in the division-free projective form described in :func:`_recursion`.
+    in the division-free projective form described in :func:`rouard_recursion`.
     """
-    cos0, q0, media, qs, E, e1, _, zero_pairs, adm = _prepare(
+    cos0, q0, media, qs, E, e1, _, zero_pairs, adm = prepare_stack(
         n0, cos0, films, n_exit, wavelength, s, p, True, transmission)
     grazing = cos0 <= 0.0
     two_l = 2.0 ** (len(films) + 1)  # the factors 2 of the interface t's
     res = {"s": (None, None), "p": (None, None)}
     for pol in adm:
-        N, D, T = _recursion(adm[pol], E, e1, None, zero_pairs)
-        invD = _inv(D)
-        r = _cmul(N, invD)
+        N, D, T = rouard_recursion(adm[pol], E, e1, None, zero_pairs)
+        invD = cinv(D)
+        r = cmul(N, invD)
         t = None
         if T is not None:
-            t = _cmul(T, invD) * two_l
+            t = cmul(T, invD) * two_l
             if pol == "p":  # the telescoped product of n_j / n_{j+1}
-                t = _cmul(t, _cmul(media[0], _inv(media[-1])))
+                t = cmul(t, cmul(media[0], cinv(media[-1])))
         r = Cx(-1.0, 0.0).select(grazing, r)
         if t is not None:
             t = Cx(0.0, 0.0).select(grazing, t)
@@ -606,21 +606,21 @@ def stack_rt(n0, cos0, films, n_exit, wavelength, *, transmission: bool = True):
     When ``transmission`` is false, ``Ts = Tp = None`` and no transmission work
     is done. At grazing incidence ``R = 1`` and ``T = 0`` exactly.
 
-    Powers are formed from the projective ``(N, D, T)`` of :func:`_recursion`
+    Powers are formed from the projective ``(N, D, T)`` of :func:`rouard_recursion`
     directly (``R = |N|^2 / |D|^2``), one division per polarisation.
     """
-    cos0, q0, media, qs, E, _, tpow, zero_pairs, adm = _prepare(
+    cos0, q0, media, qs, E, _, tpow, zero_pairs, adm = prepare_stack(
         n0, cos0, films, n_exit, wavelength, True, True, False, transmission)
     grazing = cos0 <= 0.0
     fac = None
     if transmission:
-        fac = _power_factors(n0, q0, media[-1], qs[-1], grazing, 4.0 ** (len(films) + 1))
-    results = {pol: _recursion(adm[pol], E, None, tpow.get(pol), zero_pairs)
+        fac = power_factors(n0, q0, media[-1], qs[-1], grazing, 4.0 ** (len(films) + 1))
+    results = {pol: rouard_recursion(adm[pol], E, None, tpow.get(pol), zero_pairs)
                for pol in ("s", "p")}
     return _powers(results, fac, grazing)
 
 
-def _power_factors(n0, q0, n_ex: Cx, q_ex: Cx, grazing, scale):
+def power_factors(n0, q0, n_ex: Cx, q_ex: Cx, grazing, scale):
     """``{pol: factor}`` that turn the projective ``|T|^2 / |D|^2`` into
     transmittance: ``scale`` (the ``4^(L+1)`` of the interface ``t``'s, where
     the recursion leaves them out) over ``q0``, times the power factor of
@@ -628,7 +628,7 @@ def _power_factors(n0, q0, n_ex: Cx, q_ex: Cx, grazing, scale):
     the telescoped ``|n0 / n_exit|^2`` of ``|t_p|^2``."""
     inv_q0 = scale / dr.select(grazing, 1.0, q0)
     n2 = n_ex.square()
-    re_n2q = n2.re * q_ex.re if _is_zero(q_ex.im) else n2.re * q_ex.re + n2.im * q_ex.im
+    re_n2q = n2.re * q_ex.re if is_zero(q_ex.im) else n2.re * q_ex.re + n2.im * q_ex.im
     abs2_nex = n_ex.abs2()
     if _is_literal(abs2_nex):
         fp_const = (n0 * n0) / (abs2_nex * abs2_nex)
@@ -652,12 +652,12 @@ def _powers(results: dict, fac: dict | None, grazing):
     return Rs, Rp, Ts, Tp
 
 
-def _films_left(j, *_):
+def films_left(j, *_):
     """The film loops' condition: films remain above the current interface."""
     return j > 0
 
 
-def _loop_body(step):
+def loop_body(step):
     """``step`` as a ``dr.while_loop`` body. Some products mix types (mi.Spectrum
     with Dr.Jit's Array4f): they are cast back, as a loop's state may not change
     type."""
@@ -681,7 +681,7 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     *symbolic*: its body is traced once and becomes a loop in the kernel, so
     the kernel's size and compile time do not grow with the number of films.
 
-    The body is the same step as :func:`_recursion` (:func:`_rouard_step`,
+    The body is the same step as :func:`rouard_recursion` (:func:`rouard_step`,
     the same root choice, the same guard of ``q = 0``), from the innermost film
     outwards, starting from ``gamma = 0`` inside the exit medium; it rescales
     after every film. ``(N, D)`` start at ``(0, 1)`` so the first step yields
@@ -698,24 +698,24 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     real at every angle and the loop body traces one real square root and no
     exponential per film (what :func:`stack_rt` does for literal indices).
     With ``film_n_min >= REAL_LOOP_MARGIN * n0_max`` the loop runs
-    :func:`_stack_rt_loop_real` instead (real Fresnel amplitudes, about half
+    :func:`stack_rt_loop_real` instead (real Fresnel amplitudes, about half
     the work per film); ``film_n_max``, an upper bound of the films' index,
     and ``films_max``, of ``count``, then let it drop the rescaling where it
     cannot be needed.
     """
     if real_loop_applies(n0_max, film_n_min):
-        return _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength,
+        return stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength,
                                    transmission=transmission, n0_max=n0_max,
                                    film_n_min=film_n_min, film_n_max=film_n_max,
                                    films_max=films_max, label=label)
-    cos0, beta2, q0 = _incidence(n0, cos0)
+    cos0, beta2, q0 = incidence(n0, cos0)
     if _is_literal(n0):
         n0_max = n0
     beta2_max = n0_max * n0_max if n0_max is not None else None
     film_n2_min = film_n_min * film_n_min if film_n_min is not None else None
     beta = dr.sqrt(beta2)
     grazing = cos0 <= 0.0
-    n_ex, q_ex, a_ex = _exit_admittances(n_exit, beta2, beta2_max)
+    n_ex, q_ex, a_ex = exit_admittances(n_exit, beta2, beta2_max)
     zero = 0.0 * wavelength * cos0
     one = zero + 1.0
 
@@ -727,12 +727,12 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     def film_terms(j):
         m, d = film(j)
         m = Cx.of(m)
-        q = _guard_zero_q(m, _normal_index(m, beta2, beta2_max, film_n2_min), beta, zero)
+        q = guard_zero_q(m, normal_index_bounded(m, beta2, beta2_max, film_n2_min), beta, zero)
         u = d * inv_wl
-        E = _phase_factor(q, u, True)
-        mag2 = 1.0 if _is_zero(q.im) else dr.exp((-4.0 * math.pi) * (q.im * u))
-        inv_m2 = 1.0 / (m.re * m.re) if _is_zero(m.im) else _inv(m.square())
-        return {"s": q, "p": _cmul(q, Cx.of(inv_m2))}, E, mag2
+        E = phase_factor(q, u, True)
+        mag2 = 1.0 if is_zero(q.im) else dr.exp((-4.0 * math.pi) * (q.im * u))
+        inv_m2 = 1.0 / (m.re * m.re) if is_zero(m.im) else cinv(m.square())
+        return {"s": q, "p": cmul(q, Cx.of(inv_m2))}, E, mag2
 
     # State: j, then per polarisation N, D (complex), |T|^2 (a constant 1, not
     # traced, without transmission), the admittance of the medium below, and that
@@ -749,7 +749,7 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
         out = []
         for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
                                   ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
-            N, D = _rouard_step(a[pol], b, Cx(Er, Ei), N, D)
+            N, D = rouard_step(a[pol], b, Cx(Er, Ei), N, D)
             scale = _rescale_factor(D)
             if transmission:
                 T = T * (4.0 * a[pol].abs2() * mag2) * (scale * scale)
@@ -757,15 +757,15 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
         return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
 
     (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp,
-     bsr, bsi, bpr, bpi, Er, Ei) = dr.while_loop(state, _films_left, _loop_body(step),
+     bsr, bsi, bpr, bpi, Er, Ei) = dr.while_loop(state, films_left, loop_body(step),
                                                  label=label)
     a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
     results = {}
     for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
                               ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
-        N, D = _rouard_step(a0[pol], b, Cx(Er, Ei), N, D)
+        N, D = rouard_step(a0[pol], b, Cx(Er, Ei), N, D)
         results[pol] = (N, D, T * 4.0 * a0[pol].abs2())
-    fac = _power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
+    fac = power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
     return _powers(results, fac, grazing)
 
 
@@ -775,7 +775,7 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
 REAL_LOOP_MARGIN = 1.001
 #: The real-amplitude loop keeps ``|D|`` within ``2^+-_REAL_RANGE_BITS`` of 1
 #: without rescaling when the films' contrast allows it (see
-#: :func:`_real_loop_rescale`); float32 spans 2^+-126.
+#: :func:`real_loop_rescale`); float32 spans 2^+-126.
 _REAL_RANGE_BITS = 100
 
 
@@ -788,7 +788,7 @@ def real_loop_applies(n0_max: float | None, film_n_min: float | None) -> bool:
 
 
 @functools.lru_cache(maxsize=64)
-def _real_loop_rescale(n0_max: float, film_n_min: float, film_n_max: float | None) -> int:
+def real_loop_rescale(n0_max: float, film_n_min: float, film_n_max: float | None) -> int:
     """How many films the real-amplitude loop may run before ``(N, D, T)`` must be
     rescaled (0: rescale after every film).
 
@@ -819,7 +819,7 @@ def _real_loop_rescale(n0_max: float, film_n_min: float, film_n_max: float | Non
     return int(_REAL_RANGE_BITS / bits)
 
 
-def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool,
+def stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool,
                         n0_max: float, film_n_min: float, film_n_max: float | None,
                         films_max: int | None, label: str):
     """:func:`stack_rt_loop` for films of real index above the ambient's
@@ -829,7 +829,7 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
     admittances ``a`` (``q`` for s, ``q / n^2`` for p) and the Fresnel
     amplitudes ``r = (a_j - a_j+1) / (a_j + a_j+1)`` between films. Dividing
     the Rouard step by ``a_j + a_j+1`` (instead of multiplying through by it,
-    as :func:`_rouard_step` does) leaves, with ``X = E N``::
+    as :func:`rouard_step` does) leaves, with ``X = E N``::
 
         N' = r D + X,    D' = D + r X,    |T'|^2 = (1 + r)^2 |T|^2
 
@@ -846,13 +846,13 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
     ``r`` are computed once for all wavelengths.
 
     The loop rescales ``(N, D, T)`` by a power of two after every film unless
-    :func:`_real_loop_rescale` shows, from the trace-time bounds, that ``|D|``
+    :func:`real_loop_rescale` shows, from the trace-time bounds, that ``|D|``
     and ``|T|^2`` cannot leave float32's range for ``films_max`` films (the
     traced code then depends only on which side of that bound the depth lies).
     """
-    cos0, beta2, q0 = _incidence(n0, cos0)
+    cos0, beta2, q0 = incidence(n0, cos0)
     grazing = cos0 <= 0.0
-    n_ex, q_ex, a_ex = _exit_admittances(n_exit, beta2, n0_max * n0_max)
+    n_ex, q_ex, a_ex = exit_admittances(n_exit, beta2, n0_max * n0_max)
     inv_wl = 1.0 / wavelength
     zero = 0.0 * wavelength * cos0
 
@@ -864,7 +864,7 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
         return q, q * inv_n2
 
     def phase(q, d):
-        return _phase_factor(Cx(q, 0.0), d * inv_wl, True)
+        return phase_factor(Cx(q, 0.0), d * inv_wl, True)
 
     # The innermost interface, film L-1 | exit medium (complex), without its
     # division: (N, D) = (a - a_exit, a + a_exit), |T|^2 = 4 a^2 (gamma = r and
@@ -883,11 +883,11 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
         t = (zero + 4.0 * a_b * a_b) if transmission else 1.0
         state += [zero + (a_b - a_x.re), zero - a_x.im, zero + (a_b + a_x.re), zero + a_x.im, t]
     state += [q_b, ap_b, d_last]
-    every = _real_loop_rescale(n0_max, film_n_min, film_n_max)
+    every = real_loop_rescale(n0_max, film_n_min, film_n_max)
     in_loop_rescale = films_max is None or films_max > every
 
     def step(N: Cx, D: Cx, T, r, E: Cx, rescale: bool = True):
-        X = _cmul(E, N)
+        X = cmul(E, N)
         N, D = Cx(dr.fma(r, D.re, X.re), dr.fma(r, D.im, X.im)), \
             Cx(dr.fma(r, X.re, D.re), dr.fma(r, X.im, D.im))
         if transmission:
@@ -912,7 +912,7 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
                 q_a, ap_a, d_a)
 
     (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, q_b, ap_b, d_b) = dr.while_loop(
-        tuple(state), _films_left, _loop_body(body), label=label)
+        tuple(state), films_left, loop_body(body), label=label)
     # The first film's phase and the interface with the ambient (a0 >= 0, real).
     E = phase(q_b, d_b)
     results = {}
@@ -921,7 +921,7 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
             ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, ap_b, q0 * (1.0 / (n0 * n0))))):
         N, D, T = step(N, D, T, (a0 - a_b) / (a0 + a_b), E, rescale=False)
         results[pol] = (N, D, T if transmission else None)
-    fac = _power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
+    fac = power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
     return _powers(results, fac, grazing)
 
 

@@ -70,7 +70,7 @@ Everything is generic over Python floats, Dr.Jit ``Float64``/``Float`` arrays
 and ``mi.Spectrum``: only ``dr.*`` functions and :class:`~thinfilm_mi.optics.core.Cx`
 are used, and the list of incoherent films is a Python list known at trace
 time. The sub-stack powers come from the core's own setup and recursion
-(``optics._prepare`` and ``optics._recursion``, in the form ``stack_rt`` uses),
+(``optics.prepare_stack`` and ``optics.rouard_recursion``, in the form ``stack_rt`` uses),
 so the branch choices, critical-angle floors and float32 rescaling are the
 core's.
 """
@@ -81,7 +81,7 @@ from typing import Any, Sequence
 
 import drjit as dr
 
-from thinfilm_mi.optics.core import _is_zero, _prepare, _recursion, stack_rt
+from thinfilm_mi.optics.core import is_zero, prepare_stack, rouard_recursion, stack_rt
 
 __all__ = ["incoherent_rt", "incoherent_rt_sp", "reference_incoherent_rt", "coherent_groups"]
 
@@ -112,7 +112,7 @@ def _substack(a: list, E: list, mag2: list, lo: int, hi: int, reverse: bool, tra
             if pos > 0 and mag2[j] is not None:
                 f = f * mag2[j]
             t_power.append(f)
-    N, D, T = _recursion(a_s, E_s, None, t_power, [None] * (len(idx) - 1))
+    N, D, T = rouard_recursion(a_s, E_s, None, t_power, [None] * (len(idx) - 1))
     inv = 1.0 / D.abs2()
     R = N.abs2() * inv
     if not transmission:
@@ -146,7 +146,7 @@ def incoherent_rt_sp(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
         Rs, Rp, Ts, Tp = stack_rt(n0, cos0, films, n_exit, wl, transmission=transmission)
         return Rs, Rp, Ts, Tp
 
-    cos0, q0, media, qs, E, _, _, _, adm = _prepare(
+    cos0, q0, media, qs, E, _, _, _, adm = prepare_stack(
         n0, cos0, films, n_exit, wl, True, True, True, False)
     grazing = cos0 <= 0.0
     inv_wl = 1.0 / wl
@@ -156,7 +156,7 @@ def incoherent_rt_sp(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
     mag2 = [None] * len(media)
     for j, (_, d) in enumerate(films):
         q = qs[j + 1]
-        if not _is_zero(q.im):
+        if not is_zero(q.im):
             mag2[j + 1] = dr.exp((-4.0 * math.pi) * (q.im * (d * inv_wl)))
 
     out = []

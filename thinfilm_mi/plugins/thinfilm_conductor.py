@@ -123,7 +123,7 @@ from thinfilm_mi.render import modes
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.kernel import (SpectralIndex, check_unqueried, check_variant, optional_texture,
                                 stack_from_props)
-from thinfilm_mi.materials.catalog import MAX_INDEX, MIN_INDEX
+from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.textures import check_texture_range, uniform
 

@@ -30,7 +30,7 @@ import drjit as dr
 
 from thinfilm_mi.render.kernel import KernelStack, unpolarised_powers
 from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
-from thinfilm_mi.render.textures import _mi
+from thinfilm_mi.render.textures import mitsuba_module
 
 
 @dataclass
@@ -100,7 +100,7 @@ class Polarised:
 
 def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
           thickness_scale) -> Polarised:
-    mi = _mi()
+    mi = mitsuba_module()
     side = stack.evaluation_side(inside, transmission)
     n0 = side.n0.eval_real(si, active)
     exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \

@@ -28,17 +28,17 @@ import numpy as np
 
 from thinfilm_mi.colour import cie
 from thinfilm_mi.tabulate import colour as integrated
-from thinfilm_mi.tabulate import exact as _tables
+from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
-from thinfilm_mi.render.textures import GRID, _mi, new_object, scalar, texture_range, uniform
+from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar, texture_range, uniform
 
 
 def colour_channels() -> str | None:
     """``"rgb"`` or ``"mono"`` in the RGB and mono variants (whose plugins read
     integrated colour tables, :mod:`thinfilm_mi.tabulate.colour`), ``None`` in the
     spectral ones."""
-    mi = _mi()
+    mi = mitsuba_module()
     if mi.is_spectral:
         return None
     return "mono" if mi.is_monochromatic else "rgb"
@@ -51,12 +51,12 @@ def channel_mean_texture(wavelengths: np.ndarray, values: np.ndarray, channels: 
     means = (w @ values) / w.sum(axis=1)
     if channels == "mono":
         return uniform(float(means[0]))
-    mi = _mi()
+    mi = mitsuba_module()
     return new_object("srgb", color=mi.ScalarColor3f(*[float(x) for x in means]),
                       unbounded=True)
 
 
-def with_absorbing(data: _tables.SideData) -> _tables.SideData:
+def with_absorbing(data: tabulate_base.SideData) -> tabulate_base.SideData:
     """``data`` with ``absorbing`` set from the 1 nm grid (one kernel per build)."""
     data.absorbing = (tuple(bool(np.any(np.asarray(f(GRID)).imag)) for f, _ in data.films)
                       + (bool(np.any(np.asarray(data.n_exit(GRID)).imag)),))
@@ -64,7 +64,7 @@ def with_absorbing(data: _tables.SideData) -> _tables.SideData:
 
 
 #: Colour tables shared between stacks with identical optics (RGB/mono variants).
-COLOUR_CACHE = _tables.TableCache()
+COLOUR_CACHE = tabulate_base.TableCache()
 
 
 def colour_table(stack, side, side_data):
@@ -90,7 +90,7 @@ def colour_table(stack, side, side_data):
                 where = "the substrate" if ix is side.exit else "a medium"
                 raise ThinFilmError(
                     f"{stack.plugin}: 'eta'/'k' ({where}) vary over the surface, and films "
-                    f"lie on it: in the {_mi().variant()!r} variant a spectrum or a "
+                    f"lie on it: in the {mitsuba_module().variant()!r} variant a spectrum or a "
                     "constant (number, rgb) is required there, so that the films can "
                     "be integrated over wavelengths at load time (or use a spectral "
                     "variant)")
@@ -107,16 +107,16 @@ def colour_table(stack, side, side_data):
     scale_max = fixed_scale = None
     tex = stack.thickness_texture
     if tex is not None and not tex.is_spatially_varying():
-        fixed_scale = max(scalar(tex.eval_1(dr.zeros(_mi().SurfaceInteraction3f))), 0.0)
+        fixed_scale = max(scalar(tex.eval_1(dr.zeros(mitsuba_module().SurfaceInteraction3f))), 0.0)
     elif tex is not None:
         rng = texture_range(tex, mono=True)
         scale_max = max(rng[1], 0.0) if rng is not None else None
         if scale_max is None:
             raise ThinFilmError(f"{stack.plugin}: 'thickness': its range cannot be evaluated "
-                                f"at load time, which the {_mi().variant()!r} variant needs "
+                                f"at load time, which the {mitsuba_module().variant()!r} variant needs "
                                 "(a table over the thickness scale)")
     h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
-    h.update(repr((_mi().variant(), channels, transmission, side.exit_real, side.opaque, axis,
+    h.update(repr((mitsuba_module().variant(), channels, transmission, side.exit_real, side.opaque, axis,
                    scale_max, fixed_scale,
                    integrated.settings())).encode())
     key = h.hexdigest()
@@ -133,7 +133,7 @@ def colour_table(stack, side, side_data):
                 data, films=[(f, t * scale) for f, t in data.films])
             # the points' wavelengths repeat (one per angle node): indices per unique one
             uniq, rows = np.unique(wl, return_inverse=True)
-            return _tables._evaluate(d, cos, rows, uniq, _tables._indices(d, uniq),
+            return tabulate_base.evaluate_side(d, cos, rows, uniq, tabulate_base.side_indices(d, uniq),
                                      scale if per_point else None)
         # the stack's optical thickness at its thickest (the largest scale)
         optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) * sum(
@@ -162,7 +162,7 @@ class GradientSampler:
     _by_variant: dict = {}
 
     def __init__(self, channels: str):
-        mi = _mi()
+        mi = mitsuba_module()
         w = cie.normalised_weights(channels)       # on GRID, the 1 nm grid
         self.C = w.shape[0]
         self.texture = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(w.T, np.float32)),
@@ -172,7 +172,7 @@ class GradientSampler:
 
     @classmethod
     def get(cls) -> "GradientSampler":
-        mi = _mi()
+        mi = mitsuba_module()
         with cls._lock:
             key = mi.variant()
             if key not in cls._by_variant:
@@ -181,7 +181,7 @@ class GradientSampler:
 
     def wavelengths(self, si):
         """``m`` stratified wavelengths (``mi.Spectrum``, nm) from a hash of the hit."""
-        mi = _mi()
+        mi = mitsuba_module()
 
         def bits(x):
             return dr.reinterpret_array(mi.UInt32, x)
@@ -195,7 +195,7 @@ class GradientSampler:
     def estimate(self, wavelengths, values):
         """``X_c = (470 nm / m) Σ_k ŵ_c(λ_k) values_k`` (``mi.Spectrum`` colours) of
         spectral ``values`` at the :meth:`wavelengths`."""
-        mi = _mi()
+        mi = mitsuba_module()
         lo, hi = SPECTRAL_RANGE
         m = dr.size_v(mi.Spectrum)
         out = [0.0] * self.C
@@ -228,7 +228,7 @@ def _wavelength_texture(ix):
         return None
     tex = getattr(ix, "_wl_texture", None)
     if tex is None:
-        mi = _mi()
+        mi = mitsuba_module()
         v = ix.material.index(GRID)
         tex = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(
             np.stack([v.real, v.imag], axis=1), np.float32)), use_accel=False, migrate=False,
@@ -242,7 +242,7 @@ def index_on_wavelengths(ix, si, wavelengths, active=True):
     (``mi.Spectrum``, nm) in RGB/mono variants, as ``(re, im)``: a dataset's from
     a float texture of its 1 nm values (built once per index), anything else
     (numbers: ``uniform``, differentiable) as its textures evaluate."""
-    mi = _mi()
+    mi = mitsuba_module()
     tex = _wavelength_texture(ix)
     if tex is None:
         n = ix.eval(si, active)

@@ -26,7 +26,7 @@ import numpy as np
 
 from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.tabulate import band as _band_tables
-from thinfilm_mi.tabulate import exact as _tables
+from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.llvm import require_llvm
 from thinfilm_mi.render.colour import (GradientSampler, attach_gradient, channel_mean_texture,
                             colour_channels, colour_table, index_on_wavelengths,
@@ -35,7 +35,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.optics.core import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
                      transmittance_factor_s)
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL, check_thickness, parse_layers
-from thinfilm_mi.render.textures import (GRID, _mi, check_texture_range, irregular, scalar, texture_on_grid,
+from thinfilm_mi.render.textures import (GRID, mitsuba_module, check_texture_range, irregular, scalar, texture_on_grid,
                        uniform)
 
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
@@ -52,7 +52,7 @@ def check_variant(plugin: str) -> None:
     integrated amplitudes. LLVM variants, and every variant that builds colour
     tables (float64 on the LLVM backend), pass through :func:`require_llvm`.
     """
-    mi = _mi()
+    mi = mitsuba_module()
     variant = mi.variant()
     if variant is None or (mi.is_polarized and not mi.is_spectral):
         raise ThinFilmError(
@@ -67,7 +67,7 @@ def check_variant(plugin: str) -> None:
 def opaque_float(value: float):
     """``value`` as a ``mi.Float`` that is an opaque kernel input (a scalar in
     scalar variants), so that changing it never recompiles a kernel."""
-    mi = _mi()
+    mi = mitsuba_module()
     x = mi.Float(value)
     if dr.is_jit_v(x):
         dr.make_opaque(x)
@@ -109,7 +109,7 @@ class SpectralIndex:
         self._arrays_edited = False
         for part, tex in (("eta", eta_tex), ("k", k_tex)):
             if tex.class_name() == "IrregularSpectrum":
-                tp = _mi().traverse(tex)
+                tp = mitsuba_module().traverse(tex)
                 self.arrays[part] = {name: type(tp[name])(tp[name])
                                      for name in ("wavelengths", "values")}
 
@@ -220,7 +220,7 @@ class SpectralIndex:
     def channel_values(self) -> np.ndarray | None:
         """RGB/mono variants: the index per channel (complex, one per channel) of
         textures given per channel that do not vary over the surface; else ``None``."""
-        mi = _mi()
+        mi = mitsuba_module()
         if self.eta.is_spatially_varying() or self.k.is_spatially_varying():
             return None
         si = dr.zeros(mi.SurfaceInteraction3f)
@@ -236,7 +236,7 @@ class SpectralIndex:
         texture's own parameters, or an ``irregular`` spectrum's arrays
         (``wavelengths``, ``values``) as values of the calling object (see
         :attr:`arrays`)."""
-        mi = _mi()
+        mi = mitsuba_module()
         for part in ("eta", "k"):
             arrays = self.arrays.get(part)
             if arrays is None:
@@ -252,7 +252,7 @@ class SpectralIndex:
         by the BSDF's guard before this runs)."""
         if not self.arrays:
             return
-        mi = _mi()
+        mi = mitsuba_module()
         edited = False
         for part, arrays in self.arrays.items():
             tex = getattr(self, part)
@@ -370,7 +370,7 @@ class _LoopFilms:
     """
 
     def __init__(self, films: list, n0: SpectralIndex):
-        mi = _mi()
+        mi = mitsuba_module()
         from thinfilm_mi.optics.backend import aligned_array
         grid = np.unique(np.concatenate([GRID[[0, -1]]] + [ix.knots for ix, _, _ in films]))
         self.g0 = float(grid[0])
@@ -409,7 +409,7 @@ class _LoopFilms:
     def _cell(self, w):
         """The grid cell holding wavelength ``w`` (an ``mi.Float``) and the weight of its
         upper knot."""
-        mi = _mi()
+        mi = mitsuba_module()
         if self.uniform:   # knots 1 nm apart from an integer start: exact arithmetic
             i = mi.UInt32(dr.clip(dr.floor(w - self.g0), 0.0, float(self.cells - 1)))
             return i, dr.clip(w - (self.g0 + mi.Float(i)), 0.0, 1.0)
@@ -420,7 +420,7 @@ class _LoopFilms:
         return i, dr.clip((w - lo) / (hi - lo), 0.0, 1.0)
 
     def rt(self, n0, cos_theta, exit_: Cx, wl, transmission: bool, thickness_scale):
-        mi = _mi()
+        mi = mitsuba_module()
         if self.constant:
             if self.n0_constant:
                 n0 = n0[0]
@@ -571,16 +571,16 @@ class KernelStack:
         if colour_channels() is not None:
             # RGB and mono variants read integrated colour tables (thinfilm_mi.tabulate.colour)
             for side in self.plan.values():
-                side.colour = colour_table(self, side, _side_data)
-            if dr.is_diff_v(_mi().Float):
+                side.colour = colour_table(self, side, side_data)
+            if dr.is_diff_v(mitsuba_module().Float):
                 prepare_gradients([self.ambient, self.substrate] + list(self.indices))
             return
-        if _mi().is_polarized:
+        if mitsuba_module().is_polarized:
             # Polarized variants evaluate the amplitudes exactly (thinfilm_mi.render.amplitudes);
             # tables and film loops hold powers only: none is built.
             return
         self._plan_tables()
-        if dr.is_jit_v(_mi().Float):
+        if dr.is_jit_v(mitsuba_module().Float):
             for side in self.plan.values():
                 # A side whose table serves the calls its plan is for (R, and T
                 # where the plan asks for it) does not evaluate its films: no
@@ -600,7 +600,7 @@ class KernelStack:
         # call is Python anyway and the load-time build would dominate.
         want = self.tabulate is True or (
             self.tabulate == "auto" and self.thickness_texture is None
-            and dr.is_jit_v(_mi().Float)
+            and dr.is_jit_v(mitsuba_module().Float)
             and max((len(s.films) for s in self.plan.values()), default=0) >= AUTO_MIN_FILMS)
         self.table_failed = []
         if not want:
@@ -617,7 +617,7 @@ class KernelStack:
         if self.tabulate is True and self.table_failed:
             import warnings
             warnings.warn(f"{self.plugin}: the stack {self.describe()} cannot be tabulated "
-                          f"within table_error={self.table_error:g} in {_tables.MAX_TEXELS} "
+                          f"within table_error={self.table_error:g} in {tabulate_base.MAX_TEXELS} "
                           "texels; it is evaluated exactly", stacklevel=3)
 
     def mode(self) -> str:
@@ -633,7 +633,7 @@ class KernelStack:
         return f"[{films}]" if films else "[no films]"
 
     def traverse(self, callback) -> None:
-        mi = _mi()
+        mi = mitsuba_module()
         for i, (ix, d) in enumerate(zip(self.indices, self.thickness)):
             callback.put(f"layers.{i}.thickness", d, mi.ParamFlags.Differentiable)
             ix.traverse(callback, f"layers.{i}.")
@@ -679,7 +679,7 @@ class KernelStack:
 
     def _eval_side(self, inside: bool, si, cos_theta, active, transmission: bool,
                    thickness_scale):
-        mi = _mi()
+        mi = mitsuba_module()
         # RGB/mono variants come here only for a side without films (no phase):
         # any wavelength will do for the Fresnel terms
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
@@ -709,7 +709,7 @@ class KernelStack:
                        thickness_scale, wl):
         """Exact ``R`` [, ``T``] at the wavelengths ``wl`` (``mi.Spectrum``) in an
         RGB/mono variant, through every film (the colour gradients)."""
-        mi = _mi()
+        mi = mitsuba_module()
         side = self._full_side(inside, transmission)
 
         def index(ix):
@@ -746,7 +746,7 @@ class KernelStack:
                 return self._eval_side(flag, si, cos_theta, active, transmission, None)
             R, T = plan.colour.lookup(cos_theta, scale, active)
             if transmission and T is None:
-                T = _mi().Spectrum(0.0)
+                T = mitsuba_module().Spectrum(0.0)
             if self.colour_gradients(si, active):
                 sampler = GradientSampler.get()
                 wl = sampler.wavelengths(si)
@@ -764,7 +764,7 @@ class KernelStack:
     def colour_gradients(self, si, active=True) -> bool:
         """Whether a film thickness or an index of this stack carries gradients
         (RGB/mono AD variants; decided when the kernel is traced)."""
-        if not dr.is_diff_v(_mi().Float):
+        if not dr.is_diff_v(mitsuba_module().Float):
             return False
         media = [self.ambient, self.substrate] + list(self.indices)
         return self._differentiating() or any(
@@ -804,7 +804,7 @@ def _index_grads(side: _Side, si, active) -> bool:
     """True if some film index of ``side`` carries gradients (AD variants): the loop
     buffers are plain data, so such a side is evaluated unrolled through its
     textures. Traces one texture evaluation per film (dropped unless used)."""
-    if not dr.is_diff_v(_mi().Float):
+    if not dr.is_diff_v(mitsuba_module().Float):
         return False
     return any(dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
                for ix, _, _ in side.films)
@@ -820,7 +820,7 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
 
 
 #: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).
-_TABLE_CACHE = _tables.TableCache()
+TABLE_CACHE = tabulate_base.TableCache()
 
 
 def _tables_cache(stack: KernelStack, side: _Side):
@@ -833,7 +833,7 @@ def _tables_cache(stack: KernelStack, side: _Side):
     """
     import hashlib
 
-    mi = _mi()
+    mi = mitsuba_module()
     h = hashlib.sha1()
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]
     values = {}
@@ -847,18 +847,18 @@ def _tables_cache(stack: KernelStack, side: _Side):
     h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
     transmission = side.transmission and not side.opaque
     max_texels = (AUTO_MAX_TEXELS // (2 if transmission else 1) if stack.tabulate == "auto"
-                  else _tables.MAX_TEXELS)
+                  else tabulate_base.MAX_TEXELS)
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
                    stack.table_error, stack.spectral_resolution, max_texels)).encode())
     key = h.hexdigest()
-    found, table = _TABLE_CACHE.get(key)
+    found, table = TABLE_CACHE.get(key)
     if found:
         return table
 
-    data = _side_data(side, transmission)
+    data = side_data(side, transmission)
     table = _band_tables.build_table(data, stack.table_error, GRID, max_texels,
                                      stack.spectral_resolution)
-    _TABLE_CACHE.put(key, table)
+    TABLE_CACHE.put(key, table)
     return table
 
 
@@ -879,7 +879,7 @@ def _index_function(ix: SpectralIndex, real: bool = False, channel: complex | No
     return f
 
 
-def _side_data(side: _Side, transmission: bool, channel: dict | None = None) -> _tables.SideData:
+def side_data(side: _Side, transmission: bool, channel: dict | None = None) -> tabulate_base.SideData:
     """The float64 build data (:class:`tables.SideData`) of ``side``; ``channel`` maps
     media (by ``id``) given per channel to their index in the channel built."""
     channel = channel or {}
@@ -893,7 +893,7 @@ def _side_data(side: _Side, transmission: bool, channel: dict | None = None) -> 
         return _rt(n0_, cos0, films, n_exit, wl, incoherent, transmission)
 
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]
-    return _tables.SideData(
+    return tabulate_base.SideData(
         n0=on(side.n0, real=True), films=[(on(ix), scalar(d)) for ix, d, _ in side.films],
         n_exit=on(side.exit, real=True) if side.exit_real else on(side.exit),
         transmission=transmission, rt=rt,
@@ -907,10 +907,10 @@ def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.n
     angle ``cos`` and wavelength (shape ``(len cos, len wavelengths)`` each), as
     the colour tables see it (spectral values of every medium)."""
     side = stack.plan[inside]
-    data = with_absorbing(_side_data(side, True))
+    data = with_absorbing(side_data(side, True))
     wl = np.asarray(wavelengths, np.float64)
     rows = np.tile(np.arange(wl.size), cos.size)
-    out = _tables._evaluate(data, np.repeat(cos, wl.size), rows, wl, _tables._indices(data, wl))
+    out = tabulate_base.evaluate_side(data, np.repeat(cos, wl.size), rows, wl, tabulate_base.side_indices(data, wl))
     out = out.reshape(cos.size, wl.size, 2)
     T = np.zeros_like(out[..., 0]) if side.opaque else out[..., 1]
     return out[..., 0], T

@@ -41,7 +41,7 @@ import drjit as dr
 from thinfilm_mi.render.amplitudes import Shape, depolarizing_shape, polarised_response
 from thinfilm_mi.render.colour import colour_channels
 from thinfilm_mi.render.kernel import KernelStack
-from thinfilm_mi.render.textures import _mi
+from thinfilm_mi.render.textures import mitsuba_module
 
 
 
@@ -100,7 +100,7 @@ class PolarizedMode(SpectralMode):
         return a.select(mask, b)
 
     def value(self, weight, lobe: Shape, ctx, wi, wo, normal=None):
-        mi = _mi()
+        mi = mitsuba_module()
         if lobe is self.depolarized:
             return mi.depolarizer(mi.UnpolarizedSpectrum(weight))
         M = sp_matrix(weight, lobe)
@@ -121,7 +121,7 @@ class PolarizedMode(SpectralMode):
 def sp_matrix(weight, shape: Shape):
     """The Mueller matrix ``weight * shape`` in the s/p frame of the plane of
     incidence (``mi.Spectrum`` of a polarized variant)."""
-    mi = _mi()
+    mi = mitsuba_module()
     w = mi.UnpolarizedSpectrum(weight)
     zero = dr.zeros(mi.UnpolarizedSpectrum)
     b, c_re, c_im = w * shape.b, w * shape.c_re, w * shape.c_im
@@ -149,7 +149,7 @@ _MODES = {"spectral": SpectralMode(), "polarized": PolarizedMode(), "colour": Co
 
 def current() -> SpectralMode:
     """The mode of the current Mitsuba variant (checked by :func:`kernel.check_variant`)."""
-    mi = _mi()
+    mi = mitsuba_module()
     if colour_channels() is not None:
         return _MODES["colour"]
     return _MODES["polarized" if mi.is_polarized else "spectral"]

@@ -17,8 +17,8 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.catalog import MAX_INDEX, MIN_INDEX
-from thinfilm_mi.render.textures import _mi, texture_range
+from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
+from thinfilm_mi.render.textures import mitsuba_module, texture_range
 
 #: Largest microfacet roughness accepted (``alpha``, ``alpha_u``, ``alpha_v``):
 #: beyond ~1 a Beckmann/GGX surface is already near-uniform; 100 leaves room
@@ -138,7 +138,7 @@ class ParameterGuard:
     def __init__(self, bsdf, plugin: str):
         self.plugin = plugin
         self._restoring = None
-        params = _mi().traverse(bsdf)
+        params = mitsuba_module().traverse(bsdf)
         self._valid = {k: _copy(params[k]) for k in params.keys()}
 
     def changed(self, bsdf, refresh, keys=None) -> None:
@@ -163,7 +163,7 @@ class ParameterGuard:
             if self._restoring == "refresh":
                 refresh(None)
             return
-        mi = _mi()
+        mi = mitsuba_module()
         params = mi.traverse(bsdf)
         try:
             changed = [key for key in params.keys()

@@ -30,7 +30,7 @@ GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
                    int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)
 
 
-def _mi():
+def mitsuba_module():
     import mitsuba as mi
     return mi
 
@@ -44,7 +44,7 @@ def new_object(plugin: str, **props):
     """A Mitsuba object of the current variant from plain properties, made by the
     plugin manager directly (thread-safe under parallel loading; see the module
     docstring for why not ``mi.load_dict``)."""
-    mi = _mi()
+    mi = mitsuba_module()
     p = mi.Properties(plugin)
     for k, v in props.items():
         p[k] = v
@@ -76,7 +76,7 @@ def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
     uniform spectrum's one value is read as its mean, without a kernel launch
     (~40 us each; a stack's constant films have two such textures apiece).
     """
-    mi = _mi()
+    mi = mitsuba_module()
     wl = np.asarray(wavelengths, dtype=np.float64).ravel()
     n = wl.size
     if tex.class_name() == "UniformSpectrum":
@@ -109,7 +109,7 @@ def _bitmap(tex):
     if not tex.class_name().startswith("BitmapTextureImpl"):
         return None
     try:
-        data = _mi().traverse(tex)["data"]
+        data = mitsuba_module().traverse(tex)["data"]
     except Exception:  # noqa: BLE001 - not the bitmap we know
         return None
     arr = np.asarray(np.array(data), dtype=np.float32)
@@ -125,7 +125,7 @@ def _texel_range(tex, mono: bool):
     texels: bilinear or nearest interpolation), or ``None`` where the texels are not
     the values: another texture, or RGB in spectral variants (stored as coefficients
     of Mitsuba's sRGB upsampling model unless ``raw``; a raw one has no spectrum)."""
-    mi = _mi()
+    mi = mitsuba_module()
     found = _bitmap(tex)
     if found is None:
         return None
@@ -165,7 +165,7 @@ def texture_range(tex, mono: bool = False):
     tabulated spectra, a dense sample for procedural textures. ``mono``:
     evaluate ``eval_1`` (as a scale texture is read) instead of ``eval``.
     """
-    mi = _mi()
+    mi = mitsuba_module()
     if tex.class_name() == "UniformSpectrum":
         v = scalar(tex.mean())
         return v, v
@@ -224,9 +224,9 @@ def check_texture_range(tex, what: str, lo: float = -math.inf, hi: float = math.
     rng = texture_range(tex, mono)
     if rng is None:
         found = _bitmap(tex)
-        if found is not None and not mono and found[0].shape[2] == 3 and _mi().is_spectral:
+        if found is not None and not mono and found[0].shape[2] == 3 and mitsuba_module().is_spectral:
             raise ThinFilmError(f"{what}: an RGB bitmap with raw=true has no spectrum in the "
-                                f"{_mi().variant()!r} variant (Mitsuba refuses to evaluate it "
+                                f"{mitsuba_module().variant()!r} variant (Mitsuba refuses to evaluate it "
                                 "when rendering); drop raw, or give a one-channel bitmap")
         return
     vmin, vmax = rng

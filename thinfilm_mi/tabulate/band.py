@@ -25,10 +25,10 @@ angle axis), the exact ``R`` (float64) is integrated by adaptive Simpson along
 weights, ``I_b = ∫ R(ν) B((ν - ν_b) / w) dν``:
 
 * the first level samples the amplitudes ``N``, ``D`` of the recursion
-  (``R = |N|²/|D|²``, :func:`_smooth_terms`) 32 times per interference fringe
+  (``R = |N|²/|D|²``, :func:`smooth_terms`) 32 times per interference fringe
   of the whole stack (:func:`first_step`); ``N`` and ``D`` are smooth where
   ``R`` has resonances, so every resonance shows as a zero of ``D`` near the
-  real axis, found on the cubic through four samples (:func:`_near_zeros`),
+  real axis, found on the cubic through four samples (:func:`near_zeros`),
   however narrow it is;
 * a panel is halved (two new exact values) until Simpson's error estimate is
   within :data:`TOLERANCE` times its width *and* it is no wider than
@@ -65,11 +65,10 @@ import numpy as np
 
 from thinfilm_mi.colour import cie
 from thinfilm_mi.optics.core import Cx
-from thinfilm_mi.tabulate.exact import (GHOST, GRAZING_COS, HALF_PI, MAX_U, MAX_V, SIGMA_MAX, SIGMA_MIN, SPLIT_ENDS,
-                     SideData, Table, _bspline_midpoints, band_cos, _evaluate, _indices, 
-                     bspline_coefficients,  tir_kind,
-                     with_ghosts)
+from thinfilm_mi.tabulate.base import (GHOST, GRAZING_COS, HALF_PI, SIGMA_MAX, SIGMA_MIN, SPLIT_ENDS, SideData, Table, bspline_midpoints, band_cos, evaluate_side, side_indices, bspline_coefficients, tir_kind, with_ghosts)
+from thinfilm_mi.tabulate.base import MAX_U, MAX_V
 from thinfilm_mi.tabulate import exact as _tables
+from thinfilm_mi.tabulate import base as tabulate_base
 
 __all__ = ["build_table", "REFERENCE_WAVELENGTH", "sigma_nu"]
 
@@ -135,7 +134,7 @@ def sigma_nu(resolution: float) -> float:
 
 
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
-                max_texels: int = _tables.MAX_TEXELS, resolution: float = 0.0) -> Table | None:
+                max_texels: int = tabulate_base.MAX_TEXELS, resolution: float = 0.0) -> Table | None:
     """The table of one side: of the exact values (:func:`tables.build_table`) if
     one resolves them within ``error`` (1-3 films: unchanged by band-limiting),
     else, if ``resolution`` > 0, of ``R_σ`` (:func:`build_band_table`); ``None``
@@ -284,10 +283,10 @@ class Rows:
         wl, inv = np.unique(1.0 / nu, return_inverse=True)
         if wl.size == 1:     # a 1-element buffer would trace as a scalar: another kernel
             wl = np.repeat(wl, 2)
-        idx = _indices(self.side, wl)
+        idx = side_indices(self.side, wl)
         cos = self._cos(xs, r, idx, inv)
         self.points += cos.size
-        return _evaluate(self.side, cos, inv, wl, idx), cos
+        return evaluate_side(self.side, cos, inv, wl, idx), cos
 
     def _cos(self, xs, r, idx, inv):
         """cos θ_i at the points of rows ``xs[r]`` at the wavelengths ``inv`` of the
@@ -305,10 +304,10 @@ class Rows:
         ``(rows, P, C)``), ``cos`` there, and the resonances panels must resolve
         (:class:`_Resonances`).
 
-        The amplitudes ``N``, ``D`` of :func:`_smooth_terms` (``R = |N|²/|D|²``)
+        The amplitudes ``N``, ``D`` of :func:`smooth_terms` (``R = |N|²/|D|²``)
         are smooth where ``R`` has resonances: a resonance is a zero of ``D_s``
         or ``D_p`` just off the real axis, found on the cubic through the
-        samples (:func:`_near_zeros`) even where it is far narrower than the
+        samples (:func:`near_zeros`) even where it is far narrower than the
         samples' step; the panels around it are graded by their distance to the
         zero (:class:`_Resonances`: at the zero itself, its distance from the
         axis, the resonance's half width), and the adaptive rule then resolves
@@ -319,17 +318,17 @@ class Rows:
             f, cos = self._exact(xs, rows_of, np.tile(nu_pts, R))
             return f.reshape(R, P, C), cos.reshape(R, P), _Resonances.none()
         wl = 1.0 / nu_pts
-        idx = _indices(self.side, wl)
+        idx = side_indices(self.side, wl)
         cos = self._cos(xs, rows_of, idx, np.tile(np.arange(P), R)).reshape(R, P)
-        terms = _smooth_terms(self.side, np.ascontiguousarray(cos).ravel(),
+        terms = smooth_terms(self.side, np.ascontiguousarray(cos).ravel(),
                               np.tile(np.arange(P), R), wl, idx)
         self.points += cos.size
         terms = terms.reshape(R, P, -1)
-        f = _powers_of(terms, self.side.transmission)
+        f = powers_of(terms, self.side.transmission)
         f = np.where((cos <= 0.0)[..., None], np.array([1.0, 0.0][:C]), f)
         # zeros of D_s and D_p within RESOLVE_DISTANCE sample steps of the axis
         # (positions and distances in bins)
-        r, pos, d = (np.concatenate(v) for v in zip(*(_near_zeros(terms, k) for k in (2, 6))))
+        r, pos, d = (np.concatenate(v) for v in zip(*(near_zeros(terms, k) for k in (2, 6))))
         return f, cos, _Resonances(r, self.step * pos,
                                    np.maximum(self.step * d, MIN_PANEL), self.nb)
 
@@ -479,7 +478,7 @@ class Rows:
         under D65, A and F11 (an array of 3; ``∫ R W dλ = ∫ R W(1/ν) dν / ν²``;
         ``R_σ``'s colour weights the bins by the Gaussian-smoothed weights)."""
         wl_b = 1.0 / self.wavenumbers
-        idx = _indices(self.side, wl_b)
+        idx = side_indices(self.side, wl_b)
         nb = wl_b.size
         cos = self._cos(xs, np.repeat(np.arange(xs.size), nb), idx,
                         np.tile(np.arange(nb), xs.size)).reshape(xs.size, nb)
@@ -610,13 +609,13 @@ def _round(rows: Rows, kind: str, nu: int):
         segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *ends), 0, 1)
                 for part, ends in zip((nodes[:, :m], nodes[:, m:]), SPLIT_ENDS)]
         cu = [bspline_coefficients(s, axis=1) for s in segs]
-        approx_u = np.concatenate([_bspline_midpoints(c[g:-g], 1, g, m) for c in cu], axis=1)
+        approx_u = np.concatenate([bspline_midpoints(c[g:-g], 1, g, m) for c in cu], axis=1)
         cu = np.concatenate(cu, axis=1)
         real = np.arange(nu)
         cols = real + g + np.where(real >= m, 2 * g, 0)
     else:
         cu = bspline_coefficients(nodes, axis=1)
-        approx_u = _bspline_midpoints(cu[g:-g], 1, g, nu)
+        approx_u = bspline_midpoints(cu[g:-g], 1, g, nu)
         real = np.arange(nu) + g
         cols = np.arange(nu) + g
     coeffs = bspline_coefficients(cu, axis=0)
@@ -627,7 +626,7 @@ def _round(rows: Rows, kind: str, nu: int):
     # the spline along v through node column j: the u spline's (1, 4, 1) / 6 of
     # the coefficients
     cv = (coeffs[:, cols - 1] + 4.0 * coeffs[:, cols] + coeffs[:, cols + 1]) / 6.0
-    dev = np.abs(mid_v[:, real] - _bspline_midpoints(cv, 0, g, nv)).max(axis=-1)
+    dev = np.abs(mid_v[:, real] - bspline_midpoints(cv, 0, g, nv)).max(axis=-1)
     cos_n = _node_cos(rows, xn[real], tv[g:-g])
     keep = (cos_n[:-1] >= GRAZING_COS) & (cos_n[1:] >= GRAZING_COS)
     err_v = float(np.max(np.where(keep, dev, 0.0)))
@@ -637,13 +636,13 @@ def _round(rows: Rows, kind: str, nu: int):
 def _node_cos(rows: Rows, xs: np.ndarray, bins: np.ndarray) -> np.ndarray:
     """cos θ_i of rows ``xs`` at the bins ``bins``: shape ``(len bins, len xs)``."""
     wl = 1.0 / rows.wavenumbers[bins]
-    idx = _indices(rows.side, wl)
+    idx = side_indices(rows.side, wl)
     cos = rows._cos(xs, np.tile(np.arange(xs.size), len(bins)), idx,
                     np.repeat(np.arange(len(bins)), xs.size))
     return cos.reshape(len(bins), xs.size)
 
 
-#: :func:`_smooth_terms` runs without the render kernels' power-of-two
+#: :func:`smooth_terms` runs without the render kernels' power-of-two
 #: rescaling (it would make the amplitudes jump along λ): |N|, |D| grow by at
 #: most ~2.8 per film, within float64 to ~600 films. Deeper stacks, and sides
 #: with incoherent films (whose evaluator has no such amplitudes), are sampled
@@ -656,7 +655,7 @@ def _smooth_applies(side: SideData) -> bool:
             and len(side.fringe_films) == len(side.films))
 
 
-def _smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
+def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
                   indices) -> np.ndarray:
     """The stack's projective amplitudes at points ``(cos0[i], wl[rows[i]])``:
     shape ``(points, C)`` with channels ``Re, Im`` of ``N_s, D_s, N_p, D_p``
@@ -664,7 +663,7 @@ def _smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
     |D|^2``, ``T = |T|^2 f / |D|^2``, :func:`optics._recursion`).
 
     The Rouard recursion in float64 as a Dr.Jit loop over the films, with the
-    step of :func:`optics._rouard_step` (no division), scaled after each film
+    step of :func:`optics.rouard_step` (no division), scaled after each film
     by ``1 / sqrt(|a_j|^2 + |a_j+1|^2)``, a smooth function of the wavelength
     (the render kernels' power-of-two rescaling is not): every channel is then
     an analytic function of λ without the resonant denominator ``1 / D``, and
@@ -685,13 +684,13 @@ def _smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
 
     real = not any(np.any(n.imag) for n in film_n)
     n0_max = float(np.max(n0))
-    cos, beta2, q0 = op._incidence(per_row(n0), float64_array(cos0))
+    cos, beta2, q0 = op.incidence(per_row(n0), float64_array(cos0))
     n0v = per_row(n0)
     wlv = per_row(wl)
     beta = dr.sqrt(beta2)
     zero = 0.0 * cos
     exit_cx = Cx(per_row(n_exit.real), per_row(n_exit.imag) if np.any(n_exit.imag) else 0.0)
-    n_ex, q_ex, a_ex = op._exit_admittances(exit_cx, beta2, n0_max * n0_max)
+    n_ex, q_ex, a_ex = op.exit_admittances(exit_cx, beta2, n0_max * n0_max)
     re = np.concatenate([n.real for n in film_n])
     buf_re = float64_array(re)
     buf_im = None if real else float64_array(np.concatenate([n.imag for n in film_n]))
@@ -705,17 +704,17 @@ def _smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
         i = j * width + at
         m = Cx(dr.gather(Float64, buf_re, i), 0.0 if real else dr.gather(Float64, buf_im, i))
         d = dr.gather(Float64, thick, j)
-        q = op._guard_zero_q(m, op._normal_index(m, beta2, n0_max * n0_max, n2_min), beta, zero)
-        E = op._phase_factor(q, d * inv_wl, True)
+        q = op.guard_zero_q(m, op.normal_index_bounded(m, beta2, n0_max * n0_max, n2_min), beta, zero)
+        E = op.phase_factor(q, d * inv_wl, True)
         mag2 = 1.0 if real else dr.exp((-4.0 * math.pi) * (q.im * d * inv_wl))
-        inv_m2 = 1.0 / (m.re * m.re) if real else op._inv(m.square())
-        return {"s": q, "p": op._cmul(q, Cx.of(inv_m2))}, E, mag2
+        inv_m2 = 1.0 / (m.re * m.re) if real else op.cinv(m.square())
+        return {"s": q, "p": op.cmul(q, Cx.of(inv_m2))}, E, mag2
 
     def full(z):
         return (zero + z.re, zero + z.im)
 
     def step(a, b, E_b, N, D, T, mag2):
-        N, D = op._rouard_step(a, b, E_b, N, D)
+        N, D = op.rouard_step(a, b, E_b, N, D)
         s2 = 1.0 / (a.abs2() + b.abs2())
         scale = dr.sqrt(s2)
         return N * scale, D * scale, T * (4.0 * a.abs2() * mag2 * s2)
@@ -736,7 +735,7 @@ def _smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
         return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
 
     (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, bsr, bsi, bpr, bpi, Er, Ei) = \
-        dr.while_loop(state, op._films_left, op._loop_body(body), label="thinfilm_band")
+        dr.while_loop(state, op.films_left, op.loop_body(body), label="thinfilm_band")
     a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0v * n0v)), 0.0)}
     out = []
     ts = []
@@ -747,14 +746,14 @@ def _smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
         ts.append(T)
     if transmission:
         grazing = cos <= 0.0
-        fac = op._power_factors(n0v, q0, n_ex, q_ex, grazing, 1.0)
+        fac = op.power_factors(n0v, q0, n_ex, q_ex, grazing, 1.0)
         out += [dr.select(grazing, 0.0, ts[0] * fac["s"]), dr.select(grazing, 0.0, ts[1] * fac["p"])]
     dr.eval(*out)
     return np.stack([np.array(v, dtype=np.float64) for v in out], axis=-1)
 
 
-def _powers_of(terms: np.ndarray, transmission: bool) -> np.ndarray:
-    """``R`` [, ``T``] (last axis) from :func:`_smooth_terms` channels (any leading shape)."""
+def powers_of(terms: np.ndarray, transmission: bool) -> np.ndarray:
+    """``R`` [, ``T``] (last axis) from :func:`smooth_terms` channels (any leading shape)."""
     Ns = terms[..., 0] ** 2 + terms[..., 1] ** 2
     Ds = terms[..., 2] ** 2 + terms[..., 3] ** 2
     Np = terms[..., 4] ** 2 + terms[..., 5] ** 2
@@ -769,7 +768,7 @@ def _powers_of(terms: np.ndarray, transmission: bool) -> np.ndarray:
     return np.stack([R, T], axis=-1)
 
 
-def _near_zeros(samples: np.ndarray, channel: int) -> tuple:
+def near_zeros(samples: np.ndarray, channel: int) -> tuple:
     """Zeros of the complex function ``samples[..., channel] + i samples[...,
     channel + 1]`` (shape ``(rows, n, K)``, smooth on the samples' scale) near the
     real axis: ``(row, position, distance)`` arrays, position a sample

@@ -48,10 +48,9 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
-from thinfilm_mi.colour.cie import (colour_differences, colour_weights, normalised_weights,
-                                    trapezoid_weights)
-from thinfilm_mi.tabulate.exact import _u_nodes_cos, u_texel
-from thinfilm_mi.render.textures import _mi
+from thinfilm_mi.colour.cie import (colour_differences, colour_weights, normalised_weights)
+from thinfilm_mi.tabulate.base import u_nodes_cos, u_texel
+from thinfilm_mi.render.textures import mitsuba_module
 
 #: The nodes are dense enough when the 4-point rule predicts the integrals at
 #: the midpoints within this CIEDE2000 (as colours under D65: R, and T, of every
@@ -272,7 +271,7 @@ class Axis:
     def cos(self, nodes: int) -> np.ndarray:
         """cos θ at the ``nodes`` nodes (``nodes / 2`` per segment of a split axis)."""
         s = np.arange(nodes, dtype=np.float64)
-        return _u_nodes_cos(s, np.float64(self.n0), np.float64(self.n_exit), self.kind, nodes,
+        return u_nodes_cos(s, np.float64(self.n0), np.float64(self.n_exit), self.kind, nodes,
                             ghost=0)
 
     def midpoints(self, nodes: int) -> np.ndarray:
@@ -292,7 +291,7 @@ class ColourTable:
 
     def __init__(self, values: np.ndarray, axis: Axis, channels: int, transmission: bool,
                  scale_max: float | None):
-        mi = _mi()
+        mi = mitsuba_module()
         self.axis = axis
         self.channels = channels
         self.transmission = transmission
@@ -324,7 +323,7 @@ class ColourTable:
         clamped: the sRGB channels of a saturated interference colour lie outside
         [0, 1] (the integrals have negative weights), exactly as a spectral render
         converted to sRGB gives them; Y stays within [0, 1]."""
-        mi = _mi()
+        mi = mitsuba_module()
         cos_i = dr.clip(cos_i, 0.0, 1.0)
         sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
         x = u_texel(cos_i, sin_i, self._n0, self._n_exit, self.axis.kind, self._nu)
@@ -341,7 +340,7 @@ class ColourTable:
         return R, (mi.Spectrum(*res[C:2 * C]) if C > 1 else mi.Spectrum(res[C]))
 
 
-def _midpoints4(values: np.ndarray, axis: int, mirror: bool = False) -> np.ndarray:
+def midpoints4(values: np.ndarray, axis: int, mirror: bool = False) -> np.ndarray:
     """Values halfway between uniform nodes along ``axis`` by the 4-point Lagrange
     rule ``(-f0 + 9 f1 + 9 f2 - f3) / 16`` (the Dubuc-Deslauriers interpolatory
     subdivision, exact for cubics). At the ends: the function continued as an
@@ -365,7 +364,7 @@ def _midpoints4(values: np.ndarray, axis: int, mirror: bool = False) -> np.ndarr
     return np.moveaxis(mid, 0, axis)
 
 
-def _interleave(coarse: np.ndarray, mid: np.ndarray, axis: int) -> np.ndarray:
+def interleave(coarse: np.ndarray, mid: np.ndarray, axis: int) -> np.ndarray:
     shape = list(coarse.shape)
     shape[axis] = coarse.shape[axis] + mid.shape[axis]
     out = np.empty(shape, coarse.dtype)
@@ -382,7 +381,7 @@ def _linear_ok(values: np.ndarray, axis: int, mirror: bool, channels: int) -> bo
     :data:`LINEAR_DE` and :data:`LINEAR_ABS` of the 4-point rule at every midpoint."""
     f = np.moveaxis(values, axis, 0)
     lin = 0.5 * (f[:-1] + f[1:])
-    mid = np.moveaxis(_midpoints4(values, axis, mirror), axis, 0)
+    mid = np.moveaxis(midpoints4(values, axis, mirror), axis, 0)
     return bool(np.all(close_each(lin, mid, channels, 0, LINEAR_DE, LINEAR_ABS)))
 
 
@@ -413,7 +412,7 @@ def build(sources: list, weights_kind: str, transmission: bool, axis: Axis,
     values = integrate(sources, weights_kind, axis.cos(nu), [fixed_scale])   # (1, nu, kC)
     open_u = np.ones(nu - seg, bool)                    # intervals along the angle
     while open_u.any() and nu // seg < MAX_NODES:
-        mid = np.concatenate([_midpoints4(a, 1, mirror) for a in _segments(values, seg)],
+        mid = np.concatenate([midpoints4(a, 1, mirror) for a in _segments(values, seg)],
                              axis=1)
         idx = np.flatnonzero(open_u)
         exact = integrate(sources, weights_kind, axis.midpoints(nu)[idx], [fixed_scale])
@@ -427,7 +426,7 @@ def build(sources: list, weights_kind: str, transmission: bool, axis: Axis,
 
 def _interleave_u(values: np.ndarray, mid: np.ndarray, seg: int) -> np.ndarray:
     """Nodes and midpoints interleaved along the angle (axis 1), segment by segment."""
-    return np.concatenate([_interleave(a, b, 1) for a, b in
+    return np.concatenate([interleave(a, b, 1) for a, b in
                            zip(_segments(values, seg), _segments(mid, seg))], axis=1)
 
 
@@ -443,13 +442,13 @@ def _for_lookup(values: np.ndarray, axis: Axis, C: int, transmission: bool,
         parts = _segments(values, seg)
         if all(_linear_ok(a, 1, mirror, C) for a in parts):
             break
-        values = np.concatenate([_interleave(a, _midpoints4(a, 1, mirror), 1) for a in parts],
+        values = np.concatenate([interleave(a, midpoints4(a, 1, mirror), 1) for a in parts],
                                 axis=1)
         nu = axis.refined(nu)
     while scale_max is not None and nu * ns * 2 <= max_texels:
         if _linear_ok(values, 0, False, C):
             break
-        values, ns = _interleave(values, _midpoints4(values, 0), 0), 2 * ns - 1
+        values, ns = interleave(values, midpoints4(values, 0), 0), 2 * ns - 1
     return ColourTable(values, axis, C, transmission, scale_max)
 
 
@@ -477,10 +476,10 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
         j = np.arange(nu)
         left = np.where(j % m > 0, (j // m) * (m - 1) + j % m - 1, -1)
         right = np.where(j % m < m - 1, (j // m) * (m - 1) + j % m, -1)
-        um = np.concatenate([_midpoints4(a, 1, mirror) for a in _segments(values, seg)],
+        um = np.concatenate([midpoints4(a, 1, mirror) for a in _segments(values, seg)],
                             axis=1)                                      # (ns, nu-seg)
-        sm = _midpoints4(values, 0)                                      # (ns-1, nu)
-        cm = _midpoints4(um, 0)                                          # (ns-1, nu-seg)
+        sm = midpoints4(values, 0)                                      # (ns-1, nu)
+        cm = midpoints4(um, 0)                                          # (ns-1, nu-seg)
         need_um = np.zeros(um.shape[:2], bool)
         need_um[:-1] |= open_
         need_um[1:] |= open_
@@ -512,7 +511,7 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
         node_l = (u_int // (m - 1)) * m + u_int % (m - 1)              # its left node
         failed = (bad_cm | bad_um[:-1] | bad_um[1:] | bad_sm[:, node_l]
                   | bad_sm[:, node_l + 1]) & open_
-        values = _interleave(_interleave_u(values, um, seg), _interleave_u(sm, cm, seg), 0)
+        values = interleave(_interleave_u(values, um, seg), _interleave_u(sm, cm, seg), 0)
         nu, ns = axis.refined(nu), 2 * ns - 1
         S = np.linspace(0.0, scale_max, ns)
         open_ = np.zeros((ns - 1, nu - seg), bool)

@@ -46,8 +46,8 @@ import numpy as np
 from thinfilm_mi.colour import cie
 from thinfilm_mi.tabulate import colour as integrated
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
-from thinfilm_mi.tabulate.exact import u_texel
-from thinfilm_mi.render.textures import _mi
+from thinfilm_mi.tabulate.base import u_texel
+from thinfilm_mi.render.textures import mitsuba_module
 
 #: Relative error of the Chebyshev interpolation of ``G(k_d, r)`` in ``r``.
 SERIES_TOLERANCE = 1e-5
@@ -74,7 +74,7 @@ LINEAR_ABS = 3e-4
 
 def _linear_error(values: np.ndarray, axis: int) -> float:
     f = np.moveaxis(values, axis, 0)
-    mid = np.moveaxis(integrated._midpoints4(values, axis, True), axis, 0)
+    mid = np.moveaxis(integrated.midpoints4(values, axis, True), axis, 0)
     return float(np.max(np.abs(0.5 * (f[:-1] + f[1:]) - mid)))
 
 
@@ -116,7 +116,7 @@ def lagrange_basis(nodes: np.ndarray, r: np.ndarray) -> np.ndarray:
 
 def _subdivide(values: np.ndarray, axis: int) -> np.ndarray:
     """Nodes doubled along ``axis`` by the 4-point rule (an angle axis: even ends)."""
-    return integrated._interleave(values, integrated._midpoints4(values, axis, True), axis)
+    return integrated.interleave(values, integrated.midpoints4(values, axis, True), axis)
 
 
 class DiffuseFactors:
@@ -169,7 +169,7 @@ class ColourDiffuse:
 
     def __init__(self, factors: DiffuseFactors, model: str, channels: str,
                  kd: np.ndarray | None = None):
-        mi = _mi()
+        mi = mitsuba_module()
         self.model = model
         C = 1 if channels == "mono" else 3
         self.C = C
@@ -234,7 +234,7 @@ class ColourDiffuse:
         # new nodes only)
         wl = level_data(level)[0]
         while nu < MAX_NODES:
-            t = integrated._interleave(t, factors.t(axis.midpoints(nu), wl), 0)
+            t = integrated.interleave(t, factors.t(axis.midpoints(nu), wl), 0)
             M2, A2, nodes2 = tables(level, t)
             pred = _subdivide(_subdivide(M, 0), 1)
             same = self._close(pred, nodes, M2, nodes2)
@@ -299,7 +299,7 @@ class ColourDiffuse:
         return [_g(kd, r, self.model) for r in self._r]
 
     def _combine(self, res, kd):
-        mi = _mi()
+        mi = mitsuba_module()
         C = self.C
         out = mi.Spectrum(0.0)
         for j, g in enumerate(self._weights(kd)):
@@ -309,7 +309,7 @@ class ColourDiffuse:
 
     def r_dh_at(self, wavelengths, active=True):
         """``R_dh`` at ``wavelengths`` (``mi.Spectrum``, nm), detached."""
-        mi = _mi()
+        mi = mitsuba_module()
         lo, hi = SPECTRAL_RANGE
         return dr.detach(mi.Spectrum(*[
             self._r_dh.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)[0]
@@ -321,11 +321,11 @@ class ColourDiffuse:
 
     def value(self, cos_i, cos_o, kd, active=True):
         """``π f`` (``mi.Spectrum``): the diffuse term without ``1/π`` and ``cos θ_o``."""
-        mi = _mi()
+        mi = mitsuba_module()
         res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
         return self._combine(res, kd)
 
     def albedo(self, cos_i, kd, active=True):
         """``∫ f cos θ_o dω_o``: the diffuse lobe's albedo for light from ``cos_i``."""
-        mi = _mi()
+        mi = mitsuba_module()
         return self._combine(self._A.eval(mi.Point1f(self._u(cos_i)), active), kd)

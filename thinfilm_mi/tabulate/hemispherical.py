@@ -19,7 +19,6 @@ lossless coating on a white base conserve energy exactly.
 """
 from __future__ import annotations
 
-import math
 from typing import Sequence
 
 import drjit as dr

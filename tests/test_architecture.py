@@ -1,0 +1,109 @@
+"""The package's architecture is a contract (README, "Layout"), checked here.
+
+* The layers: a module imports only from its own layer and the layers below it
+  (``[tool.importlinter]`` in ``pyproject.toml``, run with import-linter's
+  ``lint-imports``). A deliberate bad import makes it fail (the last test).
+* No private name crosses a module boundary: a name that another module needs is
+  public (no leading underscore) and documented.
+* No module is over :data:`MAX_LINES` lines, but for those in :data:`ALGORITHMS`,
+  each one algorithm that reads best in one file.
+"""
+from __future__ import annotations
+
+import ast
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+
+ROOT = Path(__file__).resolve().parent.parent
+PACKAGE = ROOT / "thinfilm_mi"
+MAX_LINES = 600
+#: Modules allowed over MAX_LINES lines, each one algorithm (path -> why).
+ALGORITHMS = {
+    "optics/core.py": "the optics core: Fresnel terms, the Rouard recursion and its loop",
+}
+
+
+def _modules():
+    return sorted(p for p in PACKAGE.rglob("*.py") if "data" not in p.parts)
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _lint_imports() -> str:
+    exe = Path(sys.executable).parent / "lint-imports"
+    return str(exe) if exe.exists() else shutil.which("lint-imports")
+
+
+def test_layers_contract_is_kept():
+    exe = _lint_imports()
+    assert exe, "import-linter is part of the test extra (pip install -e '.[test]')"
+    res = subprocess.run([exe, "--config", str(ROOT / "pyproject.toml")], cwd=ROOT,
+                         capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-2000:]
+    assert "1 kept, 0 broken" in res.stdout
+
+
+def test_no_private_name_is_imported_across_modules():
+    offenders = []
+    for path in _modules():
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        here = _module_name(path)
+        modules = {}   # local alias -> module imported as a module
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0 \
+                    and node.module.startswith("thinfilm_mi"):
+                for alias in node.names:
+                    target = f"{node.module}.{alias.name}"
+                    if (ROOT / (target.replace(".", "/") + ".py")).exists() or \
+                            (ROOT / target.replace(".", "/")).is_dir():
+                        modules[alias.asname or alias.name] = target
+                    elif alias.name.startswith("_") and node.module != here:
+                        offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: "
+                                         f"{alias.name} from {node.module}")
+            elif isinstance(node, ast.Import):
+                for alias in node.names:
+                    if alias.name.startswith("thinfilm_mi") and alias.asname:
+                        modules[alias.asname] = alias.name
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+                    and node.value.id in modules and node.attr.startswith("_")
+                    and not node.attr.startswith("__")):
+                offenders.append(f"{path.relative_to(ROOT)}:{node.lineno}: "
+                                 f"{node.value.id}.{node.attr} ({modules[node.value.id]})")
+    assert not offenders, "\n".join(offenders)
+
+
+def test_modules_are_short_or_one_algorithm():
+    long = []
+    for path in _modules():
+        rel = path.relative_to(PACKAGE).as_posix()
+        n = len(path.read_text(encoding="utf-8").splitlines())
+        if n > MAX_LINES and rel not in ALGORITHMS:
+            long.append(f"{rel}: {n} lines")
+    assert not long, "\n".join(long)
+
+
+def test_a_lower_layer_importing_a_higher_one_breaks_the_contract(tmp_path):
+    """The contract is not vacuous: a copy of the package in which the optics core
+    imports the render layer fails ``lint-imports``."""
+    exe = _lint_imports()
+    copy = tmp_path / "repo"
+    shutil.copytree(PACKAGE, copy / "thinfilm_mi",
+                    ignore=shutil.ignore_patterns("__pycache__", "data"))
+    shutil.copy(ROOT / "pyproject.toml", copy / "pyproject.toml")
+    core = copy / "thinfilm_mi" / "optics" / "core.py"
+    core.write_text(core.read_text(encoding="utf-8")
+                    + "\nfrom thinfilm_mi.render import kernel as _bad  # noqa\n")
+    res = subprocess.run([exe, "--config", str(copy / "pyproject.toml")], cwd=copy,
+                         capture_output=True, text=True,
+                         env={"PYTHONPATH": str(copy), "PATH": "/usr/bin:/bin"})
+    assert res.returncode != 0
+    assert "thinfilm_mi.optics is not allowed to import thinfilm_mi.render" in res.stdout

