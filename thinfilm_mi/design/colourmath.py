@@ -118,16 +118,16 @@ def colour_weights(illuminant: str, observer: int, step: int = 1) -> tuple[np.nd
     ``step`` > 1: every ``step``-th wavelength of that grid (and its last one),
     with the weights of a spectrum interpolated linearly between them (a cheap
     approximation for screening many stacks)."""
+    if step > 1:
+        wl, W, white = colour_weights(illuminant, observer)
+        nodes = np.unique(np.r_[np.arange(0, wl.size, step), wl.size - 1])
+        hat = np.stack([np.interp(wl, wl[nodes], np.eye(nodes.size)[k]) for k in range(nodes.size)])
+        return wl[nodes], hat @ W, white
     from ..colorimetry import integration_wavelengths, spectrum_colour
 
     wl = integration_wavelengths(illuminant)
     values = spectrum_colour(np.eye(wl.size), wl, illuminant, observer, chromatic_adaptation=None)
-    W = np.ascontiguousarray(values.XYZ)
-    if step > 1:
-        nodes = np.unique(np.r_[np.arange(0, wl.size, step), wl.size - 1])
-        hat = np.stack([np.interp(wl, wl[nodes], np.eye(nodes.size)[k]) for k in range(nodes.size)])
-        wl, W = wl[nodes], hat @ W
-    return wl, W, np.asarray(values.white_XYZ, dtype=np.float64)
+    return wl, np.ascontiguousarray(values.XYZ), np.asarray(values.white_XYZ, dtype=np.float64)
 
 
 _EPS = (6.0 / 29.0) ** 3

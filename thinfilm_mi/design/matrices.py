@@ -119,13 +119,13 @@ class _Stack:
         self.T = 4.0 * self.eta0 * self.eta_out.real / np.abs(self.D) ** 2
 
     def powers_from(self, dB, dC):
-        """dR, dT (P, K) from the changes dB, dC (P, K) of [B, C]."""
-        e0 = self.eta0[:, None]
-        r, D = self.r[:, None], self.D[:, None]
+        """dR, dT (..., K) from the changes dB, dC (..., K) of [B, C]."""
+        e0 = self.eta0[..., None]
+        r, D = self.r[..., None], self.D[..., None]
         dr = (e0 * dB * (1.0 - r) - dC * (1.0 + r)) / D
         dR = 2.0 * (np.conj(r) * dr).real
         dD = e0 * dB + dC
-        dT = -2.0 * self.T[:, None] * (np.conj(D) * dD).real / np.abs(D) ** 2
+        dT = -2.0 * self.T[..., None] * (np.conj(D) * dD).real / np.abs(D) ** 2
         return dR, dT
 
     def dM_dthickness(self, j):
@@ -158,26 +158,31 @@ def stack_response(n_in, n_out, films, d, wl, beta2, pol, index_groups=(), deriv
     (P,) wavelengths in nm, ``beta2`` (P,) ``(n_in sin theta)^2``, ``pol`` ``"s"``
     or ``"p"``. ``index_groups``: for each free index a list of the films that
     share it; its derivative is the sum over them (a change of the real part n).
-    The derivatives ``dR``, ``dT`` are (P, L + len(index_groups)); with
-    ``derivatives=False`` they are not computed, and the point arrays may then
-    broadcast against thicknesses of any shape (e.g. points (P, 1) and each
-    ``d[j]`` (B,): R and T of B stacks at once, (P, B)).
+    The derivatives ``dR``, ``dT`` are (P, L + len(index_groups)). The point
+    arrays may broadcast against thicknesses of another shape: points (P, 1) and
+    each ``d[j]`` (B,) give R and T of B stacks at once, (P, B), and derivatives
+    (P, B, K); ``derivatives=False`` skips them.
     """
     st = _Stack(n_in, n_out, films, d, wl, beta2, pol)
     if not derivatives:
         return Response(st.R, st.T)
     L = len(films)
-    P = wl.shape[0]
-    dB = np.zeros((P, L + len(index_groups)), dtype=np.complex128)
-    dC = np.zeros_like(dB)
+    shape = np.shape(st.R)
+    dB, dC = [], []
     for j in range(L):
-        dB[:, j], dC[:, j] = st.through(j, st.dM_dthickness(j))
-    for g, members in enumerate(index_groups):
+        b, c = st.through(j, st.dM_dthickness(j))
+        dB.append(np.broadcast_to(b, shape))
+        dC.append(np.broadcast_to(c, shape))
+    for members in index_groups:
+        b = c = np.zeros(shape, dtype=np.complex128)
         for j in members:
-            b, c = st.through(j, st.dM_dindex(j, 1.0))
-            dB[:, L + g] += b
-            dC[:, L + g] += c
-    dR, dT = st.powers_from(dB, dC)
+            db, dc = st.through(j, st.dM_dindex(j, 1.0))
+            b, c = b + db, c + dc
+        dB.append(b)
+        dC.append(c)
+    if not dB:
+        return Response(st.R, st.T, np.zeros(shape + (0,)), np.zeros(shape + (0,)))
+    dR, dT = st.powers_from(np.stack(dB, axis=-1), np.stack(dC, axis=-1))
     return Response(st.R, st.T, dR, dT)
 
 

@@ -152,8 +152,8 @@ class Merit:
                     r = stack_response(pts(g.n_in), pts(g.n_out), f_films, f_d, pts(g.wl), pts(g.beta2), pol,
                                        groups, derivatives=jac)
                     if back and L and jac:
-                        cols = np.r_[np.arange(L)[::-1], np.arange(L, r.dR.shape[1])]
-                        r = Response(r.R, r.T, r.dR[:, cols], r.dT[:, cols])
+                        cols = np.r_[np.arange(L)[::-1], np.arange(L, r.dR.shape[-1])]
+                        r = Response(r.R, r.T, r.dR[..., cols], r.dT[..., cols])
                 else:
                     needle_idx = [m for m, dm in enumerate(self.problem.materials) if dm.needle]
                     needles = [self._films(g, Design([m], np.zeros(1), design.n))[0] for m in needle_idx]
@@ -200,7 +200,7 @@ class Merit:
     def evaluate(self, design: Design, jac: bool = True, depths=None, report: bool = False):
         """``(e, J)`` — residuals (N,) and their Jacobian (N, K) (``None`` without
         ``jac``); with ``report`` also the list of :class:`TargetValues`. For a
-        batch (``design.d`` of shape (L, B), no ``jac``) ``e`` is (N, B)."""
+        batch (``design.d`` of shape (L, B)) ``e`` is (N, B) and ``J`` (N, B, K)."""
         resp = self._responses(design, depths, jac)
         parts: list = [None] * len(self.terms)      # per target: (e, de, achieved, error)
         pending: dict[str, list] = {"Lab": [], "xy": []}
@@ -208,19 +208,21 @@ class Merit:
             what = t.quantity if t.quantity in ("R", "T", "A") else t.of
             pairs = [self._quantity(resp[key], t, what, idx, jac) for key, idx in rows]
             q = np.stack([p[0] for p in pairs])                      # (angles, n[, B])
-            dq = np.stack([p[1] for p in pairs]) if jac else None    # (angles, n, K)
+            dq = np.stack([p[1] for p in pairs]) if jac else None    # (angles, n[, B], K)
             if t.quantity in ("R", "T", "A"):
                 tol = t.tolerance.reshape((-1,) + (1,) * (q.ndim - 2))
                 e, de = self._kind(t, (q - t.value.reshape(tol.shape)) / tol,
-                                   None if dq is None else dq / t.tolerance[:, None])
+                                   None if dq is None else dq / tol[..., None])
                 parts[i] = (e, de, q, np.abs(e) * tol)
                 continue
             _, W, white = colour_weights(t.illuminant, t.observer, self.colour_step)
             XYZ = np.moveaxis(q, 1, -1) @ W                             # (angles[, B], 3)
-            dXYZ = None if dq is None else np.einsum("nc,ank->ack", W, dq)
+            # (angles[, B], 3, K)
+            dXYZ = None if dq is None else np.swapaxes(np.tensordot(dq, W, axes=([1], [0])), -1, -2)
             if t.quantity == "Y":
                 tol = t.tolerance[0]
-                e, de = self._kind(t, (XYZ[..., 1] - t.value[0]) / tol, None if dXYZ is None else dXYZ[:, 1] / tol)
+                e, de = self._kind(t, (XYZ[..., 1] - t.value[0]) / tol,
+                                   None if dXYZ is None else dXYZ[..., 1, :] / tol)
                 parts[i] = (e, de, XYZ[..., 1], np.abs(e) * tol)
             else:
                 pending[t.space].append((i, XYZ, dXYZ, white))
@@ -242,14 +244,14 @@ class Merit:
                 start = sl.stop
                 tol = self.problem.targets[i].tolerance[0]
                 e = np.moveaxis(r.val[sl], -1, 1) / tol                          # (angles, 3|2[, B])
-                de = None if dXYZ is None else np.einsum("aij,ajk->aik", r.der[sl], dXYZ) / tol
+                de = None if dXYZ is None else np.moveaxis(r.der[sl] @ dXYZ, -2, 1) / tol
                 parts[i] = (e, de, c.val[sl], np.sqrt(np.sum(r.val[sl] ** 2, axis=-1)))
         e_all, j_all, values = [], [], []
         for t, (e, de, achieved, error) in zip(self.problem.targets, parts):
             e = e.reshape((-1,) + e.shape[2:]) if t.quantity != "Y" else e
             e_all.append(e)
             if jac:
-                j_all.append(de.reshape(-1, de.shape[-1]))
+                j_all.append(de.reshape((-1,) + de.shape[2:]) if t.quantity != "Y" else de)
             if report:
                 values.append(TargetValues(t, achieved, error, np.sum(e ** 2, axis=0)))
         e = np.concatenate(e_all)

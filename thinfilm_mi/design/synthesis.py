@@ -161,6 +161,35 @@ def synthesize(merit: Merit, design: Design, max_layers: int, deadline: float = 
     return current
 
 
+def refine_batch(merit: Merit, films: list[int], D: np.ndarray, n: np.ndarray, iterations: int = 12
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Levenberg–Marquardt steps on B stacks of the same ``films`` at once
+    (thicknesses ``D`` (L, B), kept >= 0; free indices fixed at ``n``): each step
+    solves ``(J^T J + lambda diag(J^T J)) delta = -J^T e`` for every stack, keeps
+    it where it lowers that stack's ``sum(e^2)`` (then lambda / 3, else x 4).
+    Returns ``(D, sum(e^2))``: a cheap first descent for many starts."""
+    L = len(films)
+    D = np.array(D, dtype=np.float64)
+    e, J = merit.evaluate(Design(list(films), D, n))
+    J = J[..., :L]
+    cost = np.sum(e * e, axis=0)
+    lam = np.full(D.shape[1], 1e-3)
+    eye = np.eye(L)
+    for _ in range(iterations):
+        JtJ = np.einsum("nbk,nbl->bkl", J, J)
+        g = np.einsum("nbk,nb->bk", J, e)
+        diag = np.einsum("bkk->bk", JtJ) + 1e-12
+        A = JtJ + lam[:, None, None] * diag[:, :, None] * eye
+        step = np.linalg.solve(A, -g[..., None])[..., 0]                     # (B, L)
+        trial = np.maximum(D + step.T, 0.0)
+        e2, J2 = merit.evaluate(Design(list(films), trial, n))
+        cost2 = np.sum(e2 * e2, axis=0)
+        ok = cost2 < cost
+        D[:, ok], e[:, ok], J[:, ok], cost[ok] = trial[:, ok], e2[:, ok], J2[:, ok, :L], cost2[ok]
+        lam = np.where(ok, lam / 3.0, lam * 4.0)
+    return D, cost
+
+
 def hop(merit: Merit, design: Design, deadline: float = math.inf) -> Design:
     """Try every film a half wave thicker and thinner (at the targets' centre
     wavelength), refining each; keep any change that lowers the merit, until none
@@ -195,8 +224,16 @@ def _centre_wavelength(problem: Problem) -> float:
     return float(np.mean(np.concatenate(spectral))) if spectral else 550.0
 
 
+#: Wavelength step (nm) of the colour integrals while synthesising; the final
+#: refinement uses the 1 nm integrals of :mod:`thinfilm_mi.colorimetry`. Spectra of
+#: stacks up to several microns of optical thickness vary over tens of nm, which
+#: linear interpolation between 5 nm samples follows closely.
+SYNTHESIS_COLOUR_STEP = 5
+
 #: Random stacks screened per screened seed (:func:`seed_designs`).
 SCREEN_PER_SEED = 1024
+#: Screened stacks per seed that take a few batched Levenberg–Marquardt steps.
+DESCENT_PER_SEED = 32
 #: Screened seeds of the same materials differ by more than this (nm) in some film.
 SEED_DISTANCE = 20.0
 
@@ -207,11 +244,14 @@ def seed_designs(merit: Merit, count: int, seed: int) -> list[Design]:
     Half of them (rounded up) are single films of each needle material in turn,
     a quarter wave, a half wave, three quarters ... thick at the centre
     wavelength of the targets: synthesis grows them with needles, and adds films
-    at either end. The others are the best of :data:`SCREEN_PER_SEED` random
-    stacks per seed (1 to ``max_layers`` films alternating the needle materials
-    from a random first one, each 10-300 nm; ``numpy.random.default_rng(seed)``),
-    ranked by a merit with colour integrals on a 5 nm grid (all of them at once,
-    :meth:`Merit.merits`).
+    at either end. The others come from :data:`SCREEN_PER_SEED` random stacks
+    per seed (1 to ``max_layers`` films alternating the needle materials from a
+    random first one, each 10-300 nm; ``numpy.random.default_rng(seed)``),
+    ranked by ``merit`` (all of them at once, :meth:`Merit.merits`; :func:`run`
+    passes the merit with colour integrals on a 5 nm grid): the best
+    :data:`DESCENT_PER_SEED` per seed take a few Levenberg–Marquardt steps
+    together (:func:`refine_batch`), and the best of those that differ by more
+    than :data:`SEED_DISTANCE` are the seeds.
     """
     problem = merit.problem
     mats = [i for i, dm in enumerate(problem.materials) if dm.needle]
@@ -229,7 +269,6 @@ def seed_designs(merit: Merit, count: int, seed: int) -> list[Design]:
     if n_screen <= 0:
         return out
     rng = np.random.default_rng(seed)
-    coarse = Merit(problem, colour_step=5)
     by_films: dict[tuple, list[np.ndarray]] = {}
     for _ in range(SCREEN_PER_SEED * n_screen):
         size = int(rng.integers(1, problem.max_layers + 1))
@@ -241,10 +280,18 @@ def seed_designs(merit: Merit, count: int, seed: int) -> list[Design]:
         D = np.array(ds).T                                   # (L, B)
         for lo in range(0, D.shape[1], 256):
             chunk = D[:, lo:lo + 256]
-            ranked += [(v, films, chunk[:, b]) for b, v in enumerate(coarse.merits(list(films), chunk, n))]
+            ranked += [(v, films, chunk[:, b]) for b, v in enumerate(merit.merits(list(films), chunk, n))]
     ranked.sort(key=lambda r: r[0])
+    # the best DESCENT_PER_SEED per seed descend together, then the best distinct ones are seeds
+    descended = []
+    pool = ranked[:DESCENT_PER_SEED * n_screen]
+    for films in {r[1] for r in pool}:
+        D = np.array([r[2] for r in pool if r[1] == films]).T
+        D, cost = refine_batch(merit, list(films), D, n)
+        descended += [(cost[b], films, D[:, b]) for b in range(D.shape[1])]
+    descended.sort(key=lambda r: r[0])
     chosen: list[tuple] = []
-    for _, films, d in ranked:
+    for _, films, d in descended:
         if len(chosen) == n_screen:
             break
         if all(f != films or np.max(np.abs(c - d)) > SEED_DISTANCE for f, c in chosen):
@@ -255,23 +302,27 @@ def seed_designs(merit: Merit, count: int, seed: int) -> list[Design]:
 def run(problem: Problem, *, start: Design | None = None, time_limit: float | None = None,
         progress: Progress | None = None) -> tuple[Merit, Design, list[dict]]:
     """The best design found: from ``start`` (or the problem's), else from
-    :func:`seed_designs`. Returns ``(merit, design, history)``; ``history`` holds
+    :func:`seed_designs`, then :func:`hop`; with colour or Y targets all of this on
+    colour integrals at :data:`SYNTHESIS_COLOUR_STEP`, and a last :func:`refine`
+    on the exact ones. Returns ``(merit, design, history)``; ``history`` holds
     one record per start (``films``, ``merit``, ``seconds``). ``time_limit``
     (seconds): no new start begins after it (the one running finishes its
     current refinement)."""
     merit = Merit(problem)
+    colour = any(t.quantity in ("Y", "colour") for t in problem.targets)
+    fast = Merit(problem, colour_step=SYNTHESIS_COLOUR_STEP) if colour else merit
     t0 = time.perf_counter()
     deadline = t0 + time_limit if time_limit is not None else math.inf
     if start is None and problem.start is not None:
         start = Design([m for m, _ in problem.start], np.array([d for _, d in problem.start]), merit.initial_n())
-    starts = [start] if start is not None else seed_designs(merit, problem.seeds, problem.seed)
+    starts = [start] if start is not None else seed_designs(fast, problem.seeds, problem.seed)
     best, best_value, history = None, math.inf, []
     for i, s in enumerate(starts):
         if best is not None and time.perf_counter() > deadline:
             break
         t1 = time.perf_counter()
-        result = synthesize(merit, s, problem.max_layers, deadline)
-        value = merit.merit(result)
+        result = synthesize(fast, s, problem.max_layers, deadline)
+        value = fast.merit(result)
         history.append({"start": i, "films": len(result.films), "merit": value,
                         "seconds": time.perf_counter() - t1})
         if value < best_value:
@@ -279,7 +330,9 @@ def run(problem: Problem, *, start: Design | None = None, time_limit: float | No
         if progress:
             progress((i + 1) / (len(starts) + 1), f"start {i + 1}/{len(starts)}: {len(result.films)} films, "
                                                  f"merit {value:.4g} (best {best_value:.4g})")
-    best = hop(merit, best, deadline)
+    best = hop(fast, best, deadline)
+    if fast is not merit:
+        best = refine(merit, best)
     if progress:
         progress(1.0, f"half-wave hops: {len(best.films)} films, merit {merit.merit(best):.4g}")
     return merit, best, history
