@@ -30,9 +30,13 @@ def _problem(targets: Any, **overrides) -> Problem:
     return problem
 
 
-def _design_of(problem: Problem, merit: Merit, layers: Any, name: str) -> Design:
-    films = films_from_layers(problem.materials, layers, problem.base, name)
-    return Design([m for m, _ in films], np.array([d for _, d in films], dtype=np.float64), merit.initial_n())
+def _design_of(problem: Problem, layers: Any, name: str) -> tuple[Merit, Design]:
+    """The stack of a ``layers`` string (its materials matched to the problem's,
+    or added) and the merit of the problem with those materials."""
+    films, free = films_from_layers(problem.materials, layers, problem.base, name)
+    merit = Merit(problem)
+    return merit, Design([m for m, _ in films], np.array([d for _, d in films], dtype=np.float64),
+                         merit.initial_n(free))
 
 
 def _finish(problem: Problem, merit: Merit, design: Design, t0: float, history: list,
@@ -66,8 +70,7 @@ def design(targets: Any, *, start: str | None = None, max_layers: int | None = N
         raise ThinFilmError(f"time_limit: expected a number of seconds > 0, got {time_limit!r}")
     first = None
     if start is not None:
-        merit0 = Merit(problem)
-        first = _design_of(problem, merit0, start, "start")
+        _, first = _design_of(problem, start, "start")
         if len(first.films) > problem.max_layers:
             raise ThinFilmError(f"start: {len(first.films)} films, more than max_layers = {problem.max_layers}")
     merit, best, history = run(problem, start=first, time_limit=time_limit, progress=progress)
@@ -79,17 +82,16 @@ def refine(targets: Any, layers: str, *, tolerance: str | ToleranceSpec | None =
     """Refine the thicknesses (and free indices) of ``layers`` for ``targets``,
     no films added; films that reach 0 are removed."""
     t0 = time.perf_counter()
-    problem = _problem(targets)
-    merit = Merit(problem)
-    best = _refine(merit, _design_of(problem, merit, layers, "layers"))
-    return _finish(problem, merit, best, t0, [], tolerance, tolerance_seed)
+    merit, given = _design_of(_problem(targets), layers, "layers")
+    best = _refine(merit, given)
+    return _finish(merit.problem, merit, best, t0, [], tolerance, tolerance_seed)
 
 
 def evaluate(targets: Any, layers: str, *, tolerance: str | ToleranceSpec | None = None,
              tolerance_seed: int = 0) -> DesignResult:
-    """What ``layers`` achieves for ``targets``, unchanged (free indices at their given values)."""
+    """What ``layers`` achieves for ``targets``, unchanged (a free index at the
+    value its films have in ``layers``, see
+    :func:`~thinfilm_mi.design.targets.films_from_layers`)."""
     t0 = time.perf_counter()
-    problem = _problem(targets)
-    merit = Merit(problem)
-    return _finish(problem, merit, _design_of(problem, merit, layers, "layers"), t0, [], tolerance,
-                   tolerance_seed)
+    merit, given = _design_of(_problem(targets), layers, "layers")
+    return _finish(merit.problem, merit, given, t0, [], tolerance, tolerance_seed)

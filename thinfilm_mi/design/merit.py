@@ -114,9 +114,10 @@ class Merit:
             colour_weights(t.illuminant, t.observer, self.colour_step)[0]
 
     # -- optics --------------------------------------------------------------
-    def initial_n(self) -> np.ndarray:
-        """The free indices' given values."""
-        return np.array([self.problem.materials[i].n0.real for i in self.free])
+    def initial_n(self, given: dict | None = None) -> np.ndarray:
+        """The free indices' values: from ``given`` ({material index: n}), else as listed."""
+        given = given or {}
+        return np.array([given.get(i, self.problem.materials[i].n0.real) for i in self.free])
 
     def bounds_n(self) -> list[tuple[float, float]]:
         return [self.problem.materials[i].free for i in self.free]

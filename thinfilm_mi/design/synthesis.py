@@ -314,7 +314,8 @@ def run(problem: Problem, *, start: Design | None = None, time_limit: float | No
     t0 = time.perf_counter()
     deadline = t0 + time_limit if time_limit is not None else math.inf
     if start is None and problem.start is not None:
-        start = Design([m for m, _ in problem.start], np.array([d for _, d in problem.start]), merit.initial_n())
+        start = Design([m for m, _ in problem.start], np.array([d for _, d in problem.start]),
+                       merit.initial_n(problem.start_n))
     starts = [start] if start is not None else seed_designs(fast, problem.seeds, problem.seed)
     best, best_value, history = None, math.inf, []
     for i, s in enumerate(starts):

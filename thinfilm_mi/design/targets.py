@@ -166,6 +166,7 @@ class Problem:
     ambient_spec: str = "1.0"
     substrate_spec: str = ""
     base: Path | None = None          # the targets file's folder (relative material files)
+    start_n: dict | None = None       # free index values the start gives {material index: n}
 
 
 def _fail(where: str, message: str):
@@ -361,20 +362,31 @@ def _target(entry: Any, i: int, media, back_ok: str | None) -> Target:
 
 
 def films_from_layers(materials: list[DesignMaterial], text: Any, base: Path | None = None,
-                      name: str = "layers") -> list[tuple[int, float]]:
-    """``[(material index, nm), ...]`` of a ``layers`` string, each film's material
-    matched to ``materials`` (the same dataset, or an equal constant index); a
-    material not among them is appended to ``materials`` (``needle=False``)."""
-    out = []
+                      name: str = "layers") -> tuple[list[tuple[int, float]], dict[int, float]]:
+    """``([(material index, nm), ...], {free material index: n})`` of a ``layers``
+    string. Each film's material is matched to ``materials``: the same dataset or
+    an equal constant index, or a free material of the same ``k`` whose bounds
+    hold its ``n`` (which then becomes the free index's value; all its films must
+    agree). A material matching none is appended to ``materials`` (``needle=False``)."""
+    out, free = [], {}
     for j, (spec, d) in enumerate(parse_layers(str(text), name)):
-        mat = _resolve(spec, f"{name}[{j}] material", base)
-        match = [i for i, m in enumerate(materials) if m.material is mat or (
-            m.material.constant is not None and m.material.constant == mat.constant)]
+        where = f"{name}[{j}] material"
+        mat = _resolve(spec, where, base)
+        c = mat.constant
+        match = [i for i, m in enumerate(materials) if not m.free and (m.material is mat or (
+            c is not None and m.material.constant == c))]
+        if not match and c is not None:
+            match = [i for i, m in enumerate(materials) if m.free and m.n0.imag == c.imag
+                     and m.free[0] <= c.real <= m.free[1]]
+            if match:
+                if free.setdefault(match[0], c.real) != c.real:
+                    _fail(where, f"films of the free material {materials[match[0]].spec!r} must share one "
+                                 f"index, got {free[match[0]]:g} and {c.real:g}")
         if not match:
             materials.append(DesignMaterial(str(_locate(spec, base)), mat, needle=False))
             match = [len(materials) - 1]
         out.append((match[0], d))
-    return out
+    return out, free
 
 
 def load_problem(source: Any) -> Problem:
@@ -441,9 +453,9 @@ def _problem(doc: Any, base: Path | None, name: str) -> Problem:
         _fail("seeds", f"expected an integer in [1, 1000], got {seeds!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
         _fail("seed", f"expected an integer >= 0, got {seed!r}")
-    start = None
+    start, start_n = None, {}
     if doc.get("start") is not None:
-        start = films_from_layers(materials, doc["start"], base, "start")
+        start, start_n = films_from_layers(materials, doc["start"], base, "start")
         if len(start) > max_layers:
             _fail("start", f"{len(start)} films, more than max_layers = {max_layers}")
     targets = doc["targets"]
@@ -461,4 +473,5 @@ def _problem(doc: Any, base: Path | None, name: str) -> Problem:
             back_ok = f"the substrate {substrate.name} absorbs (k = {sub_k:.3g})"
     parsed = [_target(t, i, media, back_ok) for i, t in enumerate(targets)]
     return Problem(ambient, substrate, materials, parsed, max_layers, start, seeds, seed, name,
-                   str(_locate(ambient_spec, base)).strip(), str(_locate(doc["substrate"], base)).strip(), base)
+                   str(_locate(ambient_spec, base)).strip(), str(_locate(doc["substrate"], base)).strip(), base,
+                   start_n)
