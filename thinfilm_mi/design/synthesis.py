@@ -106,14 +106,32 @@ def _insert(design: Design, j: int, z: float, m: int, t: float) -> Design:
     return Design([new_f[i] for i in keep], np.array([new_d[i] for i in keep]), design.n.copy())
 
 
+def _line_search(merit: Merit, design: Design, j: int, z: float, m: int, base: float):
+    """The best of needle thicknesses 1/8 to 64 times :attr:`Merit.needle_step`: ``(t, sum e^2)``."""
+    best_t, best = None, base
+    for t in merit.needle_step * 2.0 ** np.arange(-3, 7):
+        trial = _sum_sq(merit, _insert(design, j, z, m, float(t)))
+        if trial < best:
+            best_t, best = float(t), trial
+    return best_t, best
+
+
 def insert_needle(merit: Merit, design: Design, max_layers: int) -> Design | None:
     """``design`` with the best needle inserted (its thickness by a line search),
-    or ``None`` if no needle lowers the merit within ``max_layers`` films."""
-    depths, P = merit.needle_function(design)
+    or ``None`` if no needle lowers the merit within ``max_layers`` films.
+
+    A stack with no films has a needle function of 0 when the media do not absorb
+    (a thin film changes only the phase of ``r`` to first order), so there the
+    first film is the best of a line search for every needle material."""
     needle_mats = [i for i, dm in enumerate(merit.problem.materials) if dm.needle]
-    L = len(design.films)
-    where = [(j, k) for j in range(L) for k in range(len(depths[j]))] if L else [(0, 0)]
     base = _sum_sq(merit, design)
+    if not design.films:
+        tries = [(*_line_search(merit, design, 0, 0.0, m, base), m) for m in needle_mats]
+        t, value, m = min(tries, key=lambda r: r[1])
+        return None if t is None else _insert(design, 0, 0.0, m, t)
+    depths, P = merit.needle_function(design)
+    L = len(design.films)
+    where = [(j, k) for j in range(L) for k in range(len(depths[j]))]
     order = np.argsort(P, axis=None)
     for flat in order[:64]:
         row, col = divmod(int(flat), P.shape[1])
@@ -121,22 +139,15 @@ def insert_needle(merit: Merit, design: Design, max_layers: int) -> Design | Non
             return None
         j, k = where[row]
         m = needle_mats[col]
-        if L:
-            z = float(depths[j][k])
-            host = design.films[j]
-            inside = 0.0 < z < design.d[j]
-            if m == host or (z == 0.0 and j > 0 and design.films[j - 1] == m) or \
-                    (z == design.d[j] and j < L - 1 and design.films[j + 1] == m):
-                continue
-            if L + (2 if inside else 1) > max_layers:
-                continue
-        else:
-            z = 0.0
-        best_t, best = None, base
-        for t in merit.needle_step * 2.0 ** np.arange(-3, 7):
-            trial = _sum_sq(merit, _insert(design, j, z, m, float(t)))
-            if trial < best:
-                best_t, best = float(t), trial
+        z = float(depths[j][k])
+        host = design.films[j]
+        inside = 0.0 < z < design.d[j]
+        if m == host or (z == 0.0 and j > 0 and design.films[j - 1] == m) or \
+                (z == design.d[j] and j < L - 1 and design.films[j + 1] == m):
+            continue
+        if L + (2 if inside else 1) > max_layers:
+            continue
+        best_t, _ = _line_search(merit, design, j, z, m, base)
         if best_t is not None:
             return _insert(design, j, z, m, best_t)
     return None
@@ -190,32 +201,36 @@ def refine_batch(merit: Merit, films: list[int], D: np.ndarray, n: np.ndarray, i
     return D, cost
 
 
-def hop(merit: Merit, design: Design, deadline: float = math.inf) -> Design:
+def hop(merit: Merit, design: Design, deadline: float = math.inf, rounds: int = 10) -> Design:
     """Try every film a half wave thicker and thinner (at the targets' centre
-    wavelength), refining each; keep any change that lowers the merit, until none
-    does. Interference repeats every half wave, so this leaps between the local
-    minima that a film's thickness alone separates."""
+    wavelength): all these stacks descend together (:func:`refine_batch`), the
+    best is refined and kept if it lowers the merit; repeat (at most ``rounds``
+    times) until none does. Interference repeats every half wave, so this leaps
+    between the local minima that a film's thickness alone separates."""
     lam = _centre_wavelength(merit.problem)
     current, value = design, merit.merit(design)
-    improved = True
-    while improved and time.perf_counter() < deadline:
-        improved = False
-        for j in range(len(current.films)):
-            dm = merit.problem.materials[current.films[j]]
+    for _ in range(rounds):
+        if not current.films or time.perf_counter() > deadline:
+            break
+        shifted = []
+        for j, m in enumerate(current.films):
+            dm = merit.problem.materials[m]
             n = dm.n0.real if dm.material.constant is not None else \
                 float(dm.material.index(np.array([lam]))[0].real)
             for sign in (1.0, -1.0):
                 d = current.d.copy()
                 d[j] += sign * lam / (2.0 * n)
-                if d[j] < 0:
-                    continue
-                trial = refine(merit, Design(list(current.films), d, current.n.copy()))
-                trial_value = merit.merit(trial)
-                if trial_value < value * (1 - 1e-6):
-                    current, value, improved = trial, trial_value, True
-                    break
-            if improved:
-                break
+                if d[j] >= 0:
+                    shifted.append(d)
+        D, cost = refine_batch(merit, current.films, np.array(shifted).T, current.n)
+        b = int(np.argmin(cost))
+        if not cost[b] < value ** 2 * merit.points * (1 - 1e-6):
+            break
+        trial = refine(merit, Design(list(current.films), D[:, b], current.n.copy()))
+        trial_value = merit.merit(trial)
+        if not trial_value < value * (1 - 1e-6):
+            break
+        current, value = trial, trial_value
     return current
 
 
