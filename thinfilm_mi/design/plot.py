@@ -36,8 +36,8 @@ def _spectra(ax, result):
                 ax.plot(t.wavelengths, bound, ls=":", color=c, lw=0.8)
             if tol is not None:
                 spread = tol.achieved[i][a]                      # (wavelengths, draws)
-                ax.fill_between(t.wavelengths, spread.min(axis=-1), spread.max(axis=-1), color=c, alpha=0.2,
-                                lw=0)
+                lo_, hi_ = np.percentile(spread, [5, 95], axis=-1)
+                ax.fill_between(t.wavelengths, lo_, hi_, color=c, alpha=0.2, lw=0)
             drawn += 1
     if not spectral:
         grid = np.arange(380.0, 781.0, 2.0)
@@ -49,7 +49,7 @@ def _spectra(ax, result):
     ax.grid(alpha=0.3)
     ax.legend(fontsize=6)
     title = "spectra (lines) against the targets (bars: tolerance"
-    ax.set_title(title + ("; bands: tolerance spread)" if tol is not None else ")"), fontsize=8)
+    ax.set_title(title + ("; bands: 5-95 % of the tolerance draws)" if tol is not None else ")"), fontsize=8)
 
 
 def _chromaticity(ax, result):
@@ -63,20 +63,25 @@ def _chromaticity(ax, result):
     locus = colour.XYZ_to_xy(colour.MSDS_CMFS[OBSERVERS[observer]].values)
     ax.plot(np.append(locus[:, 0], locus[0, 0]), np.append(locus[:, 1], locus[0, 1]), color="0.3", lw=1)
     angles = np.arange(0.0, 86.0, 5.0)
-    pts = []
+    pts, paths = [], {}
     for i, v in enumerate(result.values):
         t = v.target
         if t.quantity != "colour":
             continue
         wl, W, white = colour_weights(t.illuminant, t.observer)
-        path = []
-        for angle in angles:
-            R, T = result.spectrum(wl, angle, t.side, t.polarization)
-            XYZ = (R if t.of == "R" else T) @ W
-            path.append(XYZ[:2] / XYZ.sum())
-        path = np.array(path)
-        line, = ax.plot(path[:, 0], path[:, 1], lw=1, label=f"targets[{t.index}] {t.of} 0-85°")
-        c = line.get_color()
+        key = (t.of, t.illuminant, t.observer, t.side, t.polarization)
+        if key not in paths:       # one path per light, observer and side; its targets share its colour
+            path = []
+            for angle in angles:
+                R, T = result.spectrum(wl, angle, t.side, t.polarization)
+                XYZ = (R if t.of == "R" else T) @ W
+                path.append(XYZ[:2] / XYZ.sum())
+            path = np.array(path)
+            side = "" if t.side == "front" else ", from the substrate"
+            line, = ax.plot(path[:, 0], path[:, 1], lw=1, label=f"{t.of} under {t.illuminant}{side}, 0-85°")
+            paths[key] = (path, line.get_color())
+            pts.append(path)
+        c = paths[key][1]
         if t.space == "Lab":
             wanted = colour.XYZ_to_xy(colour.Lab_to_XYZ(t.reference, colour.XYZ_to_xy(white)))
             got = colour.XYZ_to_xy(colour.Lab_to_XYZ(v.achieved, colour.XYZ_to_xy(white)))
@@ -91,7 +96,7 @@ def _chromaticity(ax, result):
             ach = result.tolerance.achieved[i]                   # (angles, draws, 3|2)
             spread = colour.XYZ_to_xy(colour.Lab_to_XYZ(ach, colour.XYZ_to_xy(white))) if t.space == "Lab" else ach
             ax.scatter(spread[..., 0].ravel(), spread[..., 1].ravel(), s=2, color=c, alpha=0.3, lw=0)
-        pts += [path, wanted, got]
+        pts += [wanted, got]
     pts = np.concatenate(pts)
     span = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])), 0.05)
     centre = (pts.max(axis=0) + pts.min(axis=0)) / 2

@@ -138,7 +138,7 @@ class DesignResult:
             lines.append("")
             lines.append(f"{t.name}: {t.describe()}; wanted {_wanted(t)}, tolerance "
                          f"{_tol_text(t)}")
-            lines.append(f"  {'angle':>6} {'achieved':>36} {'error':>10} {'within':>8}")
+            lines.append(f"  {'angle':>6} {'achieved':>44} {'error':>10} {'within':>8}")
             for a, angle in enumerate(t.angles):
                 ach, err, ok = v.achieved[a], np.atleast_1d(v.error[a]), np.atleast_1d(v.within[a])
                 if t.quantity in ("R", "T", "A"):
@@ -154,7 +154,7 @@ class DesignResult:
                 else:
                     text = ", ".join(f"{x:.4g}" for x in np.atleast_1d(ach))
                 within = f"{int(ok.sum())}/{ok.size}" if ok.size > 1 else ("yes" if ok[0] else "NO")
-                lines.append(f"  {angle:>6g} {text:>36} {float(err.max()):>10.4g} {within:>8}")
+                lines.append(f"  {angle:>6g} {text:>44} {float(err.max()):>10.4g} {within:>8}")
         if self.tolerance is not None:
             lines.append("")
             lines.append(self.tolerance.table())
