@@ -82,7 +82,7 @@ class Merit:
 
     def __init__(self, problem: Problem, colour_step: int = 1):
         self.problem = problem
-        #: wavelength step (in 1 nm samples) of the colour integrals; > 1 only for screening
+        #: step (in 1 nm samples) of the colour integrals: 1 is exact, > 1 approximates (synthesis)
         self.colour_step = colour_step
         self.free = [i for i, m in enumerate(problem.materials) if m.free]
         wanted: dict[tuple[str, float], list[np.ndarray]] = {}

@@ -102,7 +102,7 @@ def _insert(design: Design, j: int, z: float, m: int, t: float) -> Design:
     top, bottom = z, d[j] - z
     new_f = films[:j] + [films[j], m, films[j]] + films[j + 1:]
     new_d = d[:j] + [top, t, bottom] + d[j + 1:]
-    keep = [i for i in range(len(new_f)) if i in (j + 1,) or new_d[i] > 0]
+    keep = [i for i in range(len(new_f)) if i == j + 1 or new_d[i] > 0]
     return Design([new_f[i] for i in keep], np.array([new_d[i] for i in keep]), design.n.copy())
 
 
@@ -153,8 +153,7 @@ def insert_needle(merit: Merit, design: Design, max_layers: int) -> Design | Non
     return None
 
 
-def synthesize(merit: Merit, design: Design, max_layers: int, deadline: float = math.inf,
-               log: Callable[[str], None] | None = None) -> Design:
+def synthesize(merit: Merit, design: Design, max_layers: int, deadline: float = math.inf) -> Design:
     """Needle optimisation from ``design`` (refined first) up to ``max_layers`` films."""
     current = refine(merit, design)
     value = merit.merit(current)
@@ -167,8 +166,6 @@ def synthesize(merit: Merit, design: Design, max_layers: int, deadline: float = 
         if not trial_value < value * (1 - 1e-6):
             break
         current, value = trial, trial_value
-        if log:
-            log(f"{len(current.films)} films, merit {value:.4g}")
     return current
 
 
