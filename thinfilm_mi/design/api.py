@@ -30,6 +30,10 @@ def _problem(targets: Any, **overrides) -> Problem:
     return problem
 
 
+def _spec(tolerance: ToleranceSpec | str | None) -> ToleranceSpec | None:
+    return parse_tolerance(tolerance) if isinstance(tolerance, str) else tolerance
+
+
 def _design_of(problem: Problem, layers: Any, name: str) -> tuple[Merit, Design]:
     """The stack of a ``layers`` string (its materials matched to the problem's,
     or added) and the merit of the problem with those materials."""
@@ -45,10 +49,7 @@ def _finish(problem: Problem, merit: Merit, design: Design, t0: float, history: 
     rounded = Design(list(design.films), np.round(design.d, 4), np.round(design.n, 6))
     e, _, values = merit.evaluate(rounded, jac=False, report=True)
     value = float(np.sqrt(e @ e / merit.points))
-    tol = None
-    if tolerance is not None:
-        tol = tolerance_analysis(merit, rounded, parse_tolerance(tolerance) if isinstance(tolerance, str)
-                                 else tolerance, seed=tolerance_seed)
+    tol = None if tolerance is None else tolerance_analysis(merit, rounded, _spec(tolerance), seed=tolerance_seed)
     return DesignResult(problem, merit, rounded, value, time.perf_counter() - t0, values, history, tol)
 
 
@@ -65,6 +66,7 @@ def design(targets: Any, *, start: str | None = None, max_layers: int | None = N
     adds a Monte-Carlo tolerance analysis of the result. ``progress(fraction,
     message)`` is called after each seed."""
     t0 = time.perf_counter()
+    tolerance = _spec(tolerance)             # a bad tolerance fails before the design, not after
     problem = _problem(targets, max_layers=max_layers, seeds=seeds, seed=seed)
     if time_limit is not None and not (isinstance(time_limit, (int, float)) and time_limit > 0):
         raise ThinFilmError(f"time_limit: expected a number of seconds > 0, got {time_limit!r}")
