@@ -162,7 +162,10 @@ def sqrt_decaying(z: Cx) -> Cx:
     from ``sqrt((|z| + |Re z|)/2)`` and the smaller from ``|Im z| / (2 * larger)``.
     """
     x, y = z.re, z.im
-    ay = dr.abs(y)
+    # |y|, with the derivative +1 at y = 0 (dr.abs has 0 there): the one-sided
+    # derivative on the side of loss (k >= 0), the only one an index can take, so
+    # that d/dk at a lossless film (k = 0) is right
+    ay = dr.select(y < 0, -y, y)
     m = dr.sqrt(x * x + y * y)
     big = dr.sqrt(0.5 * (m + dr.abs(x)))
     small = dr.select(big > 0, ay / (2.0 * dr.select(big > 0, big, 1.0)), 0.0)
