@@ -44,6 +44,7 @@ import drjit as dr
 import numpy as np
 
 from . import integrated
+from .colour_tables import grid_coordinate
 from .stack import SPECTRAL_RANGE
 from .tables import u_texel
 from .textures import _mi
@@ -309,9 +310,8 @@ class ColourDiffuse:
     def r_dh_at(self, wavelengths, active=True):
         """``R_dh`` at ``wavelengths`` (``mi.Spectrum``, nm), detached."""
         mi = _mi()
-        lo, hi = SPECTRAL_RANGE
         return dr.detach(mi.Spectrum(*[
-            self._r_dh.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)[0]
+            self._r_dh.eval(mi.Point1f(grid_coordinate(wavelengths[k])), active)[0]
             for k in range(dr.size_v(mi.Spectrum))]))
 
     def series(self, kd, r_dh):
