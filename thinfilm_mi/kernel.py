@@ -592,12 +592,24 @@ class KernelStack:
         films = [(ix, d, False) for ix, d in zip(self.indices, self.thickness)]
         return self._side(inside, transmission, films, [False] * len(films))
 
-    def evaluation_side(self, inside: bool, transmission: bool) -> _Side:
+    def _index_gradients(self, si, active=True) -> bool:
+        """Whether an index of this stack (ambient, films, substrate) carries
+        gradients at the hit (AD variants; decided when the kernel is traced: one
+        texture evaluation per medium, dropped unless used)."""
+        if not dr.is_diff_v(_mi().Float):
+            return False
+        media = [self.ambient, self.substrate] + list(self.indices)
+        return any(dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
+                   for ix in media)
+
+    def evaluation_side(self, inside: bool, transmission: bool,
+                        index_gradients: bool = False) -> _Side:
         """The plan of the side lit from the ambient (``inside`` false) or the
         substrate, as evaluated now: every film, without skips or table, when a
-        thickness carries gradients or the side was not planned."""
+        thickness (or, with ``index_gradients``, an index) carries gradients or the
+        side was not planned (a table holds numbers, not derivatives)."""
         side = self.plan.get(inside)
-        if side is None or self._differentiating():
+        if side is None or self._differentiating() or index_gradients:
             side = self._full_side(inside, transmission)
         return side
 
@@ -607,7 +619,7 @@ class KernelStack:
         # RGB/mono variants come here only for a side without films (no phase):
         # any wavelength will do for the Fresnel terms
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
-        side = self.evaluation_side(inside, transmission)
+        side = self.evaluation_side(inside, transmission, self._index_gradients(si, active))
         n0 = side.n0.eval_real(si, active)
         table = side.table
         if table is not None and thickness_scale is None and (
@@ -690,10 +702,7 @@ class KernelStack:
         (RGB/mono AD variants; decided when the kernel is traced)."""
         if not dr.is_diff_v(_mi().Float):
             return False
-        media = [self.ambient, self.substrate] + list(self.indices)
-        return self._differentiating() or any(
-            dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
-            for ix in media)
+        return self._differentiating() or self._index_gradients(si, active)
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
                     transmission: bool = False, thickness_scale=None):
