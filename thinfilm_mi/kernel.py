@@ -32,8 +32,8 @@ from .colour_tables import (GradientSampler, attach_gradient, channel_mean_textu
                             colour_channels, colour_table, index_on_wavelengths,
                             prepare_gradients, with_absorbing)
 from .errors import ThinFilmError
-from .optics import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
-                     transmittance_factor_s)
+from .optics import (Cx, clip_transmittance, real_loop_applies, stack_amplitudes,
+                     transmittance_factor_p, transmittance_factor_s)
 from .stack import AMBIENT_K_TOL, check_thickness, parse_layers
 from .textures import (GRID, _mi, check_texture_range, irregular, scalar, texture_on_grid,
                        uniform)
@@ -867,7 +867,7 @@ def unpolarised_powers(a, transmission: bool = True):
     q0 = dr.select(a.grazing, 1.0, a.q0)
     T = 0.5 * (a.ts.abs2() * transmittance_factor_s(a.q_exit, q0)
                + a.tp.abs2() * transmittance_factor_p(a.n_exit, a.q_exit, q0))
-    T = dr.select(a.grazing, 0.0, dr.clip(T, 0.0, 1.0 - R))
+    T = dr.select(a.grazing, 0.0, clip_transmittance(T, R))
     return R, T
 
 
@@ -881,7 +881,7 @@ def unpolarised_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = 
     R = 0.5 * (Rs + Rp)
     if not transmission:
         return R
-    return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+    return R, clip_transmittance(0.5 * (Ts + Tp), R)
 
 
 def spectral_mean(x):

@@ -162,10 +162,10 @@ def sqrt_decaying(z: Cx) -> Cx:
     from ``sqrt((|z| + |Re z|)/2)`` and the smaller from ``|Im z| / (2 * larger)``.
     """
     x, y = z.re, z.im
-    # |y|, with the derivative +1 at y = 0 (dr.abs has 0 there): the one-sided
-    # derivative on the side of loss (k >= 0), the only one an index can take, so
-    # that d/dk at a lossless film (k = 0) is right
-    ay = dr.select(y < 0, -y, y)
+    # |y|; where y carries gradients, with the derivative +1 at y = 0 (dr.abs has
+    # 0 there): the one-sided derivative on the side of loss (k >= 0), the only
+    # one an index can take, so that d/dk at a lossless film (k = 0) is right
+    ay = dr.select(y < 0, -y, y) if dr.grad_enabled(y) else dr.abs(y)
     m = dr.sqrt(x * x + y * y)
     big = dr.sqrt(0.5 * (m + dr.abs(x)))
     small = dr.select(big > 0, ay / (2.0 * dr.select(big > 0, big, 1.0)), 0.0)
@@ -926,6 +926,18 @@ def _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissi
         results[pol] = (N, D, T if transmission else None)
     fac = _power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
     return _powers(results, fac, grazing)
+
+
+def clip_transmittance(T, R):
+    """``T`` clipped to ``[0, 1 - R]`` (rounding can push a lossless stack's ``T``
+    past ``1 - R``), with the derivative of the unclipped ``T``: the clip corrects
+    rounding only, and where it acts (``R + T = 1``, a lossless stack) its own
+    derivative, ``-dR``, would be that of a stack with gain (``k < 0``), not the
+    one-sided derivative on the side of loss."""
+    out = dr.clip(T, 0.0, 1.0 - R)
+    if dr.grad_enabled(T):
+        out = dr.detach(out) + (T - dr.detach(T))
+    return out
 
 
 def film_attenuation(n0, cos0, n_film, thickness, wavelength):
