@@ -158,6 +158,12 @@ class SpectralIndex:
     def eval_real(self, si, active=True):
         return self.eta.eval(si, active)
 
+    def carries_gradients(self, si, active=True) -> bool:
+        """Whether ``eta`` or ``k`` carries gradients at the hit (decided when a kernel
+        is traced: one texture evaluation each, dropped unless used)."""
+        return (dr.grad_enabled(self.eta.eval(si, active))
+                or dr.grad_enabled(self.k.eval(si, active)))
+
     def mean_real(self) -> float:
         """A representative real index (mean over 360-830 nm) for ray directions."""
         if self.constant is not None:
@@ -599,15 +605,15 @@ class KernelStack:
         if not dr.is_diff_v(_mi().Float):
             return False
         media = [self.ambient, self.substrate] + list(self.indices)
-        return any(dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
-                   for ix in media)
+        return any(ix.carries_gradients(si, active) for ix in media)
 
     def evaluation_side(self, inside: bool, transmission: bool,
                         index_gradients: bool = False) -> _Side:
         """The plan of the side lit from the ambient (``inside`` false) or the
         substrate, as evaluated now: every film, without skips or table, when a
         thickness (or, with ``index_gradients``, an index) carries gradients or the
-        side was not planned (a table holds numbers, not derivatives)."""
+        side was not planned (a table and the film loop's buffers hold numbers, not
+        derivatives)."""
         side = self.plan.get(inside)
         if side is None or self._differentiating() or index_gradients:
             side = self._full_side(inside, transmission)
@@ -631,7 +637,7 @@ class KernelStack:
             return res[0], (mi.UnpolarizedSpectrum(0.0) if side.opaque else res[1])
         exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
             else side.exit.eval(si, active)
-        if side.loop is not None and not _index_grads(side, si, active):
+        if side.loop is not None:
             out = side.loop.rt(n0, cos_theta, exit_, wl, transmission, thickness_scale)
         else:
             films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
@@ -731,16 +737,6 @@ def _either_side(side, inside, transmission: bool):
     if transmission:
         return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
     return dr.select(inside, in_r, out_r)
-
-
-def _index_grads(side: _Side, si, active) -> bool:
-    """True if some film index of ``side`` carries gradients (AD variants): the loop
-    buffers are plain data, so such a side is evaluated unrolled through its
-    textures. Traces one texture evaluation per film (dropped unless used)."""
-    if not dr.is_diff_v(_mi().Float):
-        return False
-    return any(dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
-               for ix, _, _ in side.films)
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
