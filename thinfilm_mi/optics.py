@@ -673,7 +673,7 @@ def _loop_body(step):
 def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool = True,
                   n0_max: float | None = None, film_n_min: float | None = None,
                   film_n_max: float | None = None, films_max: int | None = None,
-                  label: str = "thinfilm_rouard"):
+                  label: str = "thinfilm_rouard", max_iterations: int | None = None):
     """:func:`stack_rt` with the films visited by a Dr.Jit loop instead of unrolled.
 
     ``count`` is the number of films, as an unsigned integer array of the
@@ -704,7 +704,9 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     :func:`_stack_rt_loop_real` instead (real Fresnel amplitudes, about half
     the work per film); ``film_n_max``, an upper bound of the films' index,
     and ``films_max``, of ``count``, then let it drop the rescaling where it
-    cannot be needed.
+    cannot be needed. ``max_iterations`` (at least ``count``) lets Dr.Jit
+    differentiate the loop in reverse mode (it stores the loop's state per film);
+    it applies to the general loop, not the real-amplitude one.
     """
     if real_loop_applies(n0_max, film_n_min):
         return _stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength,
@@ -761,7 +763,7 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
 
     (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp,
      bsr, bsi, bpr, bpi, Er, Ei) = dr.while_loop(state, _films_left, _loop_body(step),
-                                                 label=label)
+                                                 label=label, max_iterations=max_iterations)
     a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
     results = {}
     for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
