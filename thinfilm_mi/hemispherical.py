@@ -114,11 +114,9 @@ def _rule(nodes: int):
 
 #: Parameters per film in :func:`r_dh_partials`: thickness (nm), Re n, Im n.
 PER_FILM = 3
-
-
-#: Lanes (wavelengths x nodes x films) per reverse-mode pass of :func:`r_dh_partials`:
-#: the loop over the films stores its state (17 float64) per film and lane.
-PARTIALS_LANE_FILMS = 1 << 20
+#: Lanes (wavelengths x nodes) x films per reverse-mode pass of :func:`r_dh_partials`:
+#: the loop over the films stores its state (14 float64) per film and lane, ~60 MB.
+PARTIALS_LANE_FILMS = 1 << 19
 
 
 def r_dh_partials(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
@@ -225,7 +223,6 @@ class DerivativeTable:
 
     def __init__(self, partials: np.ndarray):
         mi = _mi()
-        self.count = partials.shape[0]
         self.texture = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(partials.T, np.float32)),
                                     use_accel=False, migrate=False,
                                     filter_mode=dr.FilterMode.Linear,
