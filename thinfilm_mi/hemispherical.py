@@ -30,6 +30,7 @@ chain rule through any index texture (a number, a dataset's values) is exact.
 from __future__ import annotations
 
 import math
+import threading
 from typing import Sequence
 
 import drjit as dr
@@ -117,6 +118,9 @@ PER_FILM = 3
 #: Lanes (wavelengths x nodes) x films per reverse-mode pass of :func:`r_dh_partials`:
 #: the loop over the films stores its state (14 float64) per film and lane, ~60 MB.
 PARTIALS_LANE_FILMS = 1 << 19
+#: One reverse-mode pass at a time: Mitsuba's parallel scene loading runs plugin
+#: constructors on several threads, and Dr.Jit's AD graph is shared between them.
+_PARTIALS_LOCK = threading.Lock()
 
 
 def r_dh_partials(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
@@ -153,9 +157,10 @@ def r_dh_partials(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]]
     out = np.zeros((PER_FILM * (len(coating) + (film_n is not None)), nw))
     for a in range(0, nw, block):
         b = slice(a, min(nw, a + block))
-        out[:, b] = _partials_block(n_amb[b], [(n[b], d) for n, d in coating], n_exit[b],
-                                    None if film_n is None else (film_n[0][b], film_n[1]),
-                                    wavelengths[b], mu, weight)
+        block_n = None if film_n is None else (film_n[0][b], film_n[1])
+        with _PARTIALS_LOCK:
+            out[:, b] = _partials_block(n_amb[b], [(n[b], d) for n, d in coating], n_exit[b],
+                                        block_n, wavelengths[b], mu, weight)
     return np.nan_to_num(out, nan=0.0, posinf=0.0, neginf=0.0)
 
 
