@@ -44,6 +44,7 @@ import drjit as dr
 import numpy as np
 
 from . import integrated
+from .colour_tables import grid_coordinate
 from .stack import SPECTRAL_RANGE
 from .tables import u_texel
 from .textures import _mi
@@ -142,8 +143,8 @@ class DiffuseFactors:
         q = np.where(q.imag < 0, -q, q)           # the decaying root
         return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness)
 
-    def hemispherical(self, wl):
-        from .hemispherical import hemispherical_factors
+    def _arguments(self, wl):
+        """:func:`~thinfilm_mi.hemispherical.hemispherical_factors`'s arguments at ``wl``."""
         from .textures import scalar
 
         c = self.coating
@@ -151,9 +152,20 @@ class DiffuseFactors:
         coat = [(ix.spectral_values(wl), scalar(d)) for ix, d in zip(c.indices, c.thickness)]
         fn = None if self.film_n is None else (self.film_n.spectral_values(wl),
                                                self.film_n_thickness)
-        t_hemi, r_dh = hemispherical_factors(n0, coat, c.substrate.spectral_values(wl), fn,
-                                             wavelengths=wl)
+        return n0, coat, c.substrate.spectral_values(wl), fn
+
+    def hemispherical(self, wl):
+        from .hemispherical import hemispherical_factors
+
+        t_hemi, r_dh = hemispherical_factors(*self._arguments(wl), wavelengths=wl)
         return r_dh, t_hemi
+
+    def r_dh_partials(self, wl):
+        """``∂R_dh/∂x`` at ``wl`` (:func:`~thinfilm_mi.hemispherical.r_dh_partials`):
+        per film of the coating, then film ``N``, its thickness, ``Re n``, ``Im n``."""
+        from .hemispherical import r_dh_partials
+
+        return r_dh_partials(*self._arguments(wl), wavelengths=wl)
 
 
 class ColourDiffuse:
@@ -265,8 +277,8 @@ class ColourDiffuse:
         self._nu = constant(nu)
         self._inv_u = constant(1.0 / nu)
         self._r = [constant(float(r)) for r in nodes]
-        #: R_dh on the 1 nm grid, for the gradient estimate (not differentiated,
-        #: as in spectral variants)
+        #: R_dh on the 1 nm grid, for the gradient estimate (its derivatives are the
+        #: plugin's DerivativeTable, on the same grid)
         r_dh = level_data(0)[2]
         self._r_dh = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(r_dh[:, None], np.float32)),
                                   use_accel=False, migrate=False,
@@ -309,9 +321,8 @@ class ColourDiffuse:
     def r_dh_at(self, wavelengths, active=True):
         """``R_dh`` at ``wavelengths`` (``mi.Spectrum``, nm), detached."""
         mi = _mi()
-        lo, hi = SPECTRAL_RANGE
         return dr.detach(mi.Spectrum(*[
-            self._r_dh.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)[0]
+            self._r_dh.eval(mi.Point1f(grid_coordinate(wavelengths[k])), active)[0]
             for k in range(dr.size_v(mi.Spectrum))]))
 
     def series(self, kd, r_dh):

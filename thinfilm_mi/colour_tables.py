@@ -151,6 +151,14 @@ def colour_table(stack, side, side_data):
     return table
 
 
+def grid_coordinate(wavelengths):
+    """The texture coordinate of ``wavelengths`` (nm) in a 1-D texture of the values
+    on ``GRID`` (texel ``i`` holds ``GRID[i]`` at its centre, ``(i + 1/2) / len``)."""
+    lo, hi = SPECTRAL_RANGE
+    n = GRID.size
+    return (wavelengths - lo) * ((n - 1) / ((hi - lo) * n)) + 0.5 / n
+
+
 class GradientSampler:
     """In-kernel pieces of the colour gradients (see the module docstring): the
     normalised channel weights ``ŵ_c(λ)`` as a float texture over 360-830 nm
@@ -199,7 +207,7 @@ class GradientSampler:
         m = dr.size_v(mi.Spectrum)
         out = [0.0] * self.C
         for k in range(m):
-            w = self.texture.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)))
+            w = self.texture.eval(mi.Point1f(grid_coordinate(wavelengths[k])))
             for c in range(self.C):
                 out[c] = out[c] + w[c] * values[k]
         return mi.Spectrum(*[(hi - lo) / m * x for x in out])
@@ -246,10 +254,9 @@ def index_on_wavelengths(ix, si, wavelengths, active=True):
     if tex is None:
         n = ix.eval(si, active)
         return n.re, n.im
-    lo, hi = SPECTRAL_RANGE
     re, im = [], []
     for k in range(dr.size_v(mi.Spectrum)):
-        v = tex.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)
+        v = tex.eval(mi.Point1f(grid_coordinate(wavelengths[k])), active)
         re.append(v[0])
         im.append(v[1])
     return mi.Spectrum(*re), mi.Spectrum(*im)

@@ -81,7 +81,7 @@ from typing import Any, Sequence
 
 import drjit as dr
 
-from .optics import _is_zero, _prepare, _recursion, stack_rt
+from .optics import _is_zero, _prepare, _recursion, clip_transmittance, stack_rt
 
 __all__ = ["incoherent_rt", "incoherent_rt_sp", "reference_incoherent_rt", "coherent_groups"]
 
@@ -181,7 +181,7 @@ def incoherent_rt_sp(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
         R = dr.select(grazing, 1.0, dr.minimum(Re, 1.0))
         T = None
         if transmission:
-            T = dr.select(grazing, 0.0, dr.clip(Te, 0.0, 1.0 - R))
+            T = dr.select(grazing, 0.0, clip_transmittance(Te, R))
         out.append((R, T))
     (Rs, Ts), (Rp, Tp) = out
     return Rs, Rp, Ts, Tp
@@ -203,7 +203,7 @@ def incoherent_rt(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
     R = dr.minimum(0.5 * (Rs + Rp), 1.0)
     if not transmission:
         return R
-    return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+    return R, clip_transmittance(0.5 * (Ts + Tp), R)
 
 
 def reference_incoherent_rt(n0, cos0, films, thicknesses, n_exit, wavelength,
@@ -223,7 +223,7 @@ def reference_incoherent_rt(n0, cos0, films, thicknesses, n_exit, wavelength,
                                                     wavelength, size)
     Rs, Rp, Ts, Tp = incoherent_rt_sp(n0_d, cos0_d, film_d, nex, wl, incoherent)
     R = dr.minimum(0.5 * (Rs + Rp), 1.0)
-    T = dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+    T = clip_transmittance(0.5 * (Ts + Tp), R)
     zero = dr.zeros(Float64, size)
     out = {"Rs": Rs + zero, "Rp": Rp + zero, "Ts": Ts + zero, "Tp": Tp + zero,
            "R": R + zero, "T": T + zero}

@@ -32,8 +32,8 @@ from .colour_tables import (GradientSampler, attach_gradient, channel_mean_textu
                             colour_channels, colour_table, index_on_wavelengths,
                             prepare_gradients, with_absorbing)
 from .errors import ThinFilmError
-from .optics import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
-                     transmittance_factor_s)
+from .optics import (Cx, clip_transmittance, real_loop_applies, stack_amplitudes,
+                     transmittance_factor_p, transmittance_factor_s)
 from .stack import AMBIENT_K_TOL, check_thickness, parse_layers
 from .textures import (GRID, _mi, check_texture_range, irregular, scalar, texture_on_grid,
                        uniform)
@@ -184,6 +184,12 @@ class SpectralIndex:
 
     def eval_real(self, si, active=True):
         return self.eta.eval(si, active)
+
+    def carries_gradients(self, si, active=True) -> bool:
+        """Whether ``eta`` or ``k`` carries gradients at the hit (decided when a kernel
+        is traced: one texture evaluation each, dropped unless used)."""
+        return (dr.grad_enabled(self.eta.eval(si, active))
+                or dr.grad_enabled(self.k.eval(si, active)))
 
     def mean_real(self) -> float:
         """A representative real index (mean over 360-830 nm) for ray directions."""
@@ -668,12 +674,24 @@ class KernelStack:
         films = [(ix, d, False) for ix, d in zip(self.indices, self.thickness)]
         return self._side(inside, transmission, films, [False] * len(films))
 
-    def evaluation_side(self, inside: bool, transmission: bool) -> _Side:
+    def _index_gradients(self, si, active=True) -> bool:
+        """Whether an index of this stack (ambient, films, substrate) carries
+        gradients at the hit (AD variants; decided when the kernel is traced: one
+        texture evaluation per medium, dropped unless used)."""
+        if not dr.is_diff_v(_mi().Float):
+            return False
+        media = [self.ambient, self.substrate] + list(self.indices)
+        return any(ix.carries_gradients(si, active) for ix in media)
+
+    def evaluation_side(self, inside: bool, transmission: bool,
+                        index_gradients: bool = False) -> _Side:
         """The plan of the side lit from the ambient (``inside`` false) or the
         substrate, as evaluated now: every film, without skips or table, when a
-        thickness carries gradients or the side was not planned."""
+        thickness (or, with ``index_gradients``, an index) carries gradients or the
+        side was not planned (a table and the film loop's buffers hold numbers, not
+        derivatives)."""
         side = self.plan.get(inside)
-        if side is None or self._differentiating():
+        if side is None or self._differentiating() or index_gradients:
             side = self._full_side(inside, transmission)
         return side
 
@@ -683,7 +701,7 @@ class KernelStack:
         # RGB/mono variants come here only for a side without films (no phase):
         # any wavelength will do for the Fresnel terms
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
-        side = self.evaluation_side(inside, transmission)
+        side = self.evaluation_side(inside, transmission, self._index_gradients(si, active))
         n0 = side.n0.eval_real(si, active)
         table = side.table
         if table is not None and thickness_scale is None and (
@@ -695,7 +713,7 @@ class KernelStack:
             return res[0], (mi.UnpolarizedSpectrum(0.0) if side.opaque else res[1])
         exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
             else side.exit.eval(si, active)
-        if side.loop is not None and not _index_grads(side, si, active):
+        if side.loop is not None:
             out = side.loop.rt(n0, cos_theta, exit_, wl, transmission, thickness_scale)
         else:
             films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
@@ -766,10 +784,7 @@ class KernelStack:
         (RGB/mono AD variants; decided when the kernel is traced)."""
         if not dr.is_diff_v(_mi().Float):
             return False
-        media = [self.ambient, self.substrate] + list(self.indices)
-        return self._differentiating() or any(
-            dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
-            for ix in media)
+        return self._differentiating() or self._index_gradients(si, active)
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
                     transmission: bool = False, thickness_scale=None):
@@ -798,16 +813,6 @@ def _either_side(side, inside, transmission: bool):
     if transmission:
         return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
     return dr.select(inside, in_r, out_r)
-
-
-def _index_grads(side: _Side, si, active) -> bool:
-    """True if some film index of ``side`` carries gradients (AD variants): the loop
-    buffers are plain data, so such a side is evaluated unrolled through its
-    textures. Traces one texture evaluation per film (dropped unless used)."""
-    if not dr.is_diff_v(_mi().Float):
-        return False
-    return any(dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
-               for ix, _, _ in side.films)
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
@@ -934,7 +939,7 @@ def unpolarised_powers(a, transmission: bool = True):
     q0 = dr.select(a.grazing, 1.0, a.q0)
     T = 0.5 * (a.ts.abs2() * transmittance_factor_s(a.q_exit, q0)
                + a.tp.abs2() * transmittance_factor_p(a.n_exit, a.q_exit, q0))
-    T = dr.select(a.grazing, 0.0, dr.clip(T, 0.0, 1.0 - R))
+    T = dr.select(a.grazing, 0.0, clip_transmittance(T, R))
     return R, T
 
 
@@ -948,7 +953,7 @@ def unpolarised_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = 
     R = 0.5 * (Rs + Rp)
     if not transmission:
         return R
-    return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+    return R, clip_transmittance(0.5 * (Ts + Tp), R)
 
 
 def spectral_mean(x):
