@@ -5,7 +5,7 @@
 
 For each regime below, ``--points`` extreme evaluations (default 10^6) of the
 unpolarised ``R`` and ``T`` are made in **one** float32 Dr.Jit call of
-``kernel.unpolarised_rt`` (the function every BSDF evaluates in its render
+``unpolarised.unpolarised_rt`` (the function every BSDF evaluates in its render
 kernel: ``optics.stack_amplitudes`` then the power factors) on
 ``drjit.llvm.Float`` arrays, one lane per point, with per-lane random indices,
 thicknesses, angles and wavelengths (opaque inputs). The same function then runs
@@ -36,7 +36,7 @@ import drjit as dr
 from drjit.llvm import Float, Float64, UInt32
 
 from thinfilm_mi.llvm import require_llvm
-from thinfilm_mi.render.kernel import unpolarised_rt
+from thinfilm_mi.optics.unpolarised import unpolarised_rt
 from thinfilm_mi.optics.core import Cx, real_loop_applies, stack_rt_loop
 
 F32 = np.float32
@@ -289,7 +289,7 @@ REGIMES: dict[str, Callable] = {
 # ---------------------------------------------------------------------------
 def real_hints(c: Case):
     """The trace-time hints with which the render kernels run a stack whose films
-    are all real and above the ambient (``optics._stack_rt_loop_real``), or None."""
+    are all real and above the ambient (``optics.stack_rt_loop_real``), or None."""
     if not c.films or any(np.any(np.imag(n) != 0) for n, _ in c.films):
         return None
     lo = min(float(np.min(np.real(n))) for n, _ in c.films)
@@ -303,7 +303,7 @@ def real_hints(c: Case):
 def run_core(c: Case, Arr, loop: bool | str = False):
     """unpolarised_rt on Dr.Jit arrays of type Arr (Float or Float64): (R, T) as numpy.
 
-    ``loop``: the form render kernels use for stacks of ``kernel.LOOP_MIN_FILMS``
+    ``loop``: the form render kernels use for stacks of ``unpolarised.LOOP_MIN_FILMS``
     films or more, ``optics.stack_rt_loop``, with each lane's films gathered
     from film-major buffers (as ``kernel._LoopFilms`` gathers a film's index),
     ``R = (Rs + Rp) / 2`` and ``T`` clipped to ``[0, 1 - R]`` as in the kernel;
@@ -447,7 +447,7 @@ def main(argv=None):
     require_llvm()
     rng = np.random.default_rng(args.seed)
     print(f"drjit {dr.__version__}, LLVM {'.'.join(map(str, dr.detail.llvm_version()))}, "
-          f"{dr.thread_count()} threads; float32 kernel.unpolarised_rt vs the float64 run of the "
+          f"{dr.thread_count()} threads; float32 unpolarised.unpolarised_rt vs the float64 run of the "
           f"same code on the same float32-rounded inputs; tmm on {args.tmm_points} random points "
           "per regime")
     print()
@@ -472,9 +472,9 @@ def main(argv=None):
     print()
     for key, title in (
             ("loop", "The loop over films (optics.stack_rt_loop: render kernels for stacks of "
-                     "kernel.LOOP_MIN_FILMS films or more), float32, against the same float64 "
+                     "unpolarised.LOOP_MIN_FILMS films or more), float32, against the same float64 "
                      "reference:"),
-            ("loop_real", "The real-amplitude loop (optics._stack_rt_loop_real: render kernels "
+            ("loop_real", "The real-amplitude loop (optics.stack_rt_loop_real: render kernels "
                           "whose films are all real and above the ambient, at any depth), on "
                           "the regimes that qualify:")):
         print(title)

@@ -106,4 +106,4 @@ def test_a_lower_layer_importing_a_higher_one_breaks_the_contract(tmp_path):
                          capture_output=True, text=True,
                          env={"PYTHONPATH": str(copy), "PATH": "/usr/bin:/bin"})
     assert res.returncode != 0
-    assert "thinfilm_mi.optics is not allowed to import thinfilm_mi.render" in res.stdout
+    assert "thinfilm_mi.optics.core is not allowed to import thinfilm_mi.render" in res.stdout

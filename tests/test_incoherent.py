@@ -21,7 +21,7 @@ from drjit.llvm import Float, Float64
 
 from thinfilm_mi.optics import core as optics
 from thinfilm_mi.optics.incoherent import incoherent_rt, incoherent_rt_sp, reference_incoherent_rt
-from thinfilm_mi.render.kernel import unpolarised_rt
+from thinfilm_mi.optics.unpolarised import unpolarised_rt
 
 tmm = pytest.importorskip("tmm")
 

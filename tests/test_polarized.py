@@ -88,7 +88,7 @@ def test_bare_interface_map_matches_mitsuba_fresnel():
     modes.sp_matrix) equal mueller.specular_reflection/transmission for a conductor
     (complex eta) and a dielectric lit from both sides, TIR included."""
     from thinfilm_mi.render.amplitudes import jones_shape
-    from thinfilm_mi.render.kernel import unpolarised_powers
+    from thinfilm_mi.optics.unpolarised import unpolarised_powers
     from thinfilm_mi.render.modes import sp_matrix
     from thinfilm_mi.optics.core import (Cx, stack_amplitudes, transmittance_factor_p,
                                     transmittance_factor_s)

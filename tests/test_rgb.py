@@ -415,8 +415,8 @@ def test_polarized_rgb_variants_are_refused():
 
 
 def test_diffuse_gradient_matches_finite_differences():
-    """thinfilm_diffuse's diffuse term ("single": no R_dh, which is not
-    differentiated in any variant) in llvm_ad_rgb: the forward derivative averaged
+    """thinfilm_diffuse's diffuse term ("single": no R_dh; "multiple" in
+    tests/test_diffuse_gradients.py) in llvm_ad_rgb: the forward derivative averaged
     over hits against central differences of the tabulated value itself."""
     def load(d):
         return mi.load_dict({"type": "thinfilm_diffuse", "layers": f"1.46 {d}; 2.3 60",

@@ -47,7 +47,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
-from thinfilm_mi.render.kernel import unpolarised_rt
+from thinfilm_mi.optics.unpolarised import unpolarised_rt
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.render.registry import PLUGINS
 
@@ -56,7 +56,7 @@ from _plugin_modules import import_error
 VARIANT = "llvm_ad_spectral"
 # Few distinct kernel shapes, so that compiled kernels are reused across examples.
 # 1 and 2 films are unrolled in the kernel; 7 and 30 go through the loop over
-# films (kernel.LOOP_MIN_FILMS), whose kernel does not depend on the depth: a
+# films (unpolarised.LOOP_MIN_FILMS), whose kernel does not depend on the depth: a
 # 30-film draw compiles in about a second (the unrolled 30-film kernels of the
 # rough plugins took 10-60 s).
 FILM_COUNTS = (1, 2, 7, 30)

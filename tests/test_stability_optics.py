@@ -26,7 +26,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from thinfilm_mi.optics import core as optics
-from thinfilm_mi.render.kernel import unpolarised_rt, unpolarised_rt_loop
+from thinfilm_mi.optics.unpolarised import unpolarised_rt, unpolarised_rt_loop
 
 from _kernels import loop_rt
 
@@ -80,7 +80,7 @@ def evaluate(Arr, n0, films, n_exit, wl, cos0):
     dr.make_opaque(c)
     out = optics.stack_rt(arr(n0), c, f, ne, arr(wl))
     amp = optics.stack_amplitudes(arr(n0), c, f, ne, arr(wl))
-    # The loop over films of the render kernels (kernel.LOOP_MIN_FILMS), its
+    # The loop over films of the render kernels (unpolarised.LOOP_MIN_FILMS), its
     # films gathered from buffers.
     n, k, d = (np.array([v(film) for film in films], np.float64)
                for v in (lambda x: complex(x[0]).real, lambda x: complex(x[0]).imag,
@@ -97,7 +97,7 @@ def evaluate(Arr, n0, films, n_exit, wl, cos0):
 
 def real_hints(n0, films):
     """The trace-time hints with which the kernels run their loop over real films
-    (``optics._stack_rt_loop_real``), or ``None`` where the films do not qualify."""
+    (``optics.stack_rt_loop_real``), or ``None`` where the films do not qualify."""
     n = [complex(f[0]) for f in films]
     if not n or any(x.imag != 0 for x in n):
         return None

@@ -11,6 +11,7 @@ import drjit as dr
 import mitsuba as mi
 
 import thinfilm_mi as tf
+from thinfilm_mi.optics import unpolarised
 from thinfilm_mi.render import kernel as K
 
 from _kernels import compiled, interaction
@@ -433,7 +434,7 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     from thinfilm_mi.tabulate import exact as tables
     from thinfilm_mi.tabulate import base as tabulate_base
     calls = []
-    loop = K.unpolarised_rt_loop
+    loop = unpolarised.unpolarised_rt_loop
 
     def counted(*a, **k):
         calls.append(k["film_n_min"])

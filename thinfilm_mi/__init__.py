@@ -26,16 +26,21 @@ else:
 
 
 def __getattr__(name: str):
-    """``thinfilm_mi.sweep``: :func:`thinfilm_mi.batch.sweeps.sweep`, imported on first
-    use so that importing the package does not import Dask."""
+    """``thinfilm_mi.sweep``: :func:`thinfilm_mi.batch.sweeps.sweep`, and
+    ``thinfilm_mi.design``: the coating-design subpackage, imported on first use
+    so that importing the package imports neither Dask nor scipy."""
     if name == "sweep":
         from thinfilm_mi.batch.sweeps import sweep
 
         return sweep
+    if name == "design":
+        import importlib
+
+        return importlib.import_module(".design", __name__)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 __all__ = [
-    "sweep", "Stack", "Layer", "RTResult", "parse_layers", "Material", "refractive_index",
+    "sweep", "design", "Stack", "Layer", "RTResult", "parse_layers", "Material", "refractive_index",
     "resolve_material", "register", "PLUGINS", "ThinFilmError", "MaterialError", "LLVMVersionError", "require_llvm",
 ]

@@ -8,6 +8,7 @@ Subcommands::
     colour     colour of a stack at given angles: XYZ, xy, L*a*b*, sRGB swatch, luminous Y
                (table, --json, --csv, --plot), under D65, A, F11 or blackbody:T
     demo       render scenes/demo.xml into OUT/demo.exr and OUT/demo.png
+    design     design a coating for a targets file (thinfilm_mi.cli.design)
 
 Examples::
 
@@ -382,6 +383,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--verbose", action="store_true")
     p.set_defaults(func=cmd_demo)
+
+    from thinfilm_mi.cli import design as design_cli
+
+    design_cli.add_parser(sub, _error)
     return parser
 
 

@@ -256,3 +256,8 @@ class DispersiveMaterial(Material):
     def __repr__(self) -> str:
         lo, hi = self.wavelength_range
         return f"<Material {self.name} ({self.source}, {lo:g}-{hi:g} nm)>"
+
+
+#: Mitsuba's spectral range on a 1 nm grid (where datasets and checks are evaluated).
+GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
+                   int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)

@@ -162,7 +162,10 @@ def sqrt_decaying(z: Cx) -> Cx:
     from ``sqrt((|z| + |Re z|)/2)`` and the smaller from ``|Im z| / (2 * larger)``.
     """
     x, y = z.re, z.im
-    ay = dr.abs(y)
+    # |y|; where y carries gradients, with the derivative +1 at y = 0 (dr.abs has
+    # 0 there): the one-sided derivative on the side of loss (k >= 0), the only
+    # one an index can take, so that d/dk at a lossless film (k = 0) is right
+    ay = dr.select(y < 0, -y, y) if dr.grad_enabled(y) else dr.abs(y)
     m = dr.sqrt(x * x + y * y)
     big = dr.sqrt(0.5 * (m + dr.abs(x)))
     small = dr.select(big > 0, ay / (2.0 * dr.select(big > 0, big, 1.0)), 0.0)
@@ -670,7 +673,7 @@ def loop_body(step):
 def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool = True,
                   n0_max: float | None = None, film_n_min: float | None = None,
                   film_n_max: float | None = None, films_max: int | None = None,
-                  label: str = "thinfilm_rouard"):
+                  label: str = "thinfilm_rouard", max_iterations: int | None = None):
     """:func:`stack_rt` with the films visited by a Dr.Jit loop instead of unrolled.
 
     ``count`` is the number of films, as an unsigned integer array of the
@@ -701,7 +704,9 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     :func:`stack_rt_loop_real` instead (real Fresnel amplitudes, about half
     the work per film); ``film_n_max``, an upper bound of the films' index,
     and ``films_max``, of ``count``, then let it drop the rescaling where it
-    cannot be needed.
+    cannot be needed. ``max_iterations`` (at least ``count``) lets Dr.Jit
+    differentiate the loop in reverse mode (it stores the loop's state per film);
+    it applies to the general loop, not the real-amplitude one.
     """
     if real_loop_applies(n0_max, film_n_min):
         return stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength,
@@ -758,7 +763,7 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
 
     (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp,
      bsr, bsi, bpr, bpi, Er, Ei) = dr.while_loop(state, films_left, loop_body(step),
-                                                 label=label)
+                                                 label=label, max_iterations=max_iterations)
     a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
     results = {}
     for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
@@ -923,6 +928,18 @@ def stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissio
         results[pol] = (N, D, T if transmission else None)
     fac = power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
     return _powers(results, fac, grazing)
+
+
+def clip_transmittance(T, R):
+    """``T`` clipped to ``[0, 1 - R]`` (rounding can push a lossless stack's ``T``
+    past ``1 - R``), with the derivative of the unclipped ``T``: the clip corrects
+    rounding only, and where it acts (``R + T = 1``, a lossless stack) its own
+    derivative, ``-dR``, would be that of a stack with gain (``k < 0``), not the
+    one-sided derivative on the side of loss."""
+    out = dr.clip(T, 0.0, 1.0 - R)
+    if dr.grad_enabled(T):
+        out = dr.detach(out) + (T - dr.detach(T))
+    return out
 
 
 def film_attenuation(n0, cos0, n_film, thickness, wavelength):

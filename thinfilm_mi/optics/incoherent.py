@@ -46,7 +46,7 @@ Conventions (those of :mod:`thinfilm_mi.optics.core` and of ``inc_tmm``):
   underflowing to 0) or an interface with ``T = 0`` gives no 0/0.
 * s and p are combined separately (a planar stack does not mix them), then
   ``R = (Rs + Rp) / 2`` and ``T = (Ts + Tp) / 2`` as in
-  :func:`thinfilm_mi.render.kernel.unpolarised_rt`: ``R`` clamped to 1, ``T`` clipped
+  :func:`thinfilm_mi.optics.unpolarised.unpolarised_rt`: ``R`` clamped to 1, ``T`` clipped
   to ``[0, 1 - R]``, and ``R = 1``, ``T = 0`` exactly at grazing incidence.
   ``T`` is the power entering the exit medium (into a metal substrate: the
   power it absorbs).
@@ -81,7 +81,8 @@ from typing import Any, Sequence
 
 import drjit as dr
 
-from thinfilm_mi.optics.core import is_zero, prepare_stack, rouard_recursion, stack_rt
+from thinfilm_mi.optics.core import (clip_transmittance, is_zero, prepare_stack,
+                                     rouard_recursion, stack_rt)
 
 __all__ = ["incoherent_rt", "incoherent_rt_sp", "reference_incoherent_rt", "coherent_groups"]
 
@@ -181,7 +182,7 @@ def incoherent_rt_sp(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
         R = dr.select(grazing, 1.0, dr.minimum(Re, 1.0))
         T = None
         if transmission:
-            T = dr.select(grazing, 0.0, dr.clip(Te, 0.0, 1.0 - R))
+            T = dr.select(grazing, 0.0, clip_transmittance(Te, R))
         out.append((R, T))
     (Rs, Ts), (Rp, Tp) = out
     return Rs, Rp, Ts, Tp
@@ -192,7 +193,7 @@ def incoherent_rt(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
     """Unpolarised ``R`` (and ``T``, the power entering ``n_exit``) of a stack with
     incoherent thick films; any array type (floats, Dr.Jit arrays, ``mi.Spectrum``).
 
-    Same arguments and conventions as :func:`thinfilm_mi.render.kernel.unpolarised_rt`
+    Same arguments and conventions as :func:`thinfilm_mi.optics.unpolarised.unpolarised_rt`
     plus ``incoherent`` (a Python list of bools, one per film, from the ambient
     side inwards): ``R = (Rs + Rp) / 2`` clamped to 1, ``T`` clipped to
     ``[0, 1 - R]``, ``R = 1`` and ``T = 0`` at grazing incidence. With no film
@@ -203,7 +204,7 @@ def incoherent_rt(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
     R = dr.minimum(0.5 * (Rs + Rp), 1.0)
     if not transmission:
         return R
-    return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+    return R, clip_transmittance(0.5 * (Ts + Tp), R)
 
 
 def reference_incoherent_rt(n0, cos0, films, thicknesses, n_exit, wavelength,
@@ -223,7 +224,7 @@ def reference_incoherent_rt(n0, cos0, films, thicknesses, n_exit, wavelength,
                                                     wavelength, size)
     Rs, Rp, Ts, Tp = incoherent_rt_sp(n0_d, cos0_d, film_d, nex, wl, incoherent)
     R = dr.minimum(0.5 * (Rs + Rp), 1.0)
-    T = dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+    T = clip_transmittance(0.5 * (Ts + Tp), R)
     zero = dr.zeros(Float64, size)
     out = {"Rs": Rs + zero, "Rp": Rp + zero, "Ts": Ts + zero, "Tp": Tp + zero,
            "R": R + zero, "T": T + zero}

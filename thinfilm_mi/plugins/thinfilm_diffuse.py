@@ -126,8 +126,10 @@ directions, which is exact for the base medium ``ext_ior``). Without film
 base medium; with film ``N``, ``R_up = k_a^2 k_r`` (down and up through film
 ``N``, the coating reflecting alike from both sides: exact for a lossless
 coating, and ``R_up + t <= k_r + k_t <= 1`` in any case). ``R_dh`` is computed
-per wavelength at load time (and when a thickness changes) with the float64
-core over a Gauss-Legendre rule and stored as a ``regular`` spectrum. The
+per wavelength at load time (and when a film is edited) with the float64
+core over a Gauss-Legendre rule and stored as a ``regular`` spectrum; in AD
+variants its derivatives with respect to every film's thickness and index too
+(see **Gradients**). The
 internal light is Lambertian (the base re-diffuses everything it receives), so
 the exit factor is the same ``t(θ)`` and the radiance scaling ``1/η^2`` of
 ``plastic`` is 1 (matched base medium). The albedo for light from ``θ_i`` is
@@ -149,8 +151,9 @@ estimate ``t(θ_i) k_d T_hemi [/(1 - k_d R_dh)]``; the diffuse direction is
 cosine-weighted and its pdf is multiplied by the selection probability, as in
 ``plastic``. When the context enables one component only, the other one's
 stack work is skipped. Thicknesses (``layers.N.thickness``) are opaque and
-exposed to ``mi.traverse``; ``R_dh`` and ``T_hemi`` are recomputed (and not
-differentiated) when they change.
+exposed to ``mi.traverse``; ``R_dh`` and ``T_hemi`` are recomputed when they change.
+The selection probability is a detached sampling decision (the weight's gradient
+is that of ``k_r``, resp. the diffuse term), so ``T_hemi`` needs no derivatives.
 
 **RGB and mono variants** (``*_rgb``, ``*_mono``; polarized ones are refused).
 ``k_r`` is the spectral reflectance integrated against colour matching (CIE 1931 2°
@@ -165,20 +168,32 @@ channel, as in Mitsuba's ``diffuse``: a constant one is integrated exactly with 
 series; a texture through a Chebyshev expansion of ``G`` in ``R_dh`` (relative error
 <= 1e-5). Thickness and index gradients in ``llvm_ad_rgb`` are those of an unbiased
 estimate of the same integrals at stratified wavelengths per hit (the value stays
-the table's); ``R_dh`` is not differentiated, as in spectral variants. The gradient
-with respect to a constant ``reflectance`` treats the series as constant (exact for
-"single"); through a texture it is exact.
+the table's), ``R_dh`` with its derivatives at those wavelengths as below. The
+gradient with respect to a constant ``reflectance`` treats the series as constant
+(exact for "single") unless a film parameter carries gradients too (then it is the
+estimate's); through a texture it is exact.
 
-**Gradients.** Differentiate with ``path`` (the whole sample is differentiated,
-both components). Mitsuba's ``prb`` family samples detached and re-evaluates
-``eval`` at the sampled direction for the derivative; ``eval`` holds only the
-diffuse part, so for paths that took the delta specular component ``prb`` uses
-the diffuse term's derivative where ``k_r``'s belongs (a thickness gradient of
+**Gradients.** Film thicknesses and indices (``layers.N.thickness``,
+``layers.N.eta``/``k``): in spectral variants exact, per wavelength, for both
+models. ``k_r`` and ``t`` are differentiated in the kernel (every film evaluated
+exactly, not from a table, where a parameter carries gradients); ``R_dh``
+("multiple") takes its derivatives from a table of ``∂R_dh/∂x`` over 360-830 nm
+(1 nm, linear like ``R_dh``) for every film's thickness, ``Re n`` and ``Im n``,
+computed by reverse-mode AD through the same float64 quadrature at load time and at
+each edit of the films in AD variants (~0.06 s for 3 films, ~0.2 s for 30;
+``benchmarks/README.md``); the kernel adds ``Σ ∂R_dh/∂x (x - detach(x))`` to
+``R_dh`` (the chain rule through any index texture: ``R_dh(λ)`` depends on the
+indices at ``λ`` only). At ``k = 0`` the derivative with respect to ``k`` is the
+one-sided one (loss). Differentiate with ``path`` (the whole sample is
+differentiated, both components). Mitsuba's ``prb`` family samples detached and
+re-evaluates ``eval`` at the sampled direction for the derivative; ``eval`` holds
+only the diffuse part, so for paths that took the delta specular component ``prb``
+uses the diffuse term's derivative where ``k_r``'s belongs (a thickness gradient of
 +5.4e-4 where ``path`` and a finite difference give -1.5e-4, in
-``tests/test_render_gradients.py``'s scene), as it does for
-Mitsuba's own ``plastic``. A BSDF cannot tell ``prb`` from ``path`` (both trace
-``sample`` with gradients suspended in their primal pass and ``eval`` with
-gradients later), so there is no run-time warning.
+``tests/test_render_gradients.py``'s scene), as it does for Mitsuba's own
+``plastic``. A BSDF cannot tell ``prb`` from ``path`` (both trace ``sample`` with
+gradients suspended in their primal pass and ``eval`` with gradients later), so
+there is no run-time warning.
 
 .. tabs::
     .. code-tab:: xml
@@ -200,9 +215,11 @@ import mitsuba as mi
 import numpy as np
 
 from thinfilm_mi.render import modes
-from thinfilm_mi.tabulate.diffuse import ColourDiffuse, DiffuseFactors
+from thinfilm_mi.render.diffuse import DiffuseFactors
+from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.tabulate.hemispherical import GRID, hemispherical_factors
+from thinfilm_mi.materials.model import GRID
+from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable
 from thinfilm_mi.render.colour import (GradientSampler, attach_gradient, colour_channels,
                                        index_on_wavelengths, prepare_gradients)
 from thinfilm_mi.render.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
@@ -315,34 +332,26 @@ class ThinFilmDiffuse(mi.BSDF):
 
     def _update_hemispherical(self) -> None:
         """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
-        in RGB/mono variants the integrated diffuse tables instead."""
+        in RGB/mono variants the integrated diffuse tables instead. In AD variants
+        (model "multiple") also ``R_dh``'s derivatives (:attr:`r_dh_grad`)."""
+        factors = None
+        if not self.no_films:
+            thickness = None if self.film_n is None else scalar(self.film_n_thickness)
+            factors = DiffuseFactors(self.coating, self.film_n, thickness)
+        self.r_dh_grad = None
+        if factors is not None and self.model == "multiple" and dr.is_diff_v(mi.Float):
+            self.r_dh_grad = DerivativeTable(factors.r_dh_partials(GRID))
         if self.mode.integrated:
-            if not self.no_films:
-                thickness = None if self.film_n is None else scalar(self.film_n_thickness)
-                self.colour = ColourDiffuse(
-                    DiffuseFactors(self.coating, self.film_n, thickness), self.model,
-                    colour_channels(), self._constant_albedo())
+            if factors is not None:
+                self.colour = ColourDiffuse(factors, self.model, colour_channels(),
+                                            self._constant_albedo())
                 if self.film_n is not None and dr.is_diff_v(mi.Float):
                     prepare_gradients([self.film_n])
             return
-        if self.no_films:
+        if factors is None:
             t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
         else:
-            n_amb = self.coating.ambient.spectral_values(GRID, real=True)
-
-            def index(ix):
-                return ix.spectral_values(GRID)
-
-            def thickness(d):
-                return float(dr.ravel(d)[0]) if dr.is_array_v(d) else float(d)
-
-            coating = [(index(ix), thickness(d))
-                       for ix, d in zip(self.coating.indices, self.coating.thickness)]
-            n_exit = index(self.coating.substrate)
-            film_n = None
-            if self.film_n is not None:
-                film_n = (index(self.film_n), thickness(self.film_n_thickness))
-            t_hemi, r_dh = hemispherical_factors(n_amb, coating, n_exit, film_n)
+            r_dh, t_hemi = factors.hemispherical(GRID)
         self.t_hemi = _spectrum(self.t_hemi, t_hemi)
         self.r_dh = _spectrum(self.r_dh, r_dh)
 
@@ -364,7 +373,31 @@ class ThinFilmDiffuse(mi.BSDF):
         """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
         if self.model == "single":
             return mi.Spectrum(1.0)
-        return dr.rcp(1.0 - kd * self.r_dh.eval(si, active))
+        r_dh = self._with_derivatives(self.r_dh.eval(si, active), si, si.wavelengths,
+                                      lambda ix: ix.eval(si, active), active)
+        return dr.rcp(1.0 - kd * r_dh)
+
+    def _with_derivatives(self, r_dh, si, wavelengths, index_at, active):
+        """``R_dh`` (at ``wavelengths``) plus ``Σ_x ∂R_dh/∂x (x - detach(x))`` over the
+        film thicknesses and indices that carry gradients: the same value, with
+        ``R_dh``'s derivatives (:class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`).
+        ``index_at(ix)``: a film's index at ``wavelengths``."""
+        if self.r_dh_grad is None:
+            return r_dh
+        films = list(zip(self.coating.indices, self.coating.thickness))
+        if self.film_n is not None:
+            films.append((self.film_n, self.film_n_thickness))
+        carriers = {}
+        for f, (ix, d) in enumerate(films):
+            if dr.grad_enabled(d):
+                carriers[PER_FILM * f] = mi.UnpolarizedSpectrum(d - dr.detach(d))
+            if ix.carries_gradients(si, active):
+                n = index_at(ix)
+                carriers[PER_FILM * f + 1] = mi.UnpolarizedSpectrum(n.re - dr.detach(n.re))
+                carriers[PER_FILM * f + 2] = mi.UnpolarizedSpectrum(n.im - dr.detach(n.im))
+        if not carriers:
+            return r_dh
+        return r_dh + self.r_dh_grad.tangent(wavelengths, carriers, active)
 
     def _diffuse(self, si, kd, cos_i, cos_o, t_i, series, active):
         """``π f`` at ``cos_o``: ``k_d t_i t_o S`` per wavelength, or its integral
@@ -382,13 +415,12 @@ class ThinFilmDiffuse(mi.BSDF):
         """RGB/mono AD variants: whether a film thickness or index carries gradients."""
         n = self.film_n
         return self.coating.colour_gradients(si, active) or (n is not None and (
-            dr.grad_enabled(self.film_n_thickness) or dr.grad_enabled(n.eta.eval(si, active))
-            or dr.grad_enabled(n.k.eval(si, active))))
+            dr.grad_enabled(self.film_n_thickness) or n.carries_gradients(si, active)))
 
     def _colour_estimate(self, si, kd, cos_i, cos_o, active):
         """An unbiased estimate of the integrated diffuse term at stratified wavelengths
         (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose gradients the
-        table's value takes; ``R_dh`` is not differentiated, as in spectral variants."""
+        table's value takes; ``R_dh`` with its derivatives (:meth:`_with_derivatives`)."""
         sampler = GradientSampler.get()
         wl = sampler.wavelengths(si)
 
@@ -401,7 +433,9 @@ class ThinFilmDiffuse(mi.BSDF):
                                                                           active)),
                                           self.film_n_thickness, wl)
         product = t(cos_i) * t(cos_o)
-        r_dh = self.colour.r_dh_at(wl, active)
+        r_dh = self._with_derivatives(
+            self.colour.r_dh_at(wl, active), si, wl,
+            lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)
         channels = [sampler.estimate(wl, product * self.colour.series(kd[c], r_dh))[c]
                     for c in range(dr.size_v(mi.Spectrum))]
         return mi.Spectrum(*channels)

@@ -12,7 +12,7 @@ docstring of :mod:`thinfilm_mi.optics.core`: Mitsuba's amplitudes are the comple
 conjugates of ours):
 
 * ``R`` and ``T``: the unpolarised reflectance and transmittance, formed exactly
-  as :func:`kernel.unpolarised_rt` forms them (the Mueller matrices' ``M00``;
+  as :func:`unpolarised.unpolarised_rt` forms them (the Mueller matrices' ``M00``;
   the plugins use them for weights and lobe probabilities);
 * a :class:`Shape` per lobe: the Mueller matrix in the s/p frame divided by its
   ``M00``, so that ``M = R * shape`` (:mod:`thinfilm_mi.render.modes` rotates it).
@@ -28,7 +28,8 @@ from typing import Any
 
 import drjit as dr
 
-from thinfilm_mi.render.kernel import KernelStack, unpolarised_powers
+from thinfilm_mi.optics.unpolarised import unpolarised_powers
+from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
 from thinfilm_mi.render.textures import mitsuba_module
 

@@ -26,6 +26,7 @@ from dataclasses import replace
 import drjit as dr
 import numpy as np
 
+from thinfilm_mi.tabulate.base import grid_coordinate
 from thinfilm_mi.colour import cie
 from thinfilm_mi.tabulate import colour as integrated
 from thinfilm_mi.tabulate import base as tabulate_base
@@ -200,7 +201,7 @@ class GradientSampler:
         m = dr.size_v(mi.Spectrum)
         out = [0.0] * self.C
         for k in range(m):
-            w = self.texture.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)))
+            w = self.texture.eval(mi.Point1f(grid_coordinate(wavelengths[k])))
             for c in range(self.C):
                 out[c] = out[c] + w[c] * values[k]
         return mi.Spectrum(*[(hi - lo) / m * x for x in out])
@@ -247,10 +248,9 @@ def index_on_wavelengths(ix, si, wavelengths, active=True):
     if tex is None:
         n = ix.eval(si, active)
         return n.re, n.im
-    lo, hi = SPECTRAL_RANGE
     re, im = [], []
     for k in range(dr.size_v(mi.Spectrum)):
-        v = tex.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)
+        v = tex.eval(mi.Point1f(grid_coordinate(wavelengths[k])), active)
         re.append(v[0])
         im.append(v[1])
     return mi.Spectrum(*re), mi.Spectrum(*im)

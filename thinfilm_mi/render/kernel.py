@@ -24,6 +24,7 @@ from typing import Any, Sequence
 import drjit as dr
 import numpy as np
 
+from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
 from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.tabulate import band as _band_tables
 from thinfilm_mi.tabulate import base as tabulate_base
@@ -32,8 +33,7 @@ from thinfilm_mi.render.colour import (GradientSampler, attach_gradient, channel
                             colour_channels, colour_table, index_on_wavelengths,
                             prepare_gradients, with_absorbing)
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.optics.core import (Cx, real_loop_applies, stack_amplitudes, transmittance_factor_p,
-                     transmittance_factor_s)
+from thinfilm_mi.optics.core import (Cx, real_loop_applies)
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL, check_thickness, parse_layers
 from thinfilm_mi.render.textures import (GRID, mitsuba_module, check_texture_range, irregular, scalar, texture_on_grid,
                        uniform)
@@ -184,6 +184,12 @@ class SpectralIndex:
 
     def eval_real(self, si, active=True):
         return self.eta.eval(si, active)
+
+    def carries_gradients(self, si, active=True) -> bool:
+        """Whether ``eta`` or ``k`` carries gradients at the hit (decided when a kernel
+        is traced: one texture evaluation each, dropped unless used)."""
+        return (dr.grad_enabled(self.eta.eval(si, active))
+                or dr.grad_enabled(self.k.eval(si, active)))
 
     def mean_real(self) -> float:
         """A representative real index (mean over 360-830 nm) for ray directions."""
@@ -340,16 +346,9 @@ DEFAULT_SPECTRAL_RESOLUTION = 1.0
 OPAQUE_AMPLITUDE = 1e-9
 
 
-#: Exact evaluation of a side with at least this many films runs the recursion
-#: as a symbolic Dr.Jit loop over buffers of the films (:class:`_LoopFilms`):
-#: one loop body in the kernel whatever the depth, so the kernel compiles as fast
-#: for 30 films as for 3, and each hit is cheaper from 4 films on (measurements in
-#: benchmarks/SPEED.md). Below it the films are unrolled, which lets literal
-#: indices specialise the code.
-LOOP_MIN_FILMS = 4
 #: The same for sides whose films all have a real index above the ambient's
 #: (:data:`optics.REAL_LOOP_MARGIN`): their loop takes real Fresnel amplitudes
-#: (``optics._stack_rt_loop_real``) and is faster than the unrolled films from
+#: (``optics.stack_rt_loop_real``) and is faster than the unrolled films from
 #: one film on (benchmarks/SPEED.md).
 REAL_LOOP_MIN_FILMS = 1
 
@@ -387,7 +386,7 @@ class _LoopFilms:
         #: The ambient's index does not depend on the wavelength: with constant
         #: films, ``q`` and the Fresnel amplitudes are then one per lane.
         self.n0_constant = n0.knots is not None and n0.knots.size == 0
-        #: The loop will run optics._stack_rt_loop_real (real amplitudes).
+        #: The loop will run optics.stack_rt_loop_real (real amplitudes).
         self.real_steps = real_loop_applies(self.n0_max, self.film_n_min)
         #: Every film's index is one constant (no knots: a single grid cell): one
         #: real per film, gathered once per lane for all the wavelengths.
@@ -668,12 +667,24 @@ class KernelStack:
         films = [(ix, d, False) for ix, d in zip(self.indices, self.thickness)]
         return self._side(inside, transmission, films, [False] * len(films))
 
-    def evaluation_side(self, inside: bool, transmission: bool) -> _Side:
+    def _index_gradients(self, si, active=True) -> bool:
+        """Whether an index of this stack (ambient, films, substrate) carries
+        gradients at the hit (AD variants; decided when the kernel is traced: one
+        texture evaluation per medium, dropped unless used)."""
+        if not dr.is_diff_v(mitsuba_module().Float):
+            return False
+        media = [self.ambient, self.substrate] + list(self.indices)
+        return any(ix.carries_gradients(si, active) for ix in media)
+
+    def evaluation_side(self, inside: bool, transmission: bool,
+                        index_gradients: bool = False) -> _Side:
         """The plan of the side lit from the ambient (``inside`` false) or the
         substrate, as evaluated now: every film, without skips or table, when a
-        thickness carries gradients or the side was not planned."""
+        thickness (or, with ``index_gradients``, an index) carries gradients or the
+        side was not planned (a table and the film loop's buffers hold numbers, not
+        derivatives)."""
         side = self.plan.get(inside)
-        if side is None or self._differentiating():
+        if side is None or self._differentiating() or index_gradients:
             side = self._full_side(inside, transmission)
         return side
 
@@ -683,7 +694,7 @@ class KernelStack:
         # RGB/mono variants come here only for a side without films (no phase):
         # any wavelength will do for the Fresnel terms
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
-        side = self.evaluation_side(inside, transmission)
+        side = self.evaluation_side(inside, transmission, self._index_gradients(si, active))
         n0 = side.n0.eval_real(si, active)
         table = side.table
         if table is not None and thickness_scale is None and (
@@ -695,7 +706,7 @@ class KernelStack:
             return res[0], (mi.UnpolarizedSpectrum(0.0) if side.opaque else res[1])
         exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
             else side.exit.eval(si, active)
-        if side.loop is not None and not _index_grads(side, si, active):
+        if side.loop is not None:
             out = side.loop.rt(n0, cos_theta, exit_, wl, transmission, thickness_scale)
         else:
             films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
@@ -766,10 +777,7 @@ class KernelStack:
         (RGB/mono AD variants; decided when the kernel is traced)."""
         if not dr.is_diff_v(mitsuba_module().Float):
             return False
-        media = [self.ambient, self.substrate] + list(self.indices)
-        return self._differentiating() or any(
-            dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
-            for ix in media)
+        return self._differentiating() or self._index_gradients(si, active)
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
                     transmission: bool = False, thickness_scale=None):
@@ -798,16 +806,6 @@ def _either_side(side, inside, transmission: bool):
     if transmission:
         return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
     return dr.select(inside, in_r, out_r)
-
-
-def _index_grads(side: _Side, si, active) -> bool:
-    """True if some film index of ``side`` carries gradients (AD variants): the loop
-    buffers are plain data, so such a side is evaluated unrolled through its
-    textures. Traces one texture evaluation per film (dropped unless used)."""
-    if not dr.is_diff_v(mitsuba_module().Float):
-        return False
-    return any(dr.grad_enabled(ix.eta.eval(si, active)) or dr.grad_enabled(ix.k.eval(si, active))
-               for ix, _, _ in side.films)
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
@@ -914,41 +912,6 @@ def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.n
     out = out.reshape(cos.size, wl.size, 2)
     T = np.zeros_like(out[..., 0]) if side.opaque else out[..., 1]
     return out[..., 0], T
-
-
-def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
-    """Unpolarised ``R`` (and ``T``, the power entering ``n_exit``), any array type.
-
-    ``R = (Rs + Rp) / 2`` clamped to 1; ``T`` clipped to ``[0, 1 - R]``; at grazing
-    incidence ``T = 0``. Shared by the kernels and the float64 hemispherical terms.
-    """
-    a = stack_amplitudes(n0, cos0, films, n_exit, wl, transmission=transmission)
-    return unpolarised_powers(a, transmission)
-
-
-def unpolarised_powers(a, transmission: bool = True):
-    """:func:`unpolarised_rt` from the amplitudes ``a`` (:class:`optics.StackAmplitudes`)."""
-    R = dr.minimum(0.5 * (a.rs.abs2() + a.rp.abs2()), 1.0)
-    if not transmission:
-        return R
-    q0 = dr.select(a.grazing, 1.0, a.q0)
-    T = 0.5 * (a.ts.abs2() * transmittance_factor_s(a.q_exit, q0)
-               + a.tp.abs2() * transmittance_factor_p(a.n_exit, a.q_exit, q0))
-    T = dr.select(a.grazing, 0.0, dr.clip(T, 0.0, 1.0 - R))
-    return R, T
-
-
-def unpolarised_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = True, **hints):
-    """:func:`unpolarised_rt` with the films visited by a loop
-    (:func:`optics.stack_rt_loop`, whose arguments and trace-time ``hints`` these
-    are): the render kernels' deep stacks and the table builds' (float64)."""
-    from thinfilm_mi.optics.core import stack_rt_loop
-    Rs, Rp, Ts, Tp = stack_rt_loop(n0, cos0, count, film, n_exit, wl,
-                                   transmission=transmission, **hints)
-    R = 0.5 * (Rs + Rp)
-    if not transmission:
-        return R
-    return R, dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
 
 
 def spectral_mean(x):

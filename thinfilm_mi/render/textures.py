@@ -22,12 +22,8 @@ import re
 import drjit as dr
 import numpy as np
 
+from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.stack import SPECTRAL_RANGE
-
-#: Mitsuba's spectral range on a 1 nm grid (where datasets and checks are evaluated).
-GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
-                   int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)
 
 
 def mitsuba_module():

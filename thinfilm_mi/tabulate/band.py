@@ -660,7 +660,7 @@ def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndar
     """The stack's projective amplitudes at points ``(cos0[i], wl[rows[i]])``:
     shape ``(points, C)`` with channels ``Re, Im`` of ``N_s, D_s, N_p, D_p``
     and, with transmission, ``|T_s|^2 f_s, |T_p|^2 f_p`` (``R = |N|^2 /
-    |D|^2``, ``T = |T|^2 f / |D|^2``, :func:`optics._recursion`).
+    |D|^2``, ``T = |T|^2 f / |D|^2``, :func:`optics.rouard_recursion`).
 
     The Rouard recursion in float64 as a Dr.Jit loop over the films, with the
     step of :func:`optics.rouard_step` (no division), scaled after each film

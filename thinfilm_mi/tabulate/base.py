@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
+from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
 
@@ -72,10 +73,10 @@ class SideData:
     ``(index, thickness_nm)`` pairs from that side inwards (index: complex numpy
     array over ``wavelengths``), ``n_exit`` the complex exit index. ``rt`` is
     the evaluator ``(n0, cos0, films, n_exit, wl, transmission) -> R | (R, T)``
-    (the coherent :func:`~thinfilm_mi.render.kernel.unpolarised_rt` or the
+    (the coherent :func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt` or the
     incoherent-aware one), ``transmission`` whether ``T`` is tabulated too.
     ``rt_loop``, where given, evaluates :data:`BUILD_LOOP_MIN_FILMS` films or
-    more as a loop (:func:`~thinfilm_mi.render.kernel.unpolarised_rt_loop`).
+    more as a loop (:func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt_loop`).
     ``kinks``: wavelengths where an index's slope jumps (tabulated data), at
     which the build checks the table too. ``absorbing`` (set by
     :func:`build_table`): whether each film and the exit medium absorb
@@ -509,3 +510,11 @@ class TableCache:
         with self._lock:
             self._items.clear()
             self.nbytes = 0
+
+
+def grid_coordinate(wavelengths):
+    """The texture coordinate of ``wavelengths`` (nm) in a 1-D texture of the values
+    on ``GRID`` (texel ``i`` holds ``GRID[i]`` at its centre, ``(i + 1/2) / len``)."""
+    lo, hi = SPECTRAL_RANGE
+    n = GRID.size
+    return (wavelengths - lo) * ((n - 1) / ((hi - lo) * n)) + 0.5 / n

@@ -50,7 +50,6 @@ import numpy as np
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
 from thinfilm_mi.colour.cie import (colour_differences, colour_weights, normalised_weights)
 from thinfilm_mi.tabulate.base import u_nodes_cos, u_texel
-from thinfilm_mi.render.textures import mitsuba_module
 
 #: The nodes are dense enough when the 4-point rule predicts the integrals at
 #: the midpoints within this CIEDE2000 (as colours under D65: R, and T, of every
@@ -291,7 +290,7 @@ class ColourTable:
 
     def __init__(self, values: np.ndarray, axis: Axis, channels: int, transmission: bool,
                  scale_max: float | None):
-        mi = mitsuba_module()
+        import mitsuba as mi
         self.axis = axis
         self.channels = channels
         self.transmission = transmission
@@ -323,7 +322,7 @@ class ColourTable:
         clamped: the sRGB channels of a saturated interference colour lie outside
         [0, 1] (the integrals have negative weights), exactly as a spectral render
         converted to sRGB gives them; Y stays within [0, 1]."""
-        mi = mitsuba_module()
+        import mitsuba as mi
         cos_i = dr.clip(cos_i, 0.0, 1.0)
         sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
         x = u_texel(cos_i, sin_i, self._n0, self._n_exit, self.axis.kind, self._nu)

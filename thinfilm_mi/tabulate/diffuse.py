@@ -45,9 +45,9 @@ import numpy as np
 
 from thinfilm_mi.colour import cie
 from thinfilm_mi.tabulate import colour as integrated
+from thinfilm_mi.tabulate.base import grid_coordinate
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
 from thinfilm_mi.tabulate.base import u_texel
-from thinfilm_mi.render.textures import mitsuba_module
 
 #: Relative error of the Chebyshev interpolation of ``G(k_d, r)`` in ``r``.
 SERIES_TOLERANCE = 1e-5
@@ -119,44 +119,6 @@ def _subdivide(values: np.ndarray, axis: int) -> np.ndarray:
     return integrated.interleave(values, integrated.midpoints4(values, axis, True), axis)
 
 
-class DiffuseFactors:
-    """The spectral factors of a ``thinfilm_diffuse`` for :class:`ColourDiffuse`:
-    ``t(cos, wl)`` (shape ``(len cos, len wl)``) and ``hemispherical(wl) ->
-    (R_dh, T_hemi)`` (over ``wl``), for the coating ``coating`` (a
-    :class:`~thinfilm_mi.render.kernel.KernelStack`) over the absorbing film ``film_n``
-    (a ``SpectralIndex``) of ``film_n_thickness`` nm, or over the base medium
-    (``film_n`` ``None``)."""
-
-    def __init__(self, coating, film_n, film_n_thickness: float | None):
-        self.coating, self.film_n, self.film_n_thickness = coating, film_n, film_n_thickness
-
-    def t(self, cos, wl):
-        from thinfilm_mi.render.kernel import side_rt
-
-        _, T = side_rt(self.coating, False, cos, wl)
-        if self.film_n is None:
-            return T
-        n0 = self.coating.ambient.spectral_values(wl, real=True)
-        n_f = self.film_n.spectral_values(wl)
-        beta2 = (n0 ** 2)[None, :] * (1.0 - cos ** 2)[:, None]
-        q = np.sqrt((n_f ** 2)[None, :] - beta2 + 0j)
-        q = np.where(q.imag < 0, -q, q)           # the decaying root
-        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness)
-
-    def hemispherical(self, wl):
-        from thinfilm_mi.tabulate.hemispherical import hemispherical_factors
-        from thinfilm_mi.render.textures import scalar
-
-        c = self.coating
-        n0 = c.ambient.spectral_values(wl, real=True)
-        coat = [(ix.spectral_values(wl), scalar(d)) for ix, d in zip(c.indices, c.thickness)]
-        fn = None if self.film_n is None else (self.film_n.spectral_values(wl),
-                                               self.film_n_thickness)
-        t_hemi, r_dh = hemispherical_factors(n0, coat, c.substrate.spectral_values(wl), fn,
-                                             wavelengths=wl)
-        return r_dh, t_hemi
-
-
 class ColourDiffuse:
     """The integrated diffuse term and albedo estimate of one ``thinfilm_diffuse``
     (``factors``: a :class:`DiffuseFactors`).
@@ -167,9 +129,9 @@ class ColourDiffuse:
     multiplies by ``k_d``; ``None`` for a texture: the Chebyshev expansion
     in ``R_dh`` of the module docstring."""
 
-    def __init__(self, factors: DiffuseFactors, model: str, channels: str,
+    def __init__(self, factors, model: str, channels: str,
                  kd: np.ndarray | None = None):
-        mi = mitsuba_module()
+        import mitsuba as mi
         self.model = model
         C = 1 if channels == "mono" else 3
         self.C = C
@@ -266,8 +228,8 @@ class ColourDiffuse:
         self._nu = constant(nu)
         self._inv_u = constant(1.0 / nu)
         self._r = [constant(float(r)) for r in nodes]
-        #: R_dh on the 1 nm grid, for the gradient estimate (not differentiated,
-        #: as in spectral variants)
+        #: R_dh on the 1 nm grid, for the gradient estimate (its derivatives are the
+        #: plugin's DerivativeTable, on the same grid)
         r_dh = level_data(0)[2]
         self._r_dh = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(r_dh[:, None], np.float32)),
                                   use_accel=False, migrate=False,
@@ -299,7 +261,7 @@ class ColourDiffuse:
         return [_g(kd, r, self.model) for r in self._r]
 
     def _combine(self, res, kd):
-        mi = mitsuba_module()
+        import mitsuba as mi
         C = self.C
         out = mi.Spectrum(0.0)
         for j, g in enumerate(self._weights(kd)):
@@ -309,10 +271,9 @@ class ColourDiffuse:
 
     def r_dh_at(self, wavelengths, active=True):
         """``R_dh`` at ``wavelengths`` (``mi.Spectrum``, nm), detached."""
-        mi = mitsuba_module()
-        lo, hi = SPECTRAL_RANGE
+        import mitsuba as mi
         return dr.detach(mi.Spectrum(*[
-            self._r_dh.eval(mi.Point1f((wavelengths[k] - lo) / (hi - lo)), active)[0]
+            self._r_dh.eval(mi.Point1f(grid_coordinate(wavelengths[k])), active)[0]
             for k in range(dr.size_v(mi.Spectrum))]))
 
     def series(self, kd, r_dh):
@@ -321,11 +282,11 @@ class ColourDiffuse:
 
     def value(self, cos_i, cos_o, kd, active=True):
         """``π f`` (``mi.Spectrum``): the diffuse term without ``1/π`` and ``cos θ_o``."""
-        mi = mitsuba_module()
+        import mitsuba as mi
         res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
         return self._combine(res, kd)
 
     def albedo(self, cos_i, kd, active=True):
         """``∫ f cos θ_o dω_o``: the diffuse lobe's albedo for light from ``cos_i``."""
-        mi = mitsuba_module()
+        import mitsuba as mi
         return self._combine(self._A.eval(mi.Point1f(self._u(cos_i)), active), kd)

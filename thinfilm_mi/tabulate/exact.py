@@ -5,7 +5,7 @@ angles and wavelengths and interpolate linearly, which they found 6x faster than
 the recursion at every hit. Here a table is a ``Texture2f`` (Dr.Jit's texture,
 float32) whose channels are the unpolarised ``R`` and, where a BSDF needs it,
 ``T`` of one lighting side of the stack. It is built in float64 with the optics
-core (:func:`thinfilm_mi.render.kernel.unpolarised_rt` on ``drjit.llvm.Float64``) and
+core (:func:`thinfilm_mi.optics.unpolarised.unpolarised_rt` on ``drjit.llvm.Float64``) and
 looked up in the render kernel, where its cost does not depend on the number of
 films.
 
