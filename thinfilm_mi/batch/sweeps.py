@@ -345,7 +345,8 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
     if not isinstance(variant, str) or not re.fullmatch(r"[a-z]+(_[a-z0-9]+)+", variant):
         raise UsageError(f"--variant {variant!r}: not a Mitsuba variant name (e.g. {DEFAULT_VARIANT})")
     if contact_sheet:  # say so now, not after the frames are rendered
-        require_extra("matplotlib", "plot", "the contact sheet (--no-contact-sheet skips it)")
+        require_extra("matplotlib", "plot",
+                      "the contact sheet (skip it: --no-contact-sheet, contact_sheet=False)")
     axes = parse_axes(defines, "define") + parse_axes(parameters, "traverse")
     frames = build_frames(axes)
     variant, notice = grid_variant(scene_file, frames, variant)

@@ -115,7 +115,7 @@ def _parse_grid(text: str, option: str, default_step: float, example: str) -> np
             n = int(math.floor((stop - start) / step + 1e-9)) + 1
             if n > MAX_GRID_POINTS:
                 raise UsageError(f"{option} {text!r}: {n} values; at most "
-                                     f"{MAX_GRID_POINTS} (use a larger STEP)")
+                                 f"{MAX_GRID_POINTS} (use a larger STEP)")
             return start + step * np.arange(n)
         return np.array([float(t) for t in re.split(r"[,\s]+", text) if t], dtype=np.float64)
     except ValueError:
