@@ -1,5 +1,6 @@
 # The two set-up commands of the README: `make demo` and `make test`.
-# Both create .venv on first use, install the package, and make sure Dr.Jit
+# Both create .venv on first use, install the package with the extras the test
+# suite needs ([test], [sweep]: Dask, [plot]: matplotlib), and make sure Dr.Jit
 # loads an LLVM it can compile with (scripts/ensure_llvm.py).
 PYTHON ?= python3
 VENV   := .venv
@@ -11,7 +12,7 @@ STAMP  := $(VENV)/.installed-stamp
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test]'
+	$(PY) -m pip install -q -e '.[test,sweep,plot]'
 	$(PY) scripts/ensure_llvm.py
 	touch $(STAMP)
 

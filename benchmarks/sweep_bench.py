@@ -83,18 +83,18 @@ def fig8a_with_id(tmp: Path) -> Path:
 def frame_costs(tmp: Path, size: str, spp: int) -> dict[str, float]:
     import mitsuba as mi
 
-    from thinfilm_mi.cli import render as cli
     from thinfilm_mi.batch import exr
+    from thinfilm_mi.batch import scene as tf_scene
 
     imports = timed(lambda: subprocess.run(
         [sys.executable, "-c", "import mitsuba as mi; mi.set_variant('llvm_ad_spectral'); "
                                "import thinfilm_mi"], check=True, timeout=600))[0]
-    cli.setup_variant(cli.DEFAULT_VARIANT)
+    tf_scene.setup_variant(tf_scene.DEFAULT_VARIANT)
     mi.set_log_level(mi.LogLevel.Error)
-    w, h = cli.parse_size(size)
-    load, scene = timed(lambda: cli.load_scene(SCENES / "demo.xml", {"sio2": "437"}, size=(w, h), spp=spp))
-    first, (image, channels, _, _) = timed(lambda: cli.render_scene(scene, spp, seed=1))
-    second = timed(lambda: cli.render_scene(scene, spp, seed=2))[0]
+    w, h = tf_scene.parse_size(size)
+    load, scene = timed(lambda: tf_scene.load_scene(SCENES / "demo.xml", {"sio2": "437"}, size=(w, h), spp=spp))
+    first, (image, channels, _, _) = timed(lambda: tf_scene.render_scene(scene, spp, seed=1))
+    second = timed(lambda: tf_scene.render_scene(scene, spp, seed=2))[0]
     write = timed(lambda: (exr.write_exr(tmp / "one.exr", image, channels, {}),
                            exr.write_png(tmp / "one.png", image, channels)))[0]
     return {"imports (new process)": imports, "scene load": load, "first render": first,

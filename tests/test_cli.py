@@ -11,8 +11,10 @@ import pytest
 OpenEXR = pytest.importorskip("OpenEXR")
 
 from thinfilm_mi import Stack  # noqa: E402
-from thinfilm_mi.cli import render as cli
+from thinfilm_mi.batch import scene as tf_scene  # noqa: E402
+from thinfilm_mi.cli import render as cli  # noqa: E402
 from thinfilm_mi.cli import tools as tf_main  # noqa: E402
+from thinfilm_mi.errors import UsageError  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 PREFIX = "thinfilm-render: error:"
@@ -60,7 +62,7 @@ def _png_size(path):
 
 
 def _error_lines(err: str) -> list[str]:
-    return [l for l in err.splitlines() if l.strip()]
+    return [line for line in err.splitlines() if line.strip()]
 
 
 def test_render_in_process(scene, tmp_path, capfd):
@@ -210,18 +212,18 @@ def test_polarization_is_found_through_includes_and_parameters(tmp_path):
                                        '</bsdf>', '<bsdf type="polarizer"/>'))
     plain = tmp_path / "plain.xml"
     plain.write_text(SCENE)
-    assert ("Integrator", "path") in cli.scene_plugins(included)
-    assert cli.scene_variant(included, {}, "llvm_ad_spectral") == ("llvm_ad_spectral", None)
-    variant, notice = cli.scene_variant(included, {"integ": "stokes"}, "llvm_ad_spectral")
+    assert ("Integrator", "path") in tf_scene.scene_plugins(included)
+    assert tf_scene.scene_variant(included, {}, "llvm_ad_spectral") == ("llvm_ad_spectral", None)
+    variant, notice = tf_scene.scene_variant(included, {"integ": "stokes"}, "llvm_ad_spectral")
     assert variant == "llvm_ad_spectral_polarized" and "'stokes' integrator" in notice
     # no thin-film plugin: the mono family keeps its colour
-    variant, notice = cli.scene_variant(polarizer, {}, "llvm_ad_mono")
+    variant, notice = tf_scene.scene_variant(polarizer, {}, "llvm_ad_mono")
     assert variant == "llvm_ad_mono_polarized" and "'polarizer' BSDF" in notice
-    assert cli.scene_variant(polarizer, {}, "llvm_ad_spectral_polarized") == \
+    assert tf_scene.scene_variant(polarizer, {}, "llvm_ad_spectral_polarized") == \
         ("llvm_ad_spectral_polarized", None)
-    assert cli.scene_variant(plain, {}, "llvm_ad_rgb") == ("llvm_ad_rgb", None)
+    assert tf_scene.scene_variant(plain, {}, "llvm_ad_rgb") == ("llvm_ad_rgb", None)
     # a scene that does not parse keeps the variant; loading it reports the error
-    assert cli.scene_variant(plain, {"nosuch": "1"}, "llvm_ad_spectral") == ("llvm_ad_spectral", None)
+    assert tf_scene.scene_variant(plain, {"nosuch": "1"}, "llvm_ad_spectral") == ("llvm_ad_spectral", None)
 
 
 @pytest.mark.parametrize("variant, thin_films, expected", [
@@ -232,9 +234,9 @@ def test_polarization_is_found_through_includes_and_parameters(tmp_path):
     ("llvm_ad_mono_polarized", True, "llvm_ad_mono_polarized"),
 ])
 def test_polarized_variant_of_a_family(variant, thin_films, expected):
-    assert cli.polarized_variant(variant, thin_films) == expected
+    assert tf_scene.polarized_variant(variant, thin_films) == expected
     if not thin_films:  # not in the build: the spectral one of the same backend
-        assert cli.polarized_variant(variant, False, ["cuda_ad_spectral_polarized"]) == \
+        assert tf_scene.polarized_variant(variant, False, ["cuda_ad_spectral_polarized"]) == \
             "cuda_ad_spectral_polarized"
 
 
@@ -297,7 +299,7 @@ def test_one_line_condenses_plugin_tracebacks():
     msg = ('[parser.cpp:1718] At s.xml (line 12, col 25): failed to instantiate bsdf plugin of '
            'type "x": Traceback (most recent call last):\n  File "p.py", line 7, in __init__\n'
            'ValueError: thickness: must be >= 0, got -3')
-    assert cli.one_line(msg) == ('At s.xml (line 12, col 25): failed to instantiate bsdf plugin '
+    assert tf_scene.one_line(msg) == ('At s.xml (line 12, col 25): failed to instantiate bsdf plugin '
                                  'of type "x": ValueError: thickness: must be >= 0, got -3')
 
 
@@ -308,7 +310,7 @@ def test_one_line_keeps_a_multi_line_exception_message():
            'Traceback (most recent call last):\n  File "p.py", line 7, in __init__\n'
            '    self.films = films_from_props(props)\n             ^^^^^^^^^^^^^^^^\n'
            "MaterialError: material file 'f.yml': not valid\n  in line 2\nsecond line")
-    assert cli.one_line(msg) == ('At s.xml (line 3, col 25): failed to instantiate bsdf plugin of '
+    assert tf_scene.one_line(msg) == ('At s.xml (line 3, col 25): failed to instantiate bsdf plugin of '
                                  "type \"x\": MaterialError: material file 'f.yml': not valid "
                                  "in line 2 second line")
 
@@ -328,23 +330,23 @@ def test_scene_with_a_malformed_material_file_names_it(tmp_path, capfd):
 @pytest.mark.parametrize("spp,pixels,cap", [(1, 100, 1 << 22), (7, 100, 1 << 22),
                                             (1000, 1000, 10_000), (64, 1 << 22, 1 << 22)])
 def test_plan_passes(spp, pixels, cap):
-    plan = cli.plan_passes(spp, pixels, cap)
+    plan = tf_scene.plan_passes(spp, pixels, cap)
     assert sum(plan) == spp
     assert max(plan) - min(plan) <= 1
-    assert len(plan) >= min(spp, cli.MIN_PASSES)
+    assert len(plan) >= min(spp, tf_scene.MIN_PASSES)
     assert max(plan) * pixels <= max(cap, pixels)
-    seeds = {cli.pass_seed(0, i) for i in range(len(plan))} | {cli.pass_seed(1, i) for i in range(len(plan))}
+    seeds = {tf_scene.pass_seed(0, i) for i in range(len(plan))} | {tf_scene.pass_seed(1, i) for i in range(len(plan))}
     assert len(seeds) == 2 * len(plan)
 
 
 def test_parse_helpers():
-    assert cli.parse_defines(["a=1", "b_2= x=y"]) == {"a": "1", "b_2": " x=y"}
-    assert cli.parse_size("640x480") == (640, 480)
+    assert tf_scene.parse_defines(["a=1", "b_2= x=y"]) == {"a": "1", "b_2": " x=y"}
+    assert tf_scene.parse_size("640x480") == (640, 480)
     for bad in ("640", "0x4", "axb"):
-        with pytest.raises(cli.UsageError):
-            cli.parse_size(bad)
-    with pytest.raises(cli.UsageError):
-        cli.parse_defines(["1a=3"])
+        with pytest.raises(UsageError):
+            tf_scene.parse_size(bad)
+    with pytest.raises(UsageError):
+        tf_scene.parse_defines(["1a=3"])
 
 
 def test_spectrum_matches_stack(capsys):
@@ -353,7 +355,7 @@ def test_spectrum_matches_stack(capsys):
                        "--angles", "0,30,60", "--wl", "400:700:20"])
     out = capsys.readouterr().out
     assert rc == 0
-    rows = [l.split() for l in out.splitlines() if l.strip() and not l.startswith("#")]
+    rows = [line.split() for line in out.splitlines() if line.strip() and not line.startswith("#")]
     assert rows[0] == ["wl_nm", "R@0", "T@0", "R@30", "T@30", "R@60", "T@60"]
     table = np.array(rows[1:], dtype=float)
     wl = np.arange(400.0, 701.0, 20.0)

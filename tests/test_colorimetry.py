@@ -316,7 +316,7 @@ def test_parse_angles_ranges():
     np.testing.assert_array_equal(tf_main.parse_angles("0:80:10"), np.arange(0, 81, 10.0))
     np.testing.assert_array_equal(tf_main.parse_angles("0, 30 60"), [0.0, 30.0, 60.0])
     np.testing.assert_array_equal(tf_main.parse_angles("90"), [90.0])  # spectrum allows grazing
-    from thinfilm_mi.cli import render as cli
+    from thinfilm_mi.errors import UsageError
 
-    with pytest.raises(cli.UsageError, match=r"--angles.*\[0, 90\)"):
+    with pytest.raises(UsageError, match=r"--angles.*\[0, 90\)"):
         tf_main.parse_angles("90", below_90=True)

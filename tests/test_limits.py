@@ -4,6 +4,8 @@ hemispherical terms of deep coatings (a loop, equal to the unrolled recursion), 
 command lines that used to end in a traceback or an empty message."""
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -12,6 +14,7 @@ import mitsuba as mi
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402
+from thinfilm_mi.batch.scene import root_cause  # noqa: E402
 from thinfilm_mi.cli import render as cli  # noqa: E402
 from thinfilm_mi.tabulate import hemispherical
 from thinfilm_mi.cli.tools import main as module_main  # noqa: E402
@@ -86,7 +89,7 @@ def test_spectrum_with_too_many_wavelengths_is_one_clear_line(capsys):
 
 
 def test_render_with_a_huge_size_is_one_clear_line(capsys, tmp_path):
-    scene = cli.Path(__file__).resolve().parent.parent / "scenes" / "demo.xml"
+    scene = Path(__file__).resolve().parent.parent / "scenes" / "demo.xml"
     rc = cli.render_main([str(scene), "--size", "100000x100000", "--spp", "1",
                           "-o", str(tmp_path / "x.exr")])
     err = [l for l in capsys.readouterr().err.strip().splitlines() if "error" in l]
@@ -102,4 +105,4 @@ def test_render_failure_reports_the_root_cause():
             raise RuntimeError("error while performing a custom differentiable operation. "
                                "(see above).") from inner
     except RuntimeError as e:
-        assert "40 GiB" in str(cli.root_cause(e))
+        assert "40 GiB" in str(root_cause(e))

@@ -26,7 +26,9 @@ import pytest
 
 pytest.importorskip("OpenEXR")
 
+from thinfilm_mi.batch import scene as tf_scene  # noqa: E402
 from thinfilm_mi.cli import render as cli  # noqa: E402
+from thinfilm_mi.errors import UsageError  # noqa: E402
 from thinfilm_mi.batch.exr import read_exr  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
@@ -42,7 +44,7 @@ def needs_polarized(scene: Path) -> bool:
     return 'type="stokes"' in scene.read_text()
 
 
-def variant_of(scene: Path, requested: str = cli.DEFAULT_VARIANT) -> str:
+def variant_of(scene: Path, requested: str = tf_scene.DEFAULT_VARIANT) -> str:
     return POLARIZED_VARIANT if needs_polarized(scene) else requested
 
 
@@ -61,7 +63,7 @@ def render_all(scenes: list[Path], variant: str, out: Path) -> str:
 def rendered(tmp_path_factory):
     """Render every scene once; returns (output folder, the CLI's stderr)."""
     out = tmp_path_factory.mktemp("scenes")
-    return out, render_all(SCENES, cli.DEFAULT_VARIANT, out)
+    return out, render_all(SCENES, tf_scene.DEFAULT_VARIANT, out)
 
 
 @pytest.fixture(scope="module")
@@ -123,7 +125,7 @@ def _check_scene(scene: Path, out: Path, err: str, requested: str) -> None:
 
 @pytest.mark.parametrize("scene", SCENES, ids=[p.stem for p in SCENES])
 def test_scene_renders(scene, rendered):
-    _check_scene(scene, *rendered, cli.DEFAULT_VARIANT)
+    _check_scene(scene, *rendered, tf_scene.DEFAULT_VARIANT)
 
 
 @pytest.mark.parametrize("scene", SCENES, ids=[p.stem for p in SCENES])
@@ -133,9 +135,9 @@ def test_scene_renders_in_rgb(scene, rendered_rgb):
 
 def test_several_scenes_need_out_dir_not_o(tmp_path):
     # -o names one file; with several scenes it is a one-line usage error, nothing rendered
-    with pytest.raises(cli.UsageError, match="--out-dir"):
+    with pytest.raises(UsageError, match="--out-dir"):
         cli.plan_outputs([str(SCENES[0]), str(SCENES[-1])], str(tmp_path / "x.exr"))
-    with pytest.raises(cli.UsageError, match="both be written"):
+    with pytest.raises(UsageError, match="both be written"):
         cli.plan_outputs(["a/s.xml", "b/s.xml"], None, tmp_path)
     assert cli.plan_outputs(["a/s.xml", "b/t.xml"], None, tmp_path) == [tmp_path / "s.exr",
                                                                          tmp_path / "t.exr"]
@@ -152,7 +154,7 @@ def test_failing_scene_does_not_stop_the_others(tmp_path, capfd):
                           "--spp", "1"])
     err = capfd.readouterr().err
     assert rc == 2
-    errors = [l for l in err.splitlines() if "error:" in l]
+    errors = [line for line in err.splitlines() if "error:" in line]
     assert len(errors) == 1 and "missing.xml" in errors[0]
     channels, _ = read_exr(tmp_path / "o" / "good.exr")
     assert channels["R"].shape == (3, 4)

@@ -25,10 +25,10 @@ pytest.importorskip("distributed")
 
 import mitsuba as mi  # noqa: E402
 
+from thinfilm_mi.batch import exr, grid, outputs, sweeps, worker  # noqa: E402
+from thinfilm_mi.batch import scene as tf_scene  # noqa: E402
 from thinfilm_mi.cli import render as cli  # noqa: E402
-from thinfilm_mi.batch import exr
-from thinfilm_mi.batch import sweeps
-from thinfilm_mi.cli.render import UsageError  # noqa: E402
+from thinfilm_mi.errors import UsageError  # noqa: E402
 
 TIMEOUT = 120  # seconds: bound of every sweep (they take a few seconds)
 THICKNESS = "sphere.bsdf.layers.0.thickness"
@@ -85,12 +85,12 @@ def _run(scene, out, client, defines, parameters=None, **kw):
 
 
 def _manifest(out: Path) -> list[dict[str, str]]:
-    with open(out / sweeps.MANIFEST, newline="") as f:
+    with open(out / outputs.MANIFEST, newline="") as f:
         return list(csv.DictReader(f))
 
 
 def _parts(out: Path) -> list[Path]:
-    return sorted(p for p in out.rglob("*") if sweeps.PART_MARK in p.name)
+    return sorted(p for p in out.rglob("*") if outputs.PART_MARK in p.name)
 
 
 def _mtimes(out: Path, rows) -> dict[str, int]:
@@ -102,51 +102,51 @@ def _mtimes(out: Path, rows) -> dict[str, int]:
 
 
 def test_values_ranges_lists_and_errors():
-    assert sweeps.parse_values("100:800:25") == tuple(str(v) for v in range(100, 801, 25))
-    assert sweeps.parse_values("100:180:25") == ("100", "125", "150", "175")  # STOP off the grid
-    assert sweeps.parse_values("0.1:0.5:0.1") == ("0.1", "0.2", "0.3", "0.4", "0.5")  # no float noise
-    assert sweeps.parse_values("3:1:-1") == ("3", "2", "1")
-    assert sweeps.parse_values(" Au, Ag ,Cu") == ("Au", "Ag", "Cu")
-    assert sweeps.parse_values("SiO2 500; Au 20") == ("SiO2 500; Au 20",)
-    assert sweeps.parse_values(range(0, 30, 10)) == ("0", "10", "20")
-    assert sweeps.parse_values(np.array([0.5, 1.0])) == ("0.5", "1")
-    assert sweeps.parse_values(2.5) == ("2.5",)
+    assert grid.parse_values("100:800:25") == tuple(str(v) for v in range(100, 801, 25))
+    assert grid.parse_values("100:180:25") == ("100", "125", "150", "175")  # STOP off the grid
+    assert grid.parse_values("0.1:0.5:0.1") == ("0.1", "0.2", "0.3", "0.4", "0.5")  # no float noise
+    assert grid.parse_values("3:1:-1") == ("3", "2", "1")
+    assert grid.parse_values(" Au, Ag ,Cu") == ("Au", "Ag", "Cu")
+    assert grid.parse_values("SiO2 500; Au 20") == ("SiO2 500; Au 20",)
+    assert grid.parse_values(range(0, 30, 10)) == ("0", "10", "20")
+    assert grid.parse_values(np.array([0.5, 1.0])) == ("0.5", "1")
+    assert grid.parse_values(2.5) == ("2.5",)
     for bad, word in [("100:800", "START:STOP:STEP"), ("1:5:0", "STEP"), ("5:1:1", "STEP"),
                       ("1,,2", "empty"), ("", "no value"), ("1,2,1", "repeated"),
                       ("0:1e9:1", "more than"), ([], "no value"), (object(), "expected")]:
         with pytest.raises(UsageError, match=word):
-            sweeps.parse_values(bad, "-D x=")
+            grid.parse_values(bad, "-D x=")
 
 
 def test_axes_names_and_values_are_checked():
     with pytest.raises(UsageError, match="not a valid parameter name"):
-        sweeps.parse_axes(["2x=1"], "define")
+        grid.parse_axes(["2x=1"], "define")
     with pytest.raises(UsageError, match="expected name=VALUES"):
-        sweeps.parse_axes(["thickness"], "define")
+        grid.parse_axes(["thickness"], "define")
     with pytest.raises(UsageError, match="given twice"):
-        sweeps.parse_axes(["a=1", "a=2"], "define")
+        grid.parse_axes(["a=1", "a=2"], "define")
     with pytest.raises(UsageError, match="must be numbers"):
-        sweeps.parse_axes({THICKNESS: "thick"}, "traverse")
+        grid.parse_axes({THICKNESS: "thick"}, "traverse")
     with pytest.raises(UsageError, match="clash"):
-        sweeps.build_frames(sweeps.parse_axes(["status=1,2"], "define"))
+        grid.build_frames(grid.parse_axes(["status=1,2"], "define"))
 
 
 def test_frames_are_named_and_grouped_by_scene_load():
-    axes = (sweeps.parse_axes({"material": "Au,Ag", "spp": 4}, "define")
-            + sweeps.parse_axes({THICKNESS: "100:300:100"}, "traverse"))
-    frames = sweeps.build_frames(axes)
+    axes = (grid.parse_axes({"material": "Au,Ag", "spp": 4}, "define")
+            + grid.parse_axes({THICKNESS: "100:300:100"}, "traverse"))
+    frames = grid.build_frames(axes)
     assert [f.index for f in frames] == list(range(6))
     assert frames[1].params == {"material": "Au", "spp": "4", THICKNESS: "200"}
     # named after the axes that vary; -P keys by their last three parts
     assert frames[1].exr == "frames/material=Au_layers.0.thickness=200.exr"
     assert len({f.exr for f in frames}) == 6
     for per_task, sizes in [(None, [2, 1, 2, 1]), (3, [3, 3]), (1, [1] * 6)]:
-        tasks = sweeps.plan_tasks(frames, 2, per_task)
+        tasks = grid.plan_tasks(frames, 2, per_task)
         assert [len(t) for t in tasks] == sizes
         assert all(len({f.defines for f in t}) == 1 for t in tasks)  # one scene load per task
         assert [f.index for t in tasks for f in t] == list(range(6))
     # values that differ only in characters a file name cannot hold
-    odd = sweeps.build_frames(sweeps.parse_axes({"name": ["a b", "a/b"]}, "define"))
+    odd = grid.build_frames(grid.parse_axes({"name": ["a b", "a/b"]}, "define"))
     assert odd[0].exr != odd[1].exr and odd[0].exr.startswith("frames/frame-")
 
 
@@ -176,12 +176,12 @@ def test_importing_the_package_does_not_import_dask():
 
 
 def test_traverse_values_are_checked_on_the_scene(scene):
-    mi.set_variant(cli.DEFAULT_VARIANT)
-    loaded = cli.load_scene(scene)
+    mi.set_variant(tf_scene.DEFAULT_VARIANT)
+    loaded = tf_scene.load_scene(scene)
     with pytest.raises(UsageError, match="did you mean sphere.bsdf.layers.0.thickness"):
-        sweeps.set_parameters(loaded, None, [("sphere.bsdf.layers.0.thicknes", "3")])
+        worker.set_parameters(loaded, None, [("sphere.bsdf.layers.0.thicknes", "3")])
     with pytest.raises(UsageError, match="single numbers"):
-        sweeps.set_parameters(loaded, None, [("sphere.bsdf.layers.0.eta.values", "1.5")])
+        worker.set_parameters(loaded, None, [("sphere.bsdf.layers.0.eta.values", "1.5")])
 
 
 def test_sweep_arguments_are_checked(scene, tmp_path):
@@ -235,7 +235,7 @@ def test_every_frame_has_outputs_and_a_manifest_row(scene, tmp_path, client):
     assert sum(r["scene_loaded"] for r in result) <= 4  # at most one load per task
     # a -P frame is the frame thinfilm-render makes with the value in the XML
     # (same seed and sample count: the same samples; float32 sums in another order)
-    direct = cli.render_file(scene, tmp_path / "direct.exr", params={"material": "Ag",
+    direct = tf_scene.render_file(scene, tmp_path / "direct.exr", params={"material": "Ag",
                              "thickness": "450"}, spp=4, size=(16, 16))
     swept, _ = exr.read_exr(out / rows[5]["exr"])
     np.testing.assert_allclose(np.dstack([swept[c] for c in direct.channels]), direct.image,
@@ -328,8 +328,8 @@ def test_grid_that_needs_a_polarized_variant_gets_one(tmp_path):
     path.write_text(SCENE.replace('<integrator type="path">', '<integrator type="$integ">')
                     .replace('<default name="material"', '<default name="integ" value="path"/>'
                              '<default name="material"'))
-    grid = sweeps.build_frames(sweeps.parse_axes({"integ": "path,stokes"}, "define"))
-    variant, notice = sweeps.grid_variant(path, grid, "llvm_ad_spectral")
+    frames = grid.build_frames(grid.parse_axes({"integ": "path,stokes"}, "define"))
+    variant, notice = sweeps.grid_variant(path, frames, "llvm_ad_spectral")
     assert variant == "llvm_ad_spectral_polarized" and "'stokes' integrator" in notice
-    plain = sweeps.build_frames(sweeps.parse_axes({"integ": "path"}, "define"))
+    plain = grid.build_frames(grid.parse_axes({"integ": "path"}, "define"))
     assert sweeps.grid_variant(path, plain, "llvm_ad_spectral") == ("llvm_ad_spectral", None)

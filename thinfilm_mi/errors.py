@@ -1,5 +1,24 @@
-"""Exceptions raised for bad input. All derive from ValueError and name the
-parameter and the offending value, so a scene that fails to load says why."""
+"""Exceptions of thinfilm-mi (the base layer: every other layer may raise them).
+
+Two families:
+
+* :class:`ThinFilmError` (a ValueError): bad thin-film input (a stack, a layer
+  list, a material, a plugin parameter). It names the parameter and the
+  offending value, so a scene that fails to load says why.
+* :class:`RenderError`: what loading, rendering and writing a scene, and a
+  sweep, raise (the batch layer, :mod:`thinfilm_mi.batch`), told in one line.
+  :class:`UsageError` is a bad scene file, parameter, argument or set-up;
+  :class:`RenderFailure` a failure while rendering or writing the output.
+  :class:`MissingExtra` (a UsageError and an ImportError) is an optional
+  dependency that is not installed; its message names the extra to install.
+
+The library never exits: the command line (:func:`thinfilm_mi.cli.parser.exit_code`)
+maps these classes to exit statuses, in one place.
+"""
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
 
 
 class ThinFilmError(ValueError):
@@ -8,3 +27,30 @@ class ThinFilmError(ValueError):
 
 class MaterialError(ThinFilmError):
     """An unknown material, an unreadable dataset, or an index outside its range."""
+
+
+class RenderError(Exception):
+    """An error of loading, rendering or writing a scene (or a sweep), told in one line."""
+
+
+class UsageError(RenderError):
+    """A bad scene file, parameter, argument or machine set-up (the command exits with 2)."""
+
+
+class RenderFailure(RenderError):
+    """The scene loaded, but rendering or writing the output failed (the command exits with 1)."""
+
+
+class MissingExtra(UsageError, ImportError):
+    """An optional dependency is not installed; the message says which extra installs it."""
+
+
+def require_extra(module: str, extra: str, purpose: str) -> ModuleType:
+    """Import ``module``, an optional dependency of the ``extra`` of
+    ``pyproject.toml``; raise :class:`MissingExtra` saying what needs it
+    (``purpose``) and how to install it when it cannot be imported."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as e:
+        raise MissingExtra(f"{purpose} needs {module.partition('.')[0]}, which is not installed: "
+                           f"pip install 'thinfilm-mi[{extra}]'") from e

@@ -10,19 +10,21 @@ command runs, so other subcommands do not import scipy). ``--render`` writes a
 scene, ``OUT.xml`` beside the image: the designed stack on a sphere of the
 substrate (``thinfilm_dielectric``, or ``thinfilm_conductor`` for an absorbing
 substrate) on the stage of the demo scene (``scenes/include/stage.xml``), and
-renders it with :func:`thinfilm_mi.cli.render.render_file` (``thinfilm-render``) into
+renders it with :func:`thinfilm_mi.batch.scene.render_file` (``thinfilm-render``) into
 ``OUT.exr`` and ``OUT.png``.
 """
 from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
-from typing import Callable, TextIO
+from typing import TextIO
 from xml.sax.saxutils import quoteattr
 
-from thinfilm_mi.cli import render as cli
+from thinfilm_mi.batch import scene
+from thinfilm_mi.cli.parser import failure, report_error
+from thinfilm_mi.cli.render import summary
+from thinfilm_mi.errors import RenderError, ThinFilmError, UsageError, require_extra
 
 __all__ = ["add_parser", "cmd_design", "design_scene", "render_design"]
 
@@ -32,27 +34,19 @@ RENDER_SPP = 32
 
 
 class _Bar:
-    """A one-line progress bar on a stream (redrawn in place on a terminal; a
-    log gets the final state only)."""
+    """The design's progress (``progress(fraction, message)`` of
+    :func:`thinfilm_mi.design.design`) on the one progress bar of the commands
+    (:func:`thinfilm_mi.batch.scene.progress_bar`, tqdm), in thousandths."""
 
-    def __init__(self, stream: TextIO, width: int = 24):
-        self.stream, self.width = stream, width
-        self.start = time.perf_counter()
-        self.interactive = bool(getattr(stream, "isatty", lambda: False)())
-        self.last = ""
+    def __init__(self, stream: TextIO):
+        self.bar = scene.progress_bar(stream, total=1000, unit="‰", desc="design")
 
     def __call__(self, fraction: float, message: str) -> None:
-        filled = int(round(self.width * min(max(fraction, 0.0), 1.0)))
-        self.last = (f"\rdesign: [{'#' * filled}{'.' * (self.width - filled)}] {message}, "
-                     f"{time.perf_counter() - self.start:.1f} s")
-        if self.interactive:
-            self.stream.write(self.last + "\033[K")
-            self.stream.flush()
+        self.bar.set_postfix_str(message, refresh=False)
+        self.bar.update(int(round(1000 * min(max(fraction, 0.0), 1.0))) - self.bar.n)
 
     def close(self) -> None:
-        if self.last:
-            self.stream.write(("" if self.interactive else self.last.lstrip("\r")) + "\n")
-            self.stream.flush()
+        self.bar.close()
 
 
 def _stage() -> Path:
@@ -60,7 +54,7 @@ def _stage() -> Path:
         path = root / "scenes" / "include" / "stage.xml"
         if path.is_file():
             return path
-    raise cli.UsageError("--render: scenes/include/stage.xml (the demo scene's stage) was not found "
+    raise UsageError("--render: scenes/include/stage.xml (the demo scene's stage) was not found "
                          "in the working directory or the source checkout")
 
 
@@ -100,37 +94,37 @@ def design_scene(layers: str, substrate, substrate_spec: str, ambient_spec: str)
 
 
 def render_design(result, output: str | Path, size: str = RENDER_SIZE, spp: int = RENDER_SPP,
-                  variant: str = cli.DEFAULT_VARIANT, seed: int = 0, progress: TextIO | None = None):
+                  variant: str = scene.DEFAULT_VARIANT, seed: int = 0, progress: TextIO | None = None):
     """Write ``OUT.xml`` (:func:`design_scene`) and render it to ``OUT.exr`` and
-    ``OUT.png`` with :func:`thinfilm_mi.cli.render.render_file`; returns its
-    :class:`~thinfilm_mi.cli.render.RenderResult`."""
+    ``OUT.png`` with :func:`thinfilm_mi.batch.scene.render_file`; returns its
+    :class:`~thinfilm_mi.batch.scene.RenderResult`."""
     out = Path(output)
     if out.suffix.lower() not in (".png", ".exr"):
-        raise cli.UsageError(f"--render {str(output)!r}: expected an .png (or .exr) file name")
+        raise UsageError(f"--render {str(output)!r}: expected an .png (or .exr) file name")
     problem = result.problem
     xml = design_scene(result.layers, problem.substrate, problem.substrate_spec, problem.ambient_spec)
     scene = out.with_suffix(".xml")
     scene.parent.mkdir(parents=True, exist_ok=True)
     scene.write_text(xml, encoding="utf-8")
-    return cli.render_file(scene, out.with_suffix(".exr"), spp=spp, size=cli.parse_size(size),
+    return scene.render_file(scene, out.with_suffix(".exr"), spp=spp, size=scene.parse_size(size),
                            variant=variant, seed=seed, progress=progress)
 
 
-def cmd_design(args: argparse.Namespace, error: Callable[..., int]) -> int:
-    """Run the ``design`` subcommand; ``error(prog, message, code, exc, verbose)``
-    reports a failure in one line (the CLI's error handler)."""
-    from thinfilm_mi.errors import ThinFilmError
-
+def cmd_design(args: argparse.Namespace) -> int:
+    """Run the ``design`` subcommand; a failure is reported in one line
+    (:func:`thinfilm_mi.cli.parser.report_error`)."""
     bar = None
     try:
         from thinfilm_mi import design as dz
 
+        if args.plot:
+            require_extra("matplotlib", "plot", "--plot")
         tolerance = dz.parse_tolerance(args.tolerance) if args.tolerance else None
         if args.spp < 1:
-            raise cli.UsageError(f"--spp must be >= 1, got {args.spp}")
-        cli.parse_size(args.size)
+            raise UsageError(f"--spp must be >= 1, got {args.spp}")
+        scene.parse_size(args.size)
         if args.render and Path(args.render).suffix.lower() not in (".png", ".exr"):
-            raise cli.UsageError(f"--render {args.render!r}: expected an .png (or .exr) file name")
+            raise UsageError(f"--render {args.render!r}: expected an .png (or .exr) file name")
         if args.evaluate is not None:
             result = dz.evaluate(args.targets, args.evaluate, tolerance=tolerance, tolerance_seed=args.seed or 0)
         else:
@@ -138,8 +132,8 @@ def cmd_design(args: argparse.Namespace, error: Callable[..., int]) -> int:
             result = dz.design(args.targets, start=args.start, max_layers=args.max_layers, seeds=args.seeds,
                                seed=args.seed, time_limit=args.time_limit, tolerance=tolerance,
                                tolerance_seed=args.seed or 0, progress=bar)
-    except (cli.CLIError, ThinFilmError, ValueError) as e:
-        return error(PROG, str(e), getattr(e, "code", 2), e, args.verbose)
+    except (RenderError, ThinFilmError, ValueError) as e:
+        return report_error(PROG, e, args.verbose)
     finally:
         if bar is not None:
             bar.close()
@@ -151,19 +145,19 @@ def cmd_design(args: argparse.Namespace, error: Callable[..., int]) -> int:
             path.parent.mkdir(parents=True, exist_ok=True)
             fig.savefig(path)
         except Exception as e:
-            return error(PROG, f"cannot write --plot {args.plot}: {e}", 1, e, args.verbose)
+            return report_error(PROG, failure(e, f"cannot write --plot {args.plot}: {e}"), args.verbose)
         print(f"{PROG}: wrote {path}", file=sys.stderr)
     if args.render:
         try:
             rendered = render_design(result, args.render, size=args.size, spp=args.spp,
                                      variant=args.variant, progress=None if args.quiet else sys.stderr)
-        except cli.CLIError as e:
-            return error(PROG, str(e), e.code, e, args.verbose)
-        print(cli.summary(rendered), file=sys.stderr)
+        except RenderError as e:
+            return report_error(PROG, e, args.verbose)
+        print(summary(rendered), file=sys.stderr)
     return 0
 
 
-def add_parser(sub, error: Callable[..., int]) -> argparse.ArgumentParser:
+def add_parser(sub) -> argparse.ArgumentParser:
     """Add the ``design`` subcommand to ``sub`` (an argparse subparsers object)."""
     p = sub.add_parser(
         "design", help="design a coating for a targets file (needle synthesis, refinement, tolerances)",
@@ -187,8 +181,8 @@ def add_parser(sub, error: Callable[..., int]) -> argparse.ArgumentParser:
                                                        "(also writes OUT.xml and OUT.exr)")
     p.add_argument("--size", default=RENDER_SIZE, metavar="WxH", help=f"render size (default {RENDER_SIZE})")
     p.add_argument("--spp", type=int, default=RENDER_SPP, help=f"render samples per pixel (default {RENDER_SPP})")
-    p.add_argument("--variant", default=cli.DEFAULT_VARIANT, help="Mitsuba variant of the render")
+    p.add_argument("--variant", default=scene.DEFAULT_VARIANT, help="Mitsuba variant of the render")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--verbose", action="store_true")
-    p.set_defaults(func=lambda a: cmd_design(a, error))
+    p.set_defaults(func=cmd_design)
     return p

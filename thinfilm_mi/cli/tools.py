@@ -25,13 +25,16 @@ import argparse
 import math
 import re
 import sys
-import traceback
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from thinfilm_mi.cli import render as cli
+from thinfilm_mi.batch.scene import DEFAULT_VARIANT, parse_size, render_file, setup_llvm_only
+from thinfilm_mi.batch.scene import PROG as RENDER_PROG
+from thinfilm_mi.cli import render as render_command
+from thinfilm_mi.cli.parser import ArgumentParser, failure, report_error
+from thinfilm_mi.errors import RenderError, ThinFilmError, UsageError, require_extra
 
 PROG = "python -m thinfilm_mi"
 
@@ -42,24 +45,25 @@ DEMO_SUBSTRATE = "1.6"
 DEMO_DESCRIPTION = "SiO2-like 1.46 500 nm; Au-like 0.42+2.47j 20 nm on glass 1.6"
 
 
+def _pyplot(purpose: str = "--plot"):
+    """``matplotlib.pyplot`` on the Agg backend; :class:`~thinfilm_mi.errors.MissingExtra`
+    naming the ``[plot]`` extra when matplotlib is not installed."""
+    matplotlib = require_extra("matplotlib", "plot", purpose)
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
 
 def _save_figure(fig, path) -> Path:
     """Lay out ``fig``, write it to ``path`` (creating folders) and close it."""
-    import matplotlib.pyplot as plt
-
+    plt = _pyplot()
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     plt.close(fig)
     return path
-
-def _error(prog: str, message: str, code: int = 2, exc: BaseException | None = None,
-           verbose: bool = False) -> int:
-    if verbose and exc is not None:
-        traceback.print_exception(type(exc), exc, exc.__traceback__, file=sys.stderr)
-    print(f"{prog}: error: {cli.one_line(message)}", file=sys.stderr)
-    return code
 
 
 # --------------------------------------------------------------------------------------
@@ -78,8 +82,8 @@ def cmd_materials(args: argparse.Namespace) -> int:
     try:
         table = fmt()
     except Exception as e:
-        return _error(f"{PROG} materials", f"cannot list materials: {type(e).__name__}: {e}", 1,
-                      e, args.verbose)
+        return report_error(f"{PROG} materials",
+                            failure(e, f"cannot list materials: {type(e).__name__}: {e}"), args.verbose)
     print(table if isinstance(table, str) else "\n".join(map(str, table)))
     return 0
 
@@ -97,7 +101,7 @@ def _parse_grid(text: str, option: str, default_step: float, example: str) -> np
     """``"START:STOP:STEP"`` (STOP included when on the grid), ``"START:STOP"``
     (``default_step``) or a list separated by commas or spaces -> float array;
     a malformed string (or a grid of more than :data:`MAX_GRID_POINTS` values)
-    raises :class:`cli.UsageError` naming ``option``."""
+    raises :class:`~thinfilm_mi.errors.UsageError` naming ``option``."""
     text = text.strip()
     try:
         if ":" in text:
@@ -108,15 +112,15 @@ def _parse_grid(text: str, option: str, default_step: float, example: str) -> np
                 raise ValueError
             start, stop, step = parts
             if not (step > 0 and stop >= start):
-                raise cli.UsageError(f"{option} {text!r}: need STOP >= START and STEP > 0")
+                raise UsageError(f"{option} {text!r}: need STOP >= START and STEP > 0")
             n = int(math.floor((stop - start) / step + 1e-9)) + 1
             if n > MAX_GRID_POINTS:
-                raise cli.UsageError(f"{option} {text!r}: {n} values; at most "
-                                     f"{MAX_GRID_POINTS} (use a larger STEP)")
+                raise UsageError(f"{option} {text!r}: {n} values; at most "
+                                 f"{MAX_GRID_POINTS} (use a larger STEP)")
             return start + step * np.arange(n)
         return np.array([float(t) for t in re.split(r"[,\s]+", text) if t], dtype=np.float64)
     except ValueError:
-        raise cli.UsageError(f"{option} {text!r}: expected {example}") from None
+        raise UsageError(f"{option} {text!r}: expected {example}") from None
 
 
 def parse_angles(text: str, below_90: bool = False) -> np.ndarray:
@@ -125,11 +129,11 @@ def parse_angles(text: str, below_90: bool = False) -> np.ndarray:
     values = _parse_grid(text, "--angles", 10.0, "degrees separated by commas, e.g. 0,30,60, "
                          "or START:STOP:STEP, e.g. 0:80:10")
     if values.size == 0:
-        raise cli.UsageError(f"--angles {text!r}: no angle given")
+        raise UsageError(f"--angles {text!r}: no angle given")
     top = "90)" if below_90 else "90]"
     for v in values:
         if not (math.isfinite(v) and 0.0 <= v and (v < 90.0 if below_90 else v <= 90.0)):
-            raise cli.UsageError(f"--angles {text!r}: angles must be in [0, {top} degrees, got {v:g}")
+            raise UsageError(f"--angles {text!r}: angles must be in [0, {top} degrees, got {v:g}")
     return values
 
 
@@ -138,7 +142,7 @@ def parse_wavelengths(text: str) -> np.ndarray:
     (5 nm steps) or a comma-separated list."""
     wl = _parse_grid(text, "--wl", 5.0, "START:STOP:STEP in nm, e.g. 360:830:5, or a list 450,550,650")
     if wl.size == 0 or not np.all(np.isfinite(wl)) or np.any(wl <= 0):
-        raise cli.UsageError(f"--wl {text!r}: wavelengths must be positive numbers of nm")
+        raise UsageError(f"--wl {text!r}: wavelengths must be positive numbers of nm")
     return wl
 
 
@@ -165,11 +169,8 @@ def format_spectrum(wavelengths: np.ndarray, angles_deg: np.ndarray, R: np.ndarr
 
 
 def plot_spectrum(path: str | Path, stack, wavelengths, angles_deg, R, T) -> Path:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    """Plot R and T against wavelength, one colour per angle, into ``path``."""
+    plt = _pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
     colors = plt.cm.viridis(np.linspace(0, 0.9, len(angles_deg)))
     for j, a in enumerate(angles_deg):
@@ -187,23 +188,24 @@ def plot_spectrum(path: str | Path, stack, wavelengths, angles_deg, R, T) -> Pat
 def cmd_spectrum(args: argparse.Namespace) -> int:
     prog = f"{PROG} spectrum"
     from thinfilm_mi import Stack
-    from thinfilm_mi.errors import ThinFilmError
 
     try:
+        if args.plot:
+            _pyplot()
         angles = parse_angles(args.angles)
         wl = parse_wavelengths(args.wl)
-        cli.setup_llvm_only()
+        setup_llvm_only()
         stack = Stack(args.layers, substrate=args.substrate, ambient=args.ambient)
         R, T = spectrum_table(stack, wl, angles)
-    except (cli.CLIError, ThinFilmError, ValueError) as e:
-        return _error(prog, str(e), 2, e, args.verbose)
+    except (UsageError, ThinFilmError, ValueError) as e:
+        return report_error(prog, e, args.verbose)
     print(f"# {stack!r}; R, T unpolarised; angles in degrees in the ambient medium")
     print(format_spectrum(wl, angles, R, T))
     if args.plot:
         try:
             path = plot_spectrum(args.plot, stack, wl, angles, R, T)
         except Exception as e:
-            return _error(prog, f"cannot write plot {args.plot}: {e}", 1, e, args.verbose)
+            return report_error(prog, failure(e, f"cannot write plot {args.plot}: {e}"), args.verbose)
         print(f"{prog}: wrote {path}", file=sys.stderr)
     return 0
 
@@ -215,18 +217,19 @@ def cmd_spectrum(args: argparse.Namespace) -> int:
 def cmd_colour(args: argparse.Namespace) -> int:
     prog = f"{PROG} colour"
     from thinfilm_mi import Stack
-    from thinfilm_mi.errors import ThinFilmError
 
     try:
+        if args.plot:
+            _pyplot()
         angles = parse_angles(args.angles, below_90=True)
-        cli.setup_llvm_only()
+        setup_llvm_only()
         from thinfilm_mi.colour.report import colour_report
 
         stack = Stack(args.layers, substrate=args.substrate, ambient=args.ambient)
         report = colour_report(stack, angles, illuminant=args.illuminant, observer=args.observer,
                                polarizations=args.polarization.split(","))
-    except (cli.CLIError, ThinFilmError, ValueError) as e:
-        return _error(prog, str(e), 2, e, args.verbose)
+    except (UsageError, ThinFilmError, ValueError) as e:
+        return report_error(prog, e, args.verbose)
     if args.json:
         print(report.to_json(indent=1))
     else:
@@ -240,7 +243,8 @@ def cmd_colour(args: argparse.Namespace) -> int:
             try:
                 written = write(path)
             except Exception as e:
-                return _error(prog, f"cannot write {option} {path}: {e}", 1, e, args.verbose)
+                return report_error(prog, failure(e, f"cannot write {option} {path}: {e}"),
+                                    args.verbose)
             print(f"{prog}: wrote {written}", file=sys.stderr)
     return 0
 
@@ -268,12 +272,9 @@ def reflectance_colours(wavelengths: np.ndarray, R: np.ndarray) -> np.ndarray:
 
 def write_reflectance_image(path: str | Path) -> Path:
     """The demo stack's reflectance over angle and wavelength, with its D65 colour."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
     from thinfilm_mi import Stack
 
+    plt = _pyplot("the demo's reflectance image")
     stack = Stack(DEMO_LAYERS, substrate=DEMO_SUBSTRATE)
     wl = np.arange(360.0, 830.0 + 1e-9, 2.0)
     angles = np.linspace(0.0, 89.0, 90)
@@ -302,20 +303,20 @@ def cmd_demo(args: argparse.Namespace) -> int:
     scene = find_demo_scene()
     if scene is not None:
         try:
-            result = cli.render_file(
-                scene, out / "demo.exr", spp=args.spp, size=cli.parse_size(args.size),
+            result = render_file(
+                scene, out / "demo.exr", spp=args.spp, size=parse_size(args.size),
                 variant=args.variant, seed=args.seed, progress=sys.stderr, verbose=args.verbose)
-        except cli.CLIError as e:
-            return cli.report_error(e, args.verbose)
-        print(cli.summary(result), file=sys.stderr)
+        except RenderError as e:
+            return report_error(RENDER_PROG, e, args.verbose)
+        print(render_command.summary(result), file=sys.stderr)
         return 0
     try:
-        cli.setup_llvm_only()
+        setup_llvm_only()
         path = write_reflectance_image(out / "demo_reflectance.png")
-    except cli.CLIError as e:
-        return _error(prog, str(e), e.code, e, args.verbose)
+    except RenderError as e:
+        return report_error(prog, e, args.verbose)
     except Exception as e:
-        return _error(prog, f"{type(e).__name__}: {e}", 1, e, args.verbose)
+        return report_error(prog, failure(e), args.verbose)
     print(f"{prog}: scenes/demo.xml not found, so no render; wrote the demo stack's "
           f"reflectance over angle and wavelength to {path}", file=sys.stderr)
     return 0
@@ -334,14 +335,14 @@ def _add_stack_arguments(p: argparse.ArgumentParser, angles_help: str) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = cli.ArgumentParser(prog=PROG, description="thinfilm-mi command-line tools")
+    parser = ArgumentParser(prog=PROG, description="thinfilm-mi command-line tools")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     sub.required = True
 
     p = sub.add_parser("render", help="render scenes (same options as thinfilm-render)",
                        description="Render Mitsuba 3 scenes into linear EXRs and sRGB PNGs.")
-    cli.add_render_arguments(p)
-    p.set_defaults(func=lambda a: cli.run(a))
+    render_command.add_render_arguments(p)
+    p.set_defaults(func=render_command.run)
 
     p = sub.add_parser("materials", help="list the named materials")
     p.add_argument("--verbose", action="store_true")
@@ -379,14 +380,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--out", default="out", help="output folder (default out)")
     p.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
     p.add_argument("--size", metavar="WxH", help="film size (default: the scene's)")
-    p.add_argument("--variant", default=cli.DEFAULT_VARIANT)
+    p.add_argument("--variant", default=DEFAULT_VARIANT)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--verbose", action="store_true")
     p.set_defaults(func=cmd_demo)
 
     from thinfilm_mi.cli import design as design_cli
 
-    design_cli.add_parser(sub, _error)
+    design_cli.add_parser(sub)
     return parser
 
 
@@ -395,9 +396,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
-    except cli.UsageError as e:
-        prog = cli.PROG if argv[:1] == ["render"] else PROG
-        return _error(prog, str(e), 2, e, "--verbose" in argv)
+    except UsageError as e:
+        prog = RENDER_PROG if argv[:1] == ["render"] else PROG
+        return report_error(prog, e, "--verbose" in argv)
     except SystemExit as e:  # --help
         return int(e.code or 0)
     return args.func(args)
