@@ -14,6 +14,7 @@ import mitsuba as mi
 from drjit.llvm import Float64
 
 import thinfilm_mi as tf
+from thinfilm_mi.render import media as media_mod
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.optics import core as optics
 from thinfilm_mi.optics.core import Cx
@@ -115,7 +116,7 @@ def test_conductor_reads_the_loop_and_matches_float64(llvm, layers, uniform, rea
     assert (side.loop.uniform, side.loop.real) == (uniform, real)
     cos, wls = points(4000)
     R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
-    ref = tf.Stack(layers, substrate="Al", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(layers, substrate="Al", ambient=media_mod.DEFAULT_EXT_IOR)
     for i in range(4):
         exact = ref.rt(wls[i], np.arccos(cos)).R
         assert np.max(np.abs(R[i] - exact)) < F32_DEEP
@@ -186,7 +187,7 @@ def test_other_depths_and_thicknesses_reuse_the_loop_kernel(llvm):
     for bsdf, R in ((deeper, R13), (first, R6)):
         layers = [(ix.material.name, float(d[0] if dr.is_array_v(d) else d))
                   for ix, d in zip(bsdf.stack.indices, bsdf.stack.thickness)]
-        ref = tf.Stack(layers, substrate="Ag", ambient=K.DEFAULT_EXT_IOR)
+        ref = tf.Stack(layers, substrate="Ag", ambient=media_mod.DEFAULT_EXT_IOR)
         assert np.max(np.abs(R[0] - ref.rt(wls[0], np.arccos(cos)).R)) < F32_DEEP
 
 
@@ -217,7 +218,7 @@ def test_thickness_texture_scales_the_loop_films(llvm):
     cos, wls = points(2000, seed=9)
     R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
     half = [(m, d / 2) for m, d in tf.materials.stack.parse_layers(layers)]
-    ref = tf.Stack(half, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(half, substrate="Cu", ambient=media_mod.DEFAULT_EXT_IOR)
     for i in range(4):
         assert np.max(np.abs(R[i] - ref.rt(wls[i], np.arccos(cos)).R)) < F32_DEEP
 
@@ -340,7 +341,7 @@ def test_real_films_run_the_real_loop_at_any_depth(llvm, layers, constant, real_
     cos, wls = points(4000, seed=11)
     R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos)))
     assert real_path_calls
-    ref = tf.Stack(layers, substrate="Al", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(layers, substrate="Al", ambient=media_mod.DEFAULT_EXT_IOR)
     for i in range(4):
         assert np.max(np.abs(R[i] - ref.rt(wls[i], np.arccos(cos)).R)) < F32_DEEP
 

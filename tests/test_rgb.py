@@ -403,7 +403,7 @@ def test_varying_rgb_index_under_films_is_refused():
 
 
 def test_polarized_rgb_variants_are_refused():
-    from thinfilm_mi.render.kernel import check_variant
+    from thinfilm_mi.render.variant import check_variant
     if "llvm_ad_mono_polarized" not in mi.variants():
         pytest.skip("no llvm_ad_mono_polarized")
     mi.set_variant("llvm_ad_mono_polarized")

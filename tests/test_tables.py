@@ -11,6 +11,7 @@ import drjit as dr
 import mitsuba as mi
 
 import thinfilm_mi as tf
+from thinfilm_mi.render import media as media_mod
 from thinfilm_mi.optics import unpolarised
 from thinfilm_mi.render import kernel as K
 
@@ -62,7 +63,7 @@ def test_table_matches_float64_within_its_verified_error():
     cos, wls = random_points(20000)
     R = bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)))
     R = np.array(R)
-    ref = tf.Stack(STACK, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(STACK, substrate="Cu", ambient=media_mod.DEFAULT_EXT_IOR)
     err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
     assert err <= 1.5 * table.error + F32, err
     assert err > 1e-6   # it really is the interpolated table, not the recursion
@@ -86,7 +87,7 @@ def test_dielectric_tables_both_sides_with_tir(inside, layers):
     cos[:2000] = f32(0.7804861 + np.linspace(-1e-3, 1e-3, 2000))
     R, T = bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)),
                                   inside=inside, transmission=True)
-    ref = tf.Stack(layers, substrate=1.6, ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(layers, substrate=1.6, ambient=media_mod.DEFAULT_EXT_IOR)
     if inside:
         ref = ref.reversed()
     tol = 1.5 * side.table.error + F32
@@ -154,7 +155,7 @@ def test_layers_beneath_an_opaque_film_are_ignored():
     assert len(inn.films) == 2 and inn.opaque
     cos, wls = random_points(2000)
     R, T = bsdf.stack.reflectance(interaction(wls), mi.Float(cos), transmission=True)
-    ref = tf.Stack(layers, substrate=1.5, ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(layers, substrate=1.5, ambient=media_mod.DEFAULT_EXT_IOR)
     for i in range(4):
         assert np.max(np.abs(np.array(R)[i] - ref_R(ref, cos, wls[i]))) < F32
         assert np.max(np.array(T)[i]) == 0.0 and np.max(ref_R(ref, cos, wls[i], T=True)) < 1e-12
@@ -212,7 +213,7 @@ def test_table_sweep_reuses_the_kernels():
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     assert len(shapes) >= 3, shapes        # the tables did change shape
     assert fresh == [], [k.get("size") for k in fresh]
-    ref = tf.Stack(STACK.replace("420", "700"), substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(STACK.replace("420", "700"), substrate="Cu", ambient=media_mod.DEFAULT_EXT_IOR)
     assert max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i])))
                for i in range(4)) <= 1.5 * table.error + F32
 
@@ -262,7 +263,7 @@ def test_scalar_variant_uses_tables_too():
     si = dr.zeros(mi.SurfaceInteraction3f)
     si.wavelengths = mi.Spectrum(400.0, 500.0, 600.0, 700.0)
     R = np.array(bsdf.stack.reflectance(si, 0.6))
-    ref = tf.Stack(STACK, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(STACK, substrate="Cu", ambient=media_mod.DEFAULT_EXT_IOR)
     exact = ref.rt(np.array([400.0, 500, 600, 700]), np.arccos(0.6)).R
     assert np.max(np.abs(R - exact)) <= 1.5 * bsdf.stack.plan[False].table.error + F32
 
@@ -363,7 +364,7 @@ def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
     assert tables.last_build["rounds"] > 1
     cos, wls = random_points(20000, seed=7)
     R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32))))
-    ref = tf.Stack(STACK, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(STACK, substrate="Cu", ambient=media_mod.DEFAULT_EXT_IOR)
     err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
     assert err <= 1.5 * table.error + F32, err
 
@@ -450,7 +451,7 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     assert all((m is None) == ("j" in layers) for m in calls)   # complex loop iff absorbing
     cos, wls = random_points(20000, seed=8)
     R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32))))
-    ref = tf.Stack(layers, substrate="Cu", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack(layers, substrate="Cu", ambient=media_mod.DEFAULT_EXT_IOR)
     err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
     assert err <= 1.5 * table.error + F32, err
 
@@ -482,7 +483,7 @@ def test_table_cache_is_bounded_in_bytes_least_recently_used_first_out(monkeypat
     si = dr.zeros(mi.SurfaceInteraction3f)
     si.wavelengths = mi.Spectrum([450.0, 520.0, 610.0, 700.0])
     R = np.array(bsdfs[0].stack.reflectance(si, mi.Float(0.8)), dtype=np.float64)
-    ref = tf.Stack("1.46 150; 2.3 60", substrate="Al", ambient=K.DEFAULT_EXT_IOR)
+    ref = tf.Stack("1.46 150; 2.3 60", substrate="Al", ambient=media_mod.DEFAULT_EXT_IOR)
     np.testing.assert_allclose(R.ravel(), ref.rt(np.array([450.0, 520.0, 610.0, 700.0]),
                                                  np.arccos(0.8)).R,
                                atol=1.5 * bsdfs[0].stack.plan[False].table.error + 1e-5)

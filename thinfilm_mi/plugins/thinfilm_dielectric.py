@@ -121,8 +121,9 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.kernel import (check_unqueried, check_variant, optional_texture, real_index,
-                                spectral_mean, stack_from_props)
+from thinfilm_mi.render.props import (check_unqueried, optional_texture, stack_from_props)
+from thinfilm_mi.render.variant import (check_variant, spectral_mean)
+from thinfilm_mi.render.media import (real_index)
 from thinfilm_mi.render.params import ParameterGuard
 
 NAME = "thinfilm_dielectric"

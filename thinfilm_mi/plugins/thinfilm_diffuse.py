@@ -222,9 +222,9 @@ from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable
 from thinfilm_mi.render.colour import (GradientSampler, attach_gradient, colour_channels,
                                        index_on_wavelengths, prepare_gradients)
-from thinfilm_mi.render.kernel import (KernelStack, check_unqueried, check_variant, spectral_mean,
-                                ext_ior_from_props, films_from_props, opaque_float,
-                                stack_options_from_props)
+from thinfilm_mi.render.kernel import (KernelStack)
+from thinfilm_mi.render.props import (check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props)
+from thinfilm_mi.render.variant import (check_variant, spectral_mean, opaque_float)
 from thinfilm_mi.optics.core import Cx, film_attenuation
 from thinfilm_mi.render.params import ALBEDO_SLACK, ParameterGuard
 from thinfilm_mi.render.textures import check_texture_range, regular, scalar, uniform
