@@ -88,6 +88,7 @@ def forward(bsdf, key, fn):
     params = mi.traverse(bsdf)
     x = params[key]
     dr.enable_grad(x)
+    params.update()     # as in an optimisation loop: the BSDF sees the gradients
     dr.set_grad(x, 1.0)
     try:
         out = fn()
@@ -95,6 +96,7 @@ def forward(bsdf, key, fn):
         return as_numpy([dr.detach(v) for v in out]), as_numpy([dr.grad(v) for v in out])
     finally:
         dr.disable_grad(x)
+        params.update()
 
 
 def difference(bsdf, key, step, one_sided, fn):
@@ -399,3 +401,32 @@ def test_rgb_gradient_matches_product_integral(model, layers, key, step, rgb):
             (theta_i, mean, se, ref)
         assert np.max(np.abs(ref)) > 1e-4
         assert np.ptp(value, axis=1).max() <= 1e-6      # the value is the table's
+
+
+def test_derivative_table_is_built_when_gradients_are_enabled_not_at_load():
+    """No reverse-mode pass at scene load (constructors run on Mitsuba's loader
+    threads; a thread waiting for a kernel there runs other constructors, which
+    deadlocked on the pass's lock): the table of R_dh's derivatives is built by the
+    params.update() that enables gradients, and dropped by the one that disables them.
+    Gradients enabled without that update are refused, not silently biased."""
+    mi.set_variant("llvm_ad_spectral")
+    bsdf = load("2.3 90; 1.46 150; 2.3 60", "multiple")
+    assert bsdf.r_dh_grad is None
+    params = mi.traverse(bsdf)
+    x = params["layers.0.thickness"]
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.wi = mi.Vector3f(0.0, 0.0, 1.0)
+    si.wavelengths = mi.Spectrum(450.0, 550.0, 650.0, 700.0)
+    wo = mi.Vector3f(0.6, 0.0, 0.8)
+    dr.enable_grad(x)
+    try:
+        with pytest.raises(tf.ThinFilmError, match=r"params\.update\(\)"):
+            bsdf.eval(mi.BSDFContext(), si, wo)
+        params.update()
+        assert bsdf.r_dh_grad is not None
+        value = bsdf.eval(mi.BSDFContext(), si, wo)
+        assert np.all(np.isfinite(np.array(dr.detach(value))))
+    finally:
+        dr.disable_grad(params["layers.0.thickness"])   # read: a candidate for update()
+        params.update()
+    assert bsdf.r_dh_grad is None

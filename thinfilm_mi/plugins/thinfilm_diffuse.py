@@ -179,9 +179,13 @@ models. ``k_r`` and ``t`` are differentiated in the kernel (every film evaluated
 exactly, not from a table, where a parameter carries gradients); ``R_dh``
 ("multiple") takes its derivatives from a table of ``∂R_dh/∂x`` over 360-830 nm
 (1 nm, linear like ``R_dh``) for every film's thickness, ``Re n`` and ``Im n``,
-computed by reverse-mode AD through the same float64 quadrature at load time and at
-each edit of the films in AD variants (~0.06 s for 3 films, ~0.2 s for 30;
-``benchmarks/README.md``); the kernel adds ``Σ ∂R_dh/∂x (x - detach(x))`` to
+computed by reverse-mode AD through the same float64 quadrature when a film
+parameter carries gradients: at the ``params.update()`` that enables them and at each
+edit of the films after it (~0.06 s for 3 films, ~0.2 s for 30;
+``benchmarks/README.md``; never at scene load, where Mitsuba runs constructors on
+its thread pool and nothing carries gradients yet). A render that differentiates a
+film parameter whose gradients were enabled without ``params.update()`` is refused
+with that advice, never silently biased. The kernel adds ``Σ ∂R_dh/∂x (x - detach(x))`` to
 ``R_dh`` (the chain rule through any index texture: ``R_dh(λ)`` depends on the
 indices at ``λ`` only). At ``k = 0`` the derivative with respect to ``k`` is the
 one-sided one (loss). Differentiate with ``path`` (the whole sample is
@@ -338,9 +342,9 @@ class ThinFilmDiffuse(mi.BSDF):
         if not self.no_films:
             thickness = None if self.film_n is None else scalar(self.film_n_thickness)
             factors = DiffuseFactors(self.coating, self.film_n, thickness)
+        self._factors_now = factors
         self.r_dh_grad = None
-        if factors is not None and self.model == "multiple" and dr.is_diff_v(mi.Float):
-            self.r_dh_grad = DerivativeTable(factors.r_dh_partials(GRID))
+        self._update_derivatives()
         if self.mode.integrated:
             if factors is not None:
                 self.colour = ColourDiffuse(factors, self.model, colour_channels(),
@@ -354,6 +358,26 @@ class ThinFilmDiffuse(mi.BSDF):
             r_dh, t_hemi = factors.hemispherical(GRID)
         self.t_hemi = _spectrum(self.t_hemi, t_hemi)
         self.r_dh = _spectrum(self.r_dh, r_dh)
+
+    def _film_gradients(self) -> bool:
+        """Whether a film thickness or numeric index carries gradients (AD variants)."""
+        if not dr.is_diff_v(mi.Float):
+            return False
+        params = mi.traverse(self)
+        return any(dr.grad_enabled(params[k]) for k in params.keys()
+                   if k.startswith("layers.") and dr.is_diff_v(params[k]))
+
+    def _update_derivatives(self) -> None:
+        """Build ``R_dh``'s derivative table (model "multiple", AD variants) if a film
+        parameter carries gradients now and the table is missing or stale; drop it
+        otherwise. Never at scene load: nothing carries gradients then, and the
+        reverse-mode pass would run on Mitsuba's loader threads."""
+        if (self._factors_now is None or self.model != "multiple"
+                or not self._film_gradients()):
+            self.r_dh_grad = None
+            return
+        if self.r_dh_grad is None:
+            self.r_dh_grad = DerivativeTable(self._factors_now.r_dh_partials(GRID))
 
     # -- kernel helpers ------------------------------------------------------
     def _factors(self, si, cos_theta, active, transmission: bool):
@@ -382,7 +406,7 @@ class ThinFilmDiffuse(mi.BSDF):
         film thicknesses and indices that carry gradients: the same value, with
         ``R_dh``'s derivatives (:class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`).
         ``index_at(ix)``: a film's index at ``wavelengths``."""
-        if self.r_dh_grad is None:
+        if self.model == "single" or self.no_films:
             return r_dh
         films = list(zip(self.coating.indices, self.coating.thickness))
         if self.film_n is not None:
@@ -397,6 +421,11 @@ class ThinFilmDiffuse(mi.BSDF):
                 carriers[PER_FILM * f + 2] = mi.UnpolarizedSpectrum(n.im - dr.detach(n.im))
         if not carriers:
             return r_dh
+        if self.r_dh_grad is None:
+            raise ThinFilmError(
+                f"{NAME}: a film parameter carries gradients, but R_dh's derivative table "
+                "was not built: call params.update() after enabling gradients "
+                "(dr.enable_grad(params[key]); params.update()), as mi.ad optimisers do")
         return r_dh + self.r_dh_grad.tangent(wavelengths, carriers, active)
 
     def _diffuse(self, si, kd, cos_i, cos_o, t_i, series, active):
@@ -569,6 +598,10 @@ class ThinFilmDiffuse(mi.BSDF):
                                                                   k.startswith("reflectance"))
                                       for k in changed):
                 self._update_hemispherical()
+            else:
+                # gradients enabled or disabled on an unchanged value (the guard
+                # compares values, not their AD state)
+                self._update_derivatives()
         self.guard.changed(self, refresh, keys)
 
     def to_string(self):

@@ -117,9 +117,10 @@ PER_FILM = 3
 #: Lanes (wavelengths x nodes) x films per reverse-mode pass of :func:`r_dh_partials`:
 #: the loop over the films stores its state (14 float64) per film and lane, ~60 MB.
 PARTIALS_LANE_FILMS = 1 << 19
-#: One reverse-mode pass at a time: Mitsuba's parallel scene loading runs plugin
-#: constructors on several threads, and Dr.Jit's AD graph is shared between them.
-_PARTIALS_LOCK = threading.Lock()
+#: One reverse-mode pass at a time (Dr.Jit's AD graph is shared between threads).
+#: Re-entrant: a thread waiting for a kernel runs other tasks of Dr.Jit's pool, so a
+#: plain lock held across an evaluation deadlocks if one of them gets here too.
+_PARTIALS_LOCK = threading.RLock()
 
 
 def r_dh_partials(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
