@@ -66,6 +66,7 @@ def scene(config: str, res=256, spp=16) -> dict:
 
 def build() -> None:
     import mitsuba as mi
+
     from thinfilm_mi.render import kernel as K
     from thinfilm_mi.tabulate import exact as tables
     print("\n### Band-limited builds (default settings)\n")

@@ -115,8 +115,9 @@ def layers_of(n: int) -> str:
 def load_and_edit(variant: str, films: int, repeats: int) -> str:
     import drjit as dr
     import mitsuba as mi
-    from thinfilm_mi.render.diffuse import DiffuseFactors
+
     from thinfilm_mi.materials.model import GRID
+    from thinfilm_mi.render.diffuse import DiffuseFactors
 
     spec = {"type": "thinfilm_diffuse", "layers": layers_of(films), "reflectance": 0.6}
     loads, edits, partials = [], [], []

@@ -17,8 +17,8 @@ import argparse
 import math
 import time
 
-import numpy as np
 import drjit as dr
+import numpy as np
 from drjit.llvm import Float
 
 from thinfilm_mi.optics import core as optics

@@ -49,15 +49,15 @@ import os
 import time
 import warnings
 
-import numpy as np
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
 from thinfilm_mi.render import kernel as tf_kernel  # noqa: E402
-from thinfilm_mi.tabulate import exact as tables
-from thinfilm_mi.tabulate import base as tabulate_base
+from thinfilm_mi.tabulate import base as tabulate_base  # noqa: E402
+from thinfilm_mi.tabulate import exact as tables  # noqa: E402
 
 AMBIENT = 1.000277
 ERRORS = (1e-2, 3e-3, 1e-3, 3e-4)
@@ -80,10 +80,9 @@ def layers_string(films):
 def band_reference(bsdf, cos64, wl64, n, step=0.002):
     """``R_σ`` at the first ``n`` points by brute force: the build's float64
     evaluator on a grid of ``step`` nm over ±6 σ_ν, Gaussian-weighted."""
-    from thinfilm_mi.tabulate import band as band_tables
     from thinfilm_mi.render import kernel
     side = kernel.side_data(bsdf.stack.plan[False], False)
-    sig = band_tables.sigma_nu(bsdf.stack.spectral_resolution)
+    sig = band_rows.sigma_nu(bsdf.stack.spectral_resolution)
     cos, wl = np.broadcast_to(cos64[None, :], wl64.shape).ravel()[:n], wl64.ravel()[:n]
     out = np.empty(n)
     for i in range(n):

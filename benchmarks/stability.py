@@ -31,13 +31,13 @@ import warnings
 from dataclasses import dataclass
 from typing import Callable
 
-import numpy as np
 import drjit as dr
+import numpy as np
 from drjit.llvm import Float, Float64, UInt32
 
 from thinfilm_mi.llvm import require_llvm
-from thinfilm_mi.optics.unpolarised import unpolarised_rt
 from thinfilm_mi.optics.core import Cx, real_loop_applies, stack_rt_loop
+from thinfilm_mi.optics.unpolarised import unpolarised_rt
 
 F32 = np.float32
 

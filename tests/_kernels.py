@@ -1,10 +1,9 @@
 """Test helpers for the files that evaluate thin-film stacks in LLVM kernels."""
 from __future__ import annotations
 
-import numpy as np
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 from drjit.llvm import Float64, UInt32
 
 from thinfilm_mi.optics import core as optics

@@ -7,6 +7,8 @@
   public (no leading underscore) and documented.
 * No module is over :data:`MAX_LINES` lines, but for those in :data:`ALGORITHMS`,
   each one algorithm that reads best in one file.
+* ruff (pyflakes, pycodestyle, import order; ``[tool.ruff]`` in ``pyproject.toml``)
+  finds nothing in the package, tests, benchmarks and scripts.
 """
 from __future__ import annotations
 
@@ -15,7 +17,6 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-
 
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "thinfilm_mi"
@@ -38,14 +39,25 @@ def _module_name(path: Path) -> str:
 
 
 def _lint_imports() -> str:
-    exe = Path(sys.executable).parent / "lint-imports"
-    return str(exe) if exe.exists() else shutil.which("lint-imports")
+    return _tool("lint-imports")
+
+
+def _tool(name: str) -> str | None:
+    exe = Path(sys.executable).parent / name
+    return str(exe) if exe.exists() else shutil.which(name)
+
+
+def test_ruff_finds_nothing():
+    exe = _tool("ruff")
+    assert exe, "ruff is part of the test extra (pip install -e '.[test]')"
+    res = subprocess.run([exe, "check", "--no-cache", "."], cwd=ROOT, capture_output=True, text=True)
+    assert res.returncode == 0, res.stdout[-4000:] + res.stderr[-2000:]
 
 
 def test_layers_contract_is_kept():
     exe = _lint_imports()
     assert exe, "import-linter is part of the test extra (pip install -e '.[test]')"
-    res = subprocess.run([exe, "--config", str(ROOT / "pyproject.toml")], cwd=ROOT,
+    res = subprocess.run([exe, str(ROOT / "pyproject.toml")], cwd=ROOT,
                          capture_output=True, text=True)
     assert res.returncode == 0, res.stdout[-3000:] + res.stderr[-2000:]
     assert "1 kept, 0 broken" in res.stdout
@@ -102,7 +114,7 @@ def test_a_lower_layer_importing_a_higher_one_breaks_the_contract(tmp_path):
     core = copy / "thinfilm_mi" / "optics" / "core.py"
     core.write_text(core.read_text(encoding="utf-8")
                     + "\nfrom thinfilm_mi.render import kernel as _bad  # noqa\n")
-    res = subprocess.run([exe, "--config", str(copy / "pyproject.toml")], cwd=copy,
+    res = subprocess.run([exe, str(copy / "pyproject.toml")], cwd=copy,
                          capture_output=True, text=True,
                          env={"PYTHONPATH": str(copy), "PATH": "/usr/bin:/bin"})
     assert res.returncode != 0

@@ -21,16 +21,14 @@ import subprocess
 import sys
 from xml.sax.saxutils import quoteattr
 
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
+from _plugin_modules import import_error
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.render.registry import PLUGINS
-
-from _plugin_modules import import_error
 
 VARIANT = "llvm_ad_spectral"
 HOW = ["dict", "xml"]

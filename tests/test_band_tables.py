@@ -4,17 +4,17 @@ stack, the resonance search, the colour check's data and colour difference
 against colour-science, and the option's validation."""
 import math
 
+import mitsuba as mi
 import numpy as np
 import pytest
-
-import mitsuba as mi
 
 import thinfilm_mi as tf
 from thinfilm_mi.colour import cie
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.tabulate import band as band_tables
-from thinfilm_mi.tabulate import exact as tables
+from thinfilm_mi.tabulate import band_rows
 from thinfilm_mi.tabulate import base as tabulate_base
+from thinfilm_mi.tabulate import exact as tables
 
 
 @pytest.fixture(autouse=True)
@@ -70,7 +70,7 @@ def test_band_limited_values_match_a_brute_force_convolution(monkeypatch):
     9e-4 with the looser Simpson tolerance 5e-5, 1.7e-2 without the panels'
     grading)."""
     side = _resonant_side(monkeypatch)
-    rows = band_tables.Rows(side, "band", 1.0)
+    rows = band_rows.Rows(side, "band", 1.0)
     xs = np.array([0.0, 0.3, 0.7])
     vals = rows.values(xs)
     bins = rows.b0 + np.array([100, 600, 1100, 1500])
@@ -96,7 +96,7 @@ def test_a_resonant_stack_gets_a_verified_band_limited_table(monkeypatch):
     wl = np.array([452.3, 537.9, 611.1])
     for theta in (20.0, 50.0):
         cos = math.cos(math.radians(theta))
-        ref = _brute_force(side, cos, 1.0 / wl, band_tables.sigma_nu(1.0))
+        ref = _brute_force(side, cos, 1.0 / wl, band_rows.sigma_nu(1.0))
         got = [table.lookup(mi.Float(cos), mi.Spectrum(1.0), mi.Spectrum(1.0),
                             mi.Spectrum(float(w)))[0][0] for w in wl]
         got = np.array([float(g[0]) for g in got])
@@ -124,7 +124,7 @@ def test_near_zeros_finds_a_narrow_pole():
     for z0, found in ((17.3 + 0.01j, True), (25.6 - 0.4j, True), (10.2 + 9.0j, False)):
         f = (x - z0) * (1.0 + 0.02 * x)
         samples = np.stack([f.real, f.imag], axis=-1)[None]
-        r, pos, dist = band_tables.near_zeros(samples, 0)
+        r, pos, dist = band_rows.near_zeros(samples, 0)
         assert (r.size == 1) == found
         if found:
             assert abs(pos[0] - z0.real) < 1e-6 and abs(dist[0] - abs(z0.imag)) < 1e-6
@@ -138,7 +138,7 @@ def test_smooth_terms_give_the_exact_reflectance(monkeypatch):
     side = _resonant_side(monkeypatch, films=10)
     wl = np.linspace(400.0, 700.0, 301)
     cos = np.full(wl.size, 0.8)
-    R = band_tables.powers_of(band_tables.smooth_terms(side, cos, np.arange(wl.size), wl,
+    R = band_rows.powers_of(band_rows.smooth_terms(side, cos, np.arange(wl.size), wl,
                                                          tabulate_base.side_indices(side, wl)), False)[:, 0]
     layers = [(n(np.array([500.0]))[0].real, d) for n, d in side.films]
     ref = tf.Stack(layers=layers, substrate=complex(1.2, 7.0), ambient=1.0).rt(wl, math.acos(0.8)).R
@@ -201,7 +201,7 @@ def test_band_table_of_a_side_lit_from_inside_glass(monkeypatch):
     table = band_tables.build_band_table(inside, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0)
     assert table is not None and table.kind == "tir" and table.channels == 2
     assert table.error <= 1e-3
-    sig = band_tables.sigma_nu(1.0)
+    sig = band_rows.sigma_nu(1.0)
     for theta in (25.0, 55.0):
         cos = math.cos(math.radians(theta))
         for w in (471.3, 633.7):

@@ -282,8 +282,8 @@ def test_traversed_temperature_edits(variant):
 
 
 def test_fig8a_scene_renders_in_mono(tmp_path):
-    from thinfilm_mi.cli import render as cli
     from thinfilm_mi.batch.exr import read_exr
+    from thinfilm_mi.cli import render as cli
 
     pytest.importorskip("OpenEXR")
     rc = cli.render_main([str(SCENE), "-D", "temperature=3200", "--variant", MONO,

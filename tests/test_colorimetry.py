@@ -16,8 +16,13 @@ colour = pytest.importorskip("colour")
 
 from thinfilm_mi import Stack, ThinFilmError  # noqa: E402
 from thinfilm_mi.cli import tools as tf_main  # noqa: E402
-from thinfilm_mi.colour.report import (RECORD_KEYS, colour_report, integration_wavelengths,  # noqa: E402
-                                     resolve_illuminant, spectrum_colour)
+from thinfilm_mi.colour.report import (  # noqa: E402
+    RECORD_KEYS,
+    colour_report,
+    integration_wavelengths,
+    resolve_illuminant,
+    spectrum_colour,
+)
 
 # colour-science warns when sd_to_XYZ aligns a table to the requested shape (here on purpose)
 pytestmark = pytest.mark.filterwarnings("ignore::colour.utilities.ColourRuntimeWarning")

@@ -8,15 +8,15 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 
-import drjit as dr
-import mitsuba as mi
-
 mi.set_variant("llvm_ad_spectral")
-import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
 from mitsuba.chi2 import ChiSquareTest, SphericalDomain  # noqa: E402
+
+import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
 
 WAVELENGTHS = (450.0, 520.0, 600.0, 680.0)
 DIFFUSE = mi.BSDFFlags.DiffuseReflection

@@ -22,11 +22,10 @@ carried no derivatives, and its gradients were off by ~45 %).
 from __future__ import annotations
 
 import colour
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402
@@ -283,7 +282,8 @@ def test_sqrt_decaying_derivative_at_zero_loss():
     """d Im(q)/d Im(n²) at a lossless index is the one-sided derivative on the side
     of loss, 1 / (2 q), not 0 (dr.abs has derivative 0 at 0)."""
     from drjit.llvm.ad import Float64
-    from thinfilm_mi.optics.core import sqrt_decaying, Cx
+
+    from thinfilm_mi.optics.core import Cx, sqrt_decaying
     y = Float64(0.0, 0.0)
     dr.enable_grad(y)
     q = sqrt_decaying(Cx(Float64(4.0, -4.0), y))

@@ -10,11 +10,10 @@ d(R / p) = dR / p, so the weight's relative gradient is dR / R.
 """
 from __future__ import annotations
 
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402

@@ -13,10 +13,9 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
 import numpy as np
 import pytest
-
-import drjit as dr
 from drjit.llvm import Float, Float64
 
 from thinfilm_mi.optics import core as optics
@@ -274,7 +273,6 @@ def test_energy_conservation_lossless():
     cases = []
     for flags in PATTERNS:
         for _ in range(5):
-            L = len(flags)
             films = [(complex(rng.uniform(1.0, 2.6)), float(rng.uniform(1e3, 1e5) if f else rng.uniform(0, 300)))
                      for f in flags]
             cos = np.cos(np.radians(np.linspace(0.0, 89.9, 31)))

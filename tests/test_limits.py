@@ -6,20 +6,19 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402
 from thinfilm_mi.batch.scene import root_cause  # noqa: E402
 from thinfilm_mi.cli import render as cli  # noqa: E402
-from thinfilm_mi.tabulate import hemispherical
 from thinfilm_mi.cli.tools import main as module_main  # noqa: E402
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
 from thinfilm_mi.materials.stack import MAX_FILMS  # noqa: E402
+from thinfilm_mi.tabulate import hemispherical
 
 DEEP = "; ".join(f"{2.3 if i % 2 else 1.38} {60 + i % 7}" for i in range(MAX_FILMS))
 PLUGINS = ["thinfilm_conductor", "thinfilm_dielectric", "thinfilm_diffuse",

@@ -5,21 +5,19 @@ References: the unrolled core (``optics.stack_rt``, itself checked against tmm
 and closed forms in tests/test_optics.py), tmm directly, and the float64 numpy
 API (``thinfilm_mi.Stack``).
 """
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 import tmm
-
-import drjit as dr
-import mitsuba as mi
+from _kernels import compiled, interaction, loop_rt
 from drjit.llvm import Float64
 
 import thinfilm_mi as tf
-from thinfilm_mi.render import media as media_mod
-from thinfilm_mi.render import kernel as K
 from thinfilm_mi.optics import core as optics
 from thinfilm_mi.optics.core import Cx
-
-from _kernels import compiled, interaction, loop_rt
+from thinfilm_mi.render import kernel as K
+from thinfilm_mi.render import media as media_mod
 
 
 def random_stack(rng, count):

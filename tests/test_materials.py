@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 import thinfilm_mi as tf
+from thinfilm_mi.errors import MaterialError
 from thinfilm_mi.materials import catalog as M
 from thinfilm_mi.materials import sources
-from thinfilm_mi.errors import MaterialError
 
 REQUIRED = ["Au", "Ag", "Cu", "Al", "Cr", "Ti", "Ni", "Si", "a-Si", "Ge", "SiO2", "TiO2", "Ta2O5",
             "Al2O3", "MgF2", "ZnS", "Si3N4", "ITO", "BK7", "fused silica", "water", "air", "vacuum"]

@@ -14,14 +14,13 @@ import os
 import subprocess
 import sys
 
+import drjit as dr
 import numpy as np
 import pytest
-
-import drjit as dr
 from drjit.llvm import Float, Float64
 
-from thinfilm_mi.optics import core as optics
 from thinfilm_mi.llvm import LLVMVersionError, check_version
+from thinfilm_mi.optics import core as optics
 
 tmm = pytest.importorskip("tmm")
 

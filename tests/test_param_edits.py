@@ -11,11 +11,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi  # noqa: E402,F401

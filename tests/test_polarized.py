@@ -13,12 +13,11 @@ restores the suite's default variant (``llvm_ad_spectral``) afterwards.
 """
 from __future__ import annotations
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 import tmm
-
-import drjit as dr
-import mitsuba as mi
 
 import thinfilm_mi  # noqa: F401  (registers the plugins in every variant)
 
@@ -87,11 +86,10 @@ def test_bare_interface_map_matches_mitsuba_fresnel():
     """conj(our r, t) are Mitsuba's amplitudes: our s/p matrices (amplitudes.jones_shape,
     modes.sp_matrix) equal mueller.specular_reflection/transmission for a conductor
     (complex eta) and a dielectric lit from both sides, TIR included."""
-    from thinfilm_mi.render.amplitudes import jones_shape
+    from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
     from thinfilm_mi.optics.unpolarised import unpolarised_powers
+    from thinfilm_mi.render.amplitudes import jones_shape
     from thinfilm_mi.render.modes import sp_matrix
-    from thinfilm_mi.optics.core import (Cx, stack_amplitudes, transmittance_factor_p,
-                                    transmittance_factor_s)
 
     rng = np.random.default_rng(1)
     c = rng.uniform(0.0, 1.0, 512).astype(np.float32)

@@ -4,10 +4,9 @@ sample (both components) and matches a finite difference of renders; Mitsuba's
 not, which the doc block and README say."""
 from __future__ import annotations
 
-import numpy as np
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi  # noqa: E402,F401

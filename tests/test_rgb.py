@@ -17,11 +17,10 @@ The module fixture restores the suite's default variant (``llvm_ad_spectral``).
 from __future__ import annotations
 
 import colour
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
 
 import thinfilm_mi as tf
 

@@ -69,10 +69,9 @@ again after every render and at the end of the module.
 """
 from __future__ import annotations
 
+import mitsuba as mi
 import numpy as np
 import pytest
-
-import mitsuba as mi
 
 import thinfilm_mi  # noqa: F401  (registers the plugins, and again on every variant switch)
 

@@ -10,15 +10,15 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 
-import drjit as dr
-import mitsuba as mi
-
 mi.set_variant("llvm_ad_spectral")
-import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
 from mitsuba.chi2 import ChiSquareTest, SphericalDomain  # noqa: E402
+
+import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
 
 WLS = (450.0, 520.0, 610.0, 700.0)
 ROOT = Path(__file__).resolve().parent.parent

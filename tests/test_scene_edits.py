@@ -19,11 +19,10 @@ import gc
 import math
 import time
 
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.errors import ThinFilmError

@@ -27,9 +27,9 @@ import pytest
 pytest.importorskip("OpenEXR")
 
 from thinfilm_mi.batch import scene as tf_scene  # noqa: E402
+from thinfilm_mi.batch.exr import read_exr  # noqa: E402
 from thinfilm_mi.cli import render as cli  # noqa: E402
 from thinfilm_mi.errors import UsageError  # noqa: E402
-from thinfilm_mi.batch.exr import read_exr  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 SCENES = sorted((REPO / "scenes").glob("*.xml"))

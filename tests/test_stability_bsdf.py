@@ -37,21 +37,19 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
+from _plugin_modules import import_error
 from drjit.llvm import Float64
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
-from thinfilm_mi.optics.unpolarised import unpolarised_rt
 from thinfilm_mi.optics.core import Cx
+from thinfilm_mi.optics.unpolarised import unpolarised_rt
 from thinfilm_mi.render.registry import PLUGINS
-
-from _plugin_modules import import_error
 
 VARIANT = "llvm_ad_spectral"
 # Few distinct kernel shapes, so that compiled kernels are reused across examples.

@@ -17,18 +17,16 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
 import numpy as np
 import pytest
-
-import drjit as dr
+from _kernels import loop_rt
 from drjit.llvm import Float, Float64
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 from thinfilm_mi.optics import core as optics
 from thinfilm_mi.optics.unpolarised import unpolarised_rt, unpolarised_rt_loop
-
-from _kernels import loop_rt
 
 FILM_COUNTS = (1, 2, 7, 30)
 

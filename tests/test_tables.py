@@ -3,19 +3,17 @@
 References are independent of the code under test: the float64 numpy API
 (``thinfilm_mi.Stack``) and tmm (coherent and incoherent).
 """
+import drjit as dr
+import mitsuba as mi
 import numpy as np
 import pytest
 import tmm
-
-import drjit as dr
-import mitsuba as mi
+from _kernels import compiled, interaction
 
 import thinfilm_mi as tf
-from thinfilm_mi.render import media as media_mod
 from thinfilm_mi.optics import unpolarised
 from thinfilm_mi.render import kernel as K
-
-from _kernels import compiled, interaction
+from thinfilm_mi.render import media as media_mod
 
 # A float32 kernel value against float64: rounding below 3e-5 for these stacks
 # (tests/test_bsdf_specular.py). A table lookup adds its interpolation error,
@@ -330,8 +328,8 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     alone, for a small fraction of the evaluations a failing build used to spend
     (up to tabulate_base.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
     table is tried after it; tests/test_band_tables.py covers those.)"""
-    from thinfilm_mi.tabulate import exact as tables
     from thinfilm_mi.tabulate import base as tabulate_base
+    from thinfilm_mi.tabulate import exact as tables
     K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
@@ -376,8 +374,8 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     ``auto`` then renders exactly; by default it tabulates ``R_σ`` instead, which
     fits the cache (the 1 nm resolution damps the fringes of these 3 µm of optical
     thickness by exp(-2 π² (σ_ν 2 Σ n d)²) < 1 %, yet the table is 160x824)."""
-    from thinfilm_mi.tabulate import exact as tables
     from thinfilm_mi.tabulate import base as tabulate_base
+    from thinfilm_mi.tabulate import exact as tables
     layers = "2.3 800; 1.46 800"
     K.TABLE_CACHE.clear()
     big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
@@ -432,8 +430,8 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     loop over buffers of the films (real and complex loops): the table meets the
     independent float64 reference like the unrolled builds (tolerance as in the
     first test)."""
-    from thinfilm_mi.tabulate import exact as tables
     from thinfilm_mi.tabulate import base as tabulate_base
+    from thinfilm_mi.tabulate import exact as tables
     calls = []
     loop = unpolarised.unpolarised_rt_loop
 

@@ -11,11 +11,10 @@ densities, directions and eval must match Mitsuba's to float32 rounding.
 """
 from __future__ import annotations
 
-import numpy as np
-import pytest
-
 import drjit as dr
 import mitsuba as mi
+import numpy as np
+import pytest
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi  # noqa: E402,F401

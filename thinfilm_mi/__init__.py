@@ -7,10 +7,11 @@ Mitsuba plugins live in :mod:`thinfilm_mi.plugins` and are registered by
 """
 from __future__ import annotations
 
-from thinfilm_mi.llvm import LLVMVersionError, require_llvm
 from thinfilm_mi.errors import MaterialError, ThinFilmError
+from thinfilm_mi.llvm import LLVMVersionError, require_llvm
+from thinfilm_mi.materials.catalog import refractive_index
+from thinfilm_mi.materials.catalog import resolve as resolve_material
 from thinfilm_mi.materials.model import Material
-from thinfilm_mi.materials.catalog import refractive_index, resolve as resolve_material
 from thinfilm_mi.materials.stack import Layer, RTResult, Stack, parse_layers
 
 __version__ = "0.1.0"

@@ -15,7 +15,12 @@ Errors are those of :mod:`thinfilm_mi.errors` (:class:`~thinfilm_mi.errors.Usage
 """
 from thinfilm_mi.batch.exr import read_exr, write_exr, write_png
 from thinfilm_mi.batch.scene import (
-    DEFAULT_VARIANT, RenderResult, load_scene, render_file, render_scene, scene_variant,
+    DEFAULT_VARIANT,
+    RenderResult,
+    load_scene,
+    render_file,
+    render_scene,
+    scene_variant,
     setup_variant,
 )
 

@@ -21,7 +21,7 @@ from pathlib import Path
 from typing import TextIO
 from xml.sax.saxutils import quoteattr
 
-from thinfilm_mi.batch import scene
+from thinfilm_mi.batch import scene as batch_scene
 from thinfilm_mi.cli.parser import failure, report_error
 from thinfilm_mi.cli.render import summary
 from thinfilm_mi.errors import RenderError, ThinFilmError, UsageError, require_extra
@@ -39,7 +39,7 @@ class _Bar:
     (:func:`thinfilm_mi.batch.scene.progress_bar`, tqdm), in thousandths."""
 
     def __init__(self, stream: TextIO):
-        self.bar = scene.progress_bar(stream, total=1000, unit="‰", desc="design")
+        self.bar = batch_scene.progress_bar(stream, total=1000, unit="‰", desc="design")
 
     def __call__(self, fraction: float, message: str) -> None:
         self.bar.set_postfix_str(message, refresh=False)
@@ -94,7 +94,7 @@ def design_scene(layers: str, substrate, substrate_spec: str, ambient_spec: str)
 
 
 def render_design(result, output: str | Path, size: str = RENDER_SIZE, spp: int = RENDER_SPP,
-                  variant: str = scene.DEFAULT_VARIANT, seed: int = 0, progress: TextIO | None = None):
+                  variant: str = batch_scene.DEFAULT_VARIANT, seed: int = 0, progress: TextIO | None = None):
     """Write ``OUT.xml`` (:func:`design_scene`) and render it to ``OUT.exr`` and
     ``OUT.png`` with :func:`thinfilm_mi.batch.scene.render_file`; returns its
     :class:`~thinfilm_mi.batch.scene.RenderResult`."""
@@ -106,7 +106,7 @@ def render_design(result, output: str | Path, size: str = RENDER_SIZE, spp: int 
     scene = out.with_suffix(".xml")
     scene.parent.mkdir(parents=True, exist_ok=True)
     scene.write_text(xml, encoding="utf-8")
-    return scene.render_file(scene, out.with_suffix(".exr"), spp=spp, size=scene.parse_size(size),
+    return batch_scene.render_file(scene, out.with_suffix(".exr"), spp=spp, size=batch_scene.parse_size(size),
                            variant=variant, seed=seed, progress=progress)
 
 
@@ -122,7 +122,7 @@ def cmd_design(args: argparse.Namespace) -> int:
         tolerance = dz.parse_tolerance(args.tolerance) if args.tolerance else None
         if args.spp < 1:
             raise UsageError(f"--spp must be >= 1, got {args.spp}")
-        scene.parse_size(args.size)
+        batch_scene.parse_size(args.size)
         if args.render and Path(args.render).suffix.lower() not in (".png", ".exr"):
             raise UsageError(f"--render {args.render!r}: expected an .png (or .exr) file name")
         if args.evaluate is not None:
@@ -181,7 +181,7 @@ def add_parser(sub) -> argparse.ArgumentParser:
                                                        "(also writes OUT.xml and OUT.exr)")
     p.add_argument("--size", default=RENDER_SIZE, metavar="WxH", help=f"render size (default {RENDER_SIZE})")
     p.add_argument("--spp", type=int, default=RENDER_SPP, help=f"render samples per pixel (default {RENDER_SPP})")
-    p.add_argument("--variant", default=scene.DEFAULT_VARIANT, help="Mitsuba variant of the render")
+    p.add_argument("--variant", default=batch_scene.DEFAULT_VARIANT, help="Mitsuba variant of the render")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--verbose", action="store_true")
     p.set_defaults(func=cmd_design)

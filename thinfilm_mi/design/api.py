@@ -7,12 +7,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.design.merit import Design, Merit
 from thinfilm_mi.design.result import DesignResult
-from thinfilm_mi.design.synthesis import refine as _refine, run
+from thinfilm_mi.design.synthesis import refine as _refine
+from thinfilm_mi.design.synthesis import run
 from thinfilm_mi.design.targets import Problem, films_from_layers, load_problem
 from thinfilm_mi.design.tolerance import ToleranceSpec, parse_tolerance, tolerance_analysis
+from thinfilm_mi.errors import ThinFilmError
 
 __all__ = ["design", "refine", "evaluate"]
 

@@ -275,7 +275,8 @@ def seed_designs(merit: Merit, count: int, seed: int) -> list[Design]:
         return dm.n0.real if dm.material.constant is not None else float(dm.material.index(np.array([lam]))[0].real)
 
     n_single = (count + 1) // 2
-    out = [Design([mats[i % len(mats)]], np.array([(i // len(mats) + 1) * lam / (4.0 * real_index(mats[i % len(mats)]))]),
+    out = [Design([mats[i % len(mats)]],
+                  np.array([(i // len(mats) + 1) * lam / (4.0 * real_index(mats[i % len(mats)]))]),
                   n.copy()) for i in range(n_single)]
     n_screen = count - n_single
     if n_screen <= 0:

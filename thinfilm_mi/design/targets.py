@@ -282,7 +282,8 @@ def _check_reach(target: Target, wavelengths: np.ndarray, media: list[tuple[str,
         a, b = mat.wavelength_range
         if lo < a * (1 - 1e-9) or hi > b * (1 + 1e-9):
             bad = lo if lo < a * (1 - 1e-9) else hi
-            need = "" if target.wavelengths is not None else f" (the {target.illuminant} colour integral needs {lo:g}-{hi:g} nm)"
+            need = ("" if target.wavelengths is not None
+                    else f" (the {target.illuminant} colour integral needs {lo:g}-{hi:g} nm)")
             _fail(target.name, f"wavelength {bad:g} nm is out of reach: {name} {mat.name!r} has data "
                                f"for {a:g}-{b:g} nm only{need}")
 

@@ -19,9 +19,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.design.colourmath import delta_e2000
 from thinfilm_mi.design.merit import Design, Merit
+from thinfilm_mi.errors import ThinFilmError
 
 __all__ = ["ToleranceSpec", "parse_tolerance", "ToleranceResult", "tolerance_analysis"]
 

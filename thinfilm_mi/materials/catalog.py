@@ -40,6 +40,7 @@ the material, its range and the offending wavelength, never a NaN. By default
 range 360-830 nm (``require_range=None`` lifts that for numpy-only use).
 """
 from __future__ import annotations
+
 import difflib
 import math
 import os
@@ -47,11 +48,27 @@ import re
 import threading
 from pathlib import Path
 from typing import Any
-import numpy as np
-from thinfilm_mi.errors import MaterialError
-from thinfilm_mi.materials.model import ConstantMaterial, Material, SPECTRAL_RANGE, RANGE_RTOL
-from thinfilm_mi.materials.sources import FILE_SUFFIXES, MITSUBA_SWAPPED, load_builtin, load_file, load_mitsuba, load_ri_page, mitsuba_ior_dir, mitsuba_presets, mitsuba_reference, normalise_name, read_spd, builtin_registry, short_names, ri_database_version
 
+import numpy as np
+
+from thinfilm_mi.errors import MaterialError
+from thinfilm_mi.materials.model import RANGE_RTOL, SPECTRAL_RANGE, ConstantMaterial, Material
+from thinfilm_mi.materials.sources import (
+    FILE_SUFFIXES,
+    MITSUBA_SWAPPED,
+    builtin_registry,
+    load_builtin,
+    load_file,
+    load_mitsuba,
+    load_ri_page,
+    mitsuba_ior_dir,
+    mitsuba_presets,
+    mitsuba_reference,
+    normalise_name,
+    read_spd,
+    ri_database_version,
+    short_names,
+)
 
 # ---------------------------------------------------------------------------
 # resolve()

@@ -6,13 +6,14 @@ keep (:data:`MIN_INDEX`, :data:`MAX_INDEX`) and every dataset must cover
 these objects.
 """
 from __future__ import annotations
+
 import math
 from pathlib import Path
 from typing import Sequence
+
 import numpy as np
+
 from thinfilm_mi.errors import MaterialError
-
-
 
 #: Mitsuba 3's spectral range (nm): every dataset used for rendering must cover it.
 SPECTRAL_RANGE = (360.0, 830.0)

@@ -5,6 +5,7 @@ returns a :class:`~thinfilm_mi.materials.model.Material` or raises
 :class:`~thinfilm_mi.errors.MaterialError` naming the file or name.
 """
 from __future__ import annotations
+
 import difflib
 import importlib.util
 import json
@@ -12,9 +13,18 @@ import re
 import warnings
 from pathlib import Path
 from typing import Any
+
 import numpy as np
+
 from thinfilm_mi.errors import MaterialError
-from thinfilm_mi.materials.model import ConstantMaterial, DispersiveMaterial, Material, DATA_DIR, DispersionFormula, TabulatedIndex
+from thinfilm_mi.materials.model import (
+    DATA_DIR,
+    ConstantMaterial,
+    DispersionFormula,
+    DispersiveMaterial,
+    Material,
+    TabulatedIndex,
+)
 
 
 # ---------------------------------------------------------------------------

@@ -21,8 +21,8 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.materials.model import Material
 
 __all__ = ["Layer", "Stack", "RTResult", "parse_layers", "check_thickness"]
@@ -238,7 +238,7 @@ class Stack:
         """Reflectance, transmittance and amplitudes at ``wavelength`` (nm) and
         angle of incidence ``theta`` (radians, in [0, pi/2], measured in the
         ambient medium). Inputs broadcast like numpy arrays."""
-        from thinfilm_mi.optics.backend import to_numpy, reference_rt
+        from thinfilm_mi.optics.backend import reference_rt, to_numpy
 
         wl = np.asarray(wavelength, dtype=np.float64)
         th = np.asarray(theta, dtype=np.float64)

@@ -6,10 +6,20 @@
 * :mod:`thinfilm_mi.optics.incoherent` -- films averaged incoherently (as tmm's ``inc_tmm``).
 * :mod:`thinfilm_mi.optics.backend` -- the float64 LLVM backend: numpy in, numpy out.
 """
-from thinfilm_mi.optics.core import (Cx, StackAmplitudes, film_attenuation, fresnel_p,
-                                     fresnel_s, real_loop_applies, sqrt_decaying,
-                                     stack_amplitudes, stack_rt, stack_rt_loop,
-                                     transmittance_factor_p, transmittance_factor_s)
+from thinfilm_mi.optics.core import (
+                                     Cx,
+                                     StackAmplitudes,
+                                     film_attenuation,
+                                     fresnel_p,
+                                     fresnel_s,
+                                     real_loop_applies,
+                                     sqrt_decaying,
+                                     stack_amplitudes,
+                                     stack_rt,
+                                     stack_rt_loop,
+                                     transmittance_factor_p,
+                                     transmittance_factor_s,
+)
 from thinfilm_mi.optics.incoherent import incoherent_rt
 
 __all__ = ["Cx", "StackAmplitudes", "film_attenuation", "fresnel_p", "fresnel_s",

@@ -6,13 +6,12 @@ that evaluates every output together.
 """
 from __future__ import annotations
 
-import numpy as np
 import drjit as dr
+import numpy as np
 from drjit.llvm import Float64
 
 from thinfilm_mi.llvm import require_llvm
 from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
-
 
 #: Alignment (bytes) of the buffers handed to Dr.Jit, see :func:`float64_array`.
 _ALIGN = 128

@@ -81,8 +81,7 @@ from typing import Any, Sequence
 
 import drjit as dr
 
-from thinfilm_mi.optics.core import (clip_transmittance, is_zero, prepare_stack,
-                                     rouard_recursion, stack_rt)
+from thinfilm_mi.optics.core import clip_transmittance, is_zero, prepare_stack, rouard_recursion, stack_rt
 
 __all__ = ["incoherent_rt", "incoherent_rt_sp", "reference_incoherent_rt", "coherent_groups"]
 

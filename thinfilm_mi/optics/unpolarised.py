@@ -10,11 +10,15 @@ table build and hemispherical integral evaluates.
 """
 from __future__ import annotations
 
-
-from thinfilm_mi.optics.core import (clip_transmittance, stack_amplitudes, stack_rt_loop,
-                                     transmittance_factor_p, transmittance_factor_s)
 import drjit as dr
 
+from thinfilm_mi.optics.core import (
+    clip_transmittance,
+    stack_amplitudes,
+    stack_rt_loop,
+    transmittance_factor_p,
+    transmittance_factor_s,
+)
 
 #: Exact evaluation of a side with at least this many films runs the recursion
 #: as a symbolic Dr.Jit loop over buffers of the films (the render kernel's film loop,

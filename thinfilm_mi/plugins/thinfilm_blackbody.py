@@ -63,8 +63,8 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.colour.cie import colour_weights, trapezoid_weights, xyz_to_srgb_matrix
+from thinfilm_mi.errors import ThinFilmError
 
 NAME = "thinfilm_blackbody"
 

@@ -119,14 +119,14 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from thinfilm_mi.render import modes
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.render.media import (SpectralIndex)
-from thinfilm_mi.render.props import (check_unqueried, optional_texture, stack_from_props)
-from thinfilm_mi.render.variant import (check_variant)
 from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
+from thinfilm_mi.render import modes
+from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.params import ParameterGuard
+from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
 from thinfilm_mi.render.textures import check_texture_range, uniform
+from thinfilm_mi.render.variant import check_variant
 
 NAME = "thinfilm_conductor"
 

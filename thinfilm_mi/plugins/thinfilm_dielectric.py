@@ -121,10 +121,10 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.props import (check_unqueried, optional_texture, stack_from_props)
-from thinfilm_mi.render.variant import (check_variant, spectral_mean)
-from thinfilm_mi.render.media import (real_index)
+from thinfilm_mi.render.media import real_index
 from thinfilm_mi.render.params import ParameterGuard
+from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
+from thinfilm_mi.render.variant import check_variant, spectral_mean
 
 NAME = "thinfilm_dielectric"
 

@@ -218,20 +218,24 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 
-from thinfilm_mi.render import modes
-from thinfilm_mi.render.diffuse import DiffuseFactors
-from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable
-from thinfilm_mi.render.colour import (GradientSampler, attach_gradient, colour_channels,
-                                       index_on_wavelengths, prepare_gradients)
-from thinfilm_mi.render.kernel import (KernelStack)
-from thinfilm_mi.render.props import (check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props)
-from thinfilm_mi.render.variant import (check_variant, spectral_mean, opaque_float)
 from thinfilm_mi.optics.core import Cx, film_attenuation
+from thinfilm_mi.render import modes
+from thinfilm_mi.render.colour import (
+    GradientSampler,
+    attach_gradient,
+    colour_channels,
+    index_on_wavelengths,
+    prepare_gradients,
+)
+from thinfilm_mi.render.diffuse import DiffuseFactors, update_derivative_table, with_derivatives
+from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.params import ALBEDO_SLACK, ParameterGuard
+from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
 from thinfilm_mi.render.textures import check_texture_range, regular, scalar, uniform
+from thinfilm_mi.render.variant import check_variant, opaque_float, spectral_mean
+from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple")
@@ -359,25 +363,11 @@ class ThinFilmDiffuse(mi.BSDF):
         self.t_hemi = _spectrum(self.t_hemi, t_hemi)
         self.r_dh = _spectrum(self.r_dh, r_dh)
 
-    def _film_gradients(self) -> bool:
-        """Whether a film thickness or numeric index carries gradients (AD variants)."""
-        if not dr.is_diff_v(mi.Float):
-            return False
-        params = mi.traverse(self)
-        return any(dr.grad_enabled(params[k]) for k in params.keys()
-                   if k.startswith("layers.") and dr.is_diff_v(params[k]))
-
     def _update_derivatives(self) -> None:
-        """Build ``R_dh``'s derivative table (model "multiple", AD variants) if a film
-        parameter carries gradients now and the table is missing or stale; drop it
-        otherwise. Never at scene load: nothing carries gradients then, and the
-        reverse-mode pass would run on Mitsuba's loader threads."""
-        if (self._factors_now is None or self.model != "multiple"
-                or not self._film_gradients()):
-            self.r_dh_grad = None
-            return
-        if self.r_dh_grad is None:
-            self.r_dh_grad = DerivativeTable(self._factors_now.r_dh_partials(GRID))
+        """``R_dh``'s derivative table, built or dropped
+        (:func:`thinfilm_mi.render.diffuse.update_derivative_table`)."""
+        self.r_dh_grad = update_derivative_table(self, self._factors_now, self.model,
+                                                 self.r_dh_grad)
 
     # -- kernel helpers ------------------------------------------------------
     def _factors(self, si, cos_theta, active, transmission: bool):
@@ -402,31 +392,14 @@ class ThinFilmDiffuse(mi.BSDF):
         return dr.rcp(1.0 - kd * r_dh)
 
     def _with_derivatives(self, r_dh, si, wavelengths, index_at, active):
-        """``R_dh`` (at ``wavelengths``) plus ``Σ_x ∂R_dh/∂x (x - detach(x))`` over the
-        film thicknesses and indices that carry gradients: the same value, with
-        ``R_dh``'s derivatives (:class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`).
-        ``index_at(ix)``: a film's index at ``wavelengths``."""
+        """``R_dh`` carrying its derivatives (:func:`thinfilm_mi.render.diffuse.with_derivatives`)."""
         if self.model == "single" or self.no_films:
             return r_dh
         films = list(zip(self.coating.indices, self.coating.thickness))
         if self.film_n is not None:
             films.append((self.film_n, self.film_n_thickness))
-        carriers = {}
-        for f, (ix, d) in enumerate(films):
-            if dr.grad_enabled(d):
-                carriers[PER_FILM * f] = mi.UnpolarizedSpectrum(d - dr.detach(d))
-            if ix.carries_gradients(si, active):
-                n = index_at(ix)
-                carriers[PER_FILM * f + 1] = mi.UnpolarizedSpectrum(n.re - dr.detach(n.re))
-                carriers[PER_FILM * f + 2] = mi.UnpolarizedSpectrum(n.im - dr.detach(n.im))
-        if not carriers:
-            return r_dh
-        if self.r_dh_grad is None:
-            raise ThinFilmError(
-                f"{NAME}: a film parameter carries gradients, but R_dh's derivative table "
-                "was not built: call params.update() after enabling gradients "
-                "(dr.enable_grad(params[key]); params.update()), as mi.ad optimisers do")
-        return r_dh + self.r_dh_grad.tangent(wavelengths, carriers, active)
+        return with_derivatives(self.r_dh_grad, r_dh, films, si, wavelengths, index_at, active,
+                                NAME)
 
     def _diffuse(self, si, kd, cos_i, cos_o, t_i, series, active):
         """``π f`` at ``cos_o``: ``k_d t_i t_o S`` per wavelength, or its integral

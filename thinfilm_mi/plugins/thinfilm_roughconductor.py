@@ -134,13 +134,13 @@ import math
 import drjit as dr
 import mitsuba as mi
 
-from thinfilm_mi.render import modes
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.render.props import (check_unqueried, optional_texture, stack_from_props)
-from thinfilm_mi.render.variant import (check_variant)
 from thinfilm_mi.plugins.thinfilm_conductor import substrate_from_props
+from thinfilm_mi.render import modes
 from thinfilm_mi.render.params import MAX_ALPHA, ParameterGuard
+from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
 from thinfilm_mi.render.textures import check_texture_range, uniform
+from thinfilm_mi.render.variant import check_variant
 
 NAME = "thinfilm_roughconductor"
 

@@ -28,9 +28,9 @@ from typing import Any
 
 import drjit as dr
 
+from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
 from thinfilm_mi.optics.unpolarised import unpolarised_powers
 from thinfilm_mi.render.kernel import KernelStack
-from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
 from thinfilm_mi.render.textures import mitsuba_module
 
 

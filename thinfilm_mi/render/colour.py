@@ -26,13 +26,13 @@ from dataclasses import replace
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.tabulate.base import grid_coordinate
 from thinfilm_mi.colour import cie
-from thinfilm_mi.tabulate import colour as integrated
-from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
 from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar, texture_range, uniform
+from thinfilm_mi.tabulate import base as tabulate_base
+from thinfilm_mi.tabulate import colour as integrated
+from thinfilm_mi.tabulate.base import grid_coordinate
 
 
 def colour_channels() -> str | None:

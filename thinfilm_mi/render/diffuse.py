@@ -1,7 +1,13 @@
-"""The spectral factors of a ``thinfilm_diffuse`` as its colour tables
-(:mod:`thinfilm_mi.tabulate.diffuse`) integrate them: the coating's transmittance at
-any (angle, wavelength) and its hemispherical terms, read from the plugin's
-:class:`~thinfilm_mi.render.kernel.KernelStack` and media."""
+"""What ``thinfilm_diffuse`` needs beyond its kernel stack.
+
+* :class:`DiffuseFactors`: its spectral factors as its colour tables
+  (:mod:`thinfilm_mi.tabulate.diffuse`) integrate them: the coating's transmittance at
+  any (angle, wavelength) and its hemispherical terms, read from the plugin's
+  :class:`~thinfilm_mi.render.kernel.KernelStack` and media.
+* :func:`update_derivative_table`, :func:`with_derivatives`: ``R_dh`` carrying its
+  derivatives with respect to the films' thicknesses and indices (model "multiple"
+  in AD variants), from a table built when a film parameter carries gradients.
+"""
 from __future__ import annotations
 
 import math
@@ -56,3 +62,60 @@ class DiffuseFactors:
         per film of the coating, then film ``N``, its thickness, ``Re n``, ``Im n``."""
 
         return r_dh_partials(*self._arguments(wl), wavelengths=wl)
+
+
+def film_gradients(bsdf) -> bool:
+    """Whether a film parameter of ``bsdf`` (a ``layers.*`` value) carries gradients."""
+    import drjit as dr
+    import mitsuba as mi
+
+    if not dr.is_diff_v(mi.Float):
+        return False
+    params = mi.traverse(bsdf)
+    return any(dr.grad_enabled(params[k]) for k in params.keys()
+               if k.startswith("layers.") and dr.is_diff_v(params[k]))
+
+
+def update_derivative_table(bsdf, factors, model: str, table):
+    """``R_dh``'s derivative table for ``bsdf`` now: built from ``factors`` (a
+    :class:`DiffuseFactors`) if a film parameter carries gradients and ``table`` is
+    missing, kept if it is there, ``None`` when nothing carries gradients (or for
+    model "single", or no films). Never needed at scene load, where nothing carries
+    gradients: the reverse-mode pass then never runs on Mitsuba's loader threads."""
+    from thinfilm_mi.materials.model import GRID
+    from thinfilm_mi.tabulate.hemispherical import DerivativeTable
+
+    if factors is None or model != "multiple" or not film_gradients(bsdf):
+        return None
+    return table if table is not None else DerivativeTable(factors.r_dh_partials(GRID))
+
+
+def with_derivatives(table, r_dh, films, si, wavelengths, index_at, active, plugin: str):
+    """``R_dh`` (at ``wavelengths``) plus ``Σ_x ∂R_dh/∂x (x - detach(x))`` over the
+    ``films`` (``(SpectralIndex, thickness)``, the coating's then film N) whose
+    thickness or index carries gradients: the same value, with ``R_dh``'s derivatives
+    (``table``, a :class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`).
+    ``index_at(ix)``: a film's index at ``wavelengths``. Gradients that reach here
+    without a table (enabled without ``params.update()``) raise, never bias."""
+    import drjit as dr
+    import mitsuba as mi
+
+    from thinfilm_mi.errors import ThinFilmError
+    from thinfilm_mi.tabulate.hemispherical import PER_FILM
+
+    carriers = {}
+    for f, (ix, d) in enumerate(films):
+        if dr.grad_enabled(d):
+            carriers[PER_FILM * f] = mi.UnpolarizedSpectrum(d - dr.detach(d))
+        if ix.carries_gradients(si, active):
+            n = index_at(ix)
+            carriers[PER_FILM * f + 1] = mi.UnpolarizedSpectrum(n.re - dr.detach(n.re))
+            carriers[PER_FILM * f + 2] = mi.UnpolarizedSpectrum(n.im - dr.detach(n.im))
+    if not carriers:
+        return r_dh
+    if table is None:
+        raise ThinFilmError(
+            f"{plugin}: a film parameter carries gradients, but R_dh's derivative table "
+            "was not built: call params.update() after enabling gradients "
+            "(dr.enable_grad(params[key]); params.update()), as mi.ad optimisers do")
+    return r_dh + table.tangent(wavelengths, carriers, active)

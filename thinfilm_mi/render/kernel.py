@@ -17,22 +17,31 @@
   validates them at scene load time.
 """
 from __future__ import annotations
+
 import math
 from typing import Any, Sequence
+
 import drjit as dr
 import numpy as np
-from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
-from thinfilm_mi.tabulate import band as _band_tables
-from thinfilm_mi.tabulate import base as tabulate_base
-from thinfilm_mi.render.colour import (GradientSampler, attach_gradient, colour_channels, colour_table, index_on_wavelengths,
-                            prepare_gradients, with_absorbing)
+
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.optics.core import (Cx)
-from thinfilm_mi.render.textures import (GRID, mitsuba_module, scalar, texture_on_grid)
+from thinfilm_mi.optics.core import Cx
+from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
+from thinfilm_mi.render.colour import (
+    GradientSampler,
+    attach_gradient,
+    colour_channels,
+    colour_table,
+    index_on_wavelengths,
+    prepare_gradients,
+    with_absorbing,
+)
 from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.media import SpectralIndex
+from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 from thinfilm_mi.render.variant import opaque_float
-
+from thinfilm_mi.tabulate import band as _band_tables
+from thinfilm_mi.tabulate import base as tabulate_base
 
 #: Default coherence thickness (nm): thicker films are averaged incoherently.
 DEFAULT_COHERENCE_THICKNESS = 5000.0

@@ -4,12 +4,14 @@ one symbolic Dr.Jit loop visits, so the kernel and its compile time do not grow 
 the number of films.
 """
 from __future__ import annotations
+
 import drjit as dr
 import numpy as np
+
+from thinfilm_mi.optics.core import Cx, real_loop_applies
 from thinfilm_mi.optics.unpolarised import unpolarised_rt_loop
-from thinfilm_mi.optics.core import (Cx, real_loop_applies)
-from thinfilm_mi.render.textures import (GRID, mitsuba_module, scalar, texture_on_grid)
 from thinfilm_mi.render.media import SpectralIndex
+from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 
 
 class LoopFilms:

@@ -5,20 +5,19 @@ wavelength grid, its knots and kinks), and :func:`real_index` for the non-absorb
 media (``ext_ior``, ``int_ior``).
 """
 from __future__ import annotations
+
 import math
 from typing import Any
+
 import drjit as dr
 import numpy as np
-from thinfilm_mi.materials import catalog as _materials
-from thinfilm_mi.render.colour import (channel_mean_texture,
-                            colour_channels)
+
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.optics.core import (Cx)
+from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL
-from thinfilm_mi.render.textures import (GRID, mitsuba_module, irregular, texture_on_grid,
-                       uniform)
-
-
+from thinfilm_mi.optics.core import Cx
+from thinfilm_mi.render.colour import channel_mean_texture, colour_channels
+from thinfilm_mi.render.textures import GRID, irregular, mitsuba_module, texture_on_grid, uniform
 
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
 DEFAULT_EXT_IOR = 1.000277

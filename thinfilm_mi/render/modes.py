@@ -44,7 +44,6 @@ from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
 
 
-
 @dataclass
 class Response:
     """A stack's unpolarised ``R`` and ``T`` at a hit, and per lobe what the mode
@@ -148,7 +147,7 @@ _MODES = {"spectral": SpectralMode(), "polarized": PolarizedMode(), "colour": Co
 
 
 def current() -> SpectralMode:
-    """The mode of the current Mitsuba variant (checked by :func:`kernel.check_variant`)."""
+    """The mode of the current Mitsuba variant (checked by :func:`thinfilm_mi.render.variant.check_variant`)."""
     mi = mitsuba_module()
     if colour_channels() is not None:
         return _MODES["colour"]

@@ -4,12 +4,19 @@ check that no property was misspelt (:func:`check_unqueried`). Every bad value r
 :class:`~thinfilm_mi.errors.ThinFilmError` naming the property and the value.
 """
 from __future__ import annotations
+
 import math
+
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.stack import check_thickness, parse_layers
-from thinfilm_mi.render.textures import (check_texture_range)
-from thinfilm_mi.render.kernel import DEFAULT_COHERENCE_THICKNESS, DEFAULT_SPECTRAL_RESOLUTION, DEFAULT_TABLE_ERROR, KernelStack
+from thinfilm_mi.render.kernel import (
+    DEFAULT_COHERENCE_THICKNESS,
+    DEFAULT_SPECTRAL_RESOLUTION,
+    DEFAULT_TABLE_ERROR,
+    KernelStack,
+)
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR, SpectralIndex, real_index
+from thinfilm_mi.render.textures import check_texture_range
 
 
 def optional_texture(props, name: str, plugin: str):

@@ -22,8 +22,8 @@ import re
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.materials.model import GRID
 
 
 def mitsuba_module():

@@ -3,11 +3,12 @@ cannot serve, :func:`opaque_float` makes a kernel input that never recompiles, a
 :func:`spectral_mean` averages a spectrum in every variant.
 """
 from __future__ import annotations
-import drjit as dr
-from thinfilm_mi.llvm import require_llvm
-from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.render.textures import (mitsuba_module)
 
+import drjit as dr
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.llvm import require_llvm
+from thinfilm_mi.render.textures import mitsuba_module
 
 
 def check_variant(plugin: str) -> None:

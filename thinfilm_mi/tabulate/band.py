@@ -57,14 +57,28 @@ channel, must be within :data:`COLOUR_TOLERANCE` (CIEDE2000); otherwise no
 table is built (``tabulate="auto"`` then evaluates exactly).
 """
 from __future__ import annotations
-import math
-import numpy as np
-from thinfilm_mi.tabulate.base import (GHOST, GRAZING_COS, SPLIT_ENDS, SideData, Table, bspline_midpoints, side_indices, bspline_coefficients, tir_kind, with_ghosts)
-from thinfilm_mi.tabulate.base import MAX_U, MAX_V
-from thinfilm_mi.tabulate import exact as _tables
-from thinfilm_mi.tabulate import base as tabulate_base
-from thinfilm_mi.tabulate.band_rows import ILLUMINANTS, Rows, V_SPACING
 
+import math
+
+import numpy as np
+
+from thinfilm_mi.tabulate import base as tabulate_base
+from thinfilm_mi.tabulate import exact as _tables
+from thinfilm_mi.tabulate.band_rows import ILLUMINANTS, V_SPACING, Rows
+from thinfilm_mi.tabulate.base import (
+    GHOST,
+    GRAZING_COS,
+    MAX_U,
+    MAX_V,
+    SPLIT_ENDS,
+    SideData,
+    Table,
+    bspline_coefficients,
+    bspline_midpoints,
+    side_indices,
+    tir_kind,
+    with_ghosts,
+)
 
 #: Bins are half a v-node spacing wide, 0.3 σ_ν: the bins' B-spline departs
 #: from a Gaussian by its fourth cumulant, ~1e-6 of ``R_σ``.

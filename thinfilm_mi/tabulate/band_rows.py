@@ -6,14 +6,25 @@ them (:class:`Rows`), the smooth amplitudes ``N``, ``D`` from which ``R = |N|²/
 is sampled (:func:`smooth_terms`), and the Gaussian's width (:func:`sigma_nu`).
 """
 from __future__ import annotations
+
 import math
+
 import drjit as dr
 import numpy as np
+
 from thinfilm_mi.colour import cie
 from thinfilm_mi.optics.core import Cx
-from thinfilm_mi.tabulate.base import (GHOST, GRAZING_COS, HALF_PI, SIGMA_MAX, SIGMA_MIN, SideData, band_cos, evaluate_side, side_indices)
-
-
+from thinfilm_mi.tabulate.base import (
+    GHOST,
+    GRAZING_COS,
+    HALF_PI,
+    SIGMA_MAX,
+    SIGMA_MIN,
+    SideData,
+    band_cos,
+    evaluate_side,
+    side_indices,
+)
 
 #: The wavelength (nm) at which ``spectral_resolution`` is the Gaussian's
 #: standard deviation in nm (it scales as λ² elsewhere).
@@ -225,7 +236,8 @@ class Rows:
         First level: samples every :attr:`step` bins, panels two steps wide whose
         error is estimated in pairs (5 samples); a panel that fails, or is wider
         than the resonances near it allow (:class:`_Resonances`), is halved (2
-        new samples) until it passes or reaches :data:`MIN_PANEL`. Each accepted panel stands for the quadratic through its three
+        new samples) until it passes or reaches :data:`MIN_PANEL`. Each accepted panel stands for
+        the quadratic through its three
         samples, integrated exactly against the bins' B-splines (3-point
         Gauss-Legendre on each bin interval it covers: degree 2 + 3)."""
         R, nb, w, S = xs.size, self.nb, self.w, self.step

@@ -19,15 +19,16 @@ The builders on top are :mod:`thinfilm_mi.tabulate.exact` (tables of the exact
 values) and :mod:`thinfilm_mi.tabulate.band` (band-limited values of deep stacks).
 """
 from __future__ import annotations
+
 import math
 from dataclasses import dataclass, field
+
 import drjit as dr
 import numpy as np
+
 from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
-
-
+from thinfilm_mi.optics.core import Cx
 
 SIGMA_MAX = 1.0 / SPECTRAL_RANGE[0]   # 1/nm at 360 nm
 SIGMA_MIN = 1.0 / SPECTRAL_RANGE[1]   # 1/nm at 830 nm

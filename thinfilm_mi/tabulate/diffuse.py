@@ -44,10 +44,9 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.colour import cie
-from thinfilm_mi.tabulate import colour as integrated
-from thinfilm_mi.tabulate.base import grid_coordinate
 from thinfilm_mi.materials.stack import SPECTRAL_RANGE
-from thinfilm_mi.tabulate.base import u_texel
+from thinfilm_mi.tabulate import colour as integrated
+from thinfilm_mi.tabulate.base import grid_coordinate, u_texel
 
 #: Relative error of the Chebyshev interpolation of ``G(k_d, r)`` in ``r``.
 SERIES_TOLERANCE = 1e-5

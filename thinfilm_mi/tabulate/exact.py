@@ -57,9 +57,39 @@ The lookup's scale and offset constants are opaque JIT variables, so a new
 table of another shape (a thickness sweep) reuses the compiled render kernel.
 """
 from __future__ import annotations
+
 import math
+
 import numpy as np
-from thinfilm_mi.tabulate.base import MAX_U, MAX_V, MIN_U, MIN_V, GHOST, GRAZING_COS, HALF_PI, MAX_BUILD_POINTS, MAX_ROUNDS, MAX_TEXELS, REFINE_SHARE, SIGMA_MAX, SIGMA_MIN, SPLIT_ENDS, SideData, Table, bspline_at, v_nodes_wl, bspline_coefficients, bspline_midpoints, evaluate_side, side_indices, tir_kind, u_nodes_cos, v_texel, with_ghosts
+
+from thinfilm_mi.tabulate.base import (
+    GHOST,
+    GRAZING_COS,
+    HALF_PI,
+    MAX_BUILD_POINTS,
+    MAX_ROUNDS,
+    MAX_TEXELS,
+    MAX_U,
+    MAX_V,
+    MIN_U,
+    MIN_V,
+    REFINE_SHARE,
+    SIGMA_MAX,
+    SIGMA_MIN,
+    SPLIT_ENDS,
+    SideData,
+    Table,
+    bspline_at,
+    bspline_coefficients,
+    bspline_midpoints,
+    evaluate_side,
+    side_indices,
+    tir_kind,
+    u_nodes_cos,
+    v_nodes_wl,
+    v_texel,
+    with_ghosts,
+)
 
 
 # -- resolution ----------------------------------------------------------------

@@ -36,12 +36,12 @@ import drjit as dr
 import numpy as np
 from drjit.llvm import Float64, UInt32
 
-from thinfilm_mi.optics.backend import aligned_array, float64_array, repeated
 from thinfilm_mi.llvm import require_llvm
+from thinfilm_mi.materials.model import GRID  # where the factors are tabulated
+from thinfilm_mi.optics.backend import aligned_array, float64_array, repeated
 from thinfilm_mi.optics.core import Cx, film_attenuation
 from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
 from thinfilm_mi.tabulate.base import grid_coordinate
-from thinfilm_mi.materials.model import GRID  # where the factors are tabulated
 
 __all__ = ["hemispherical_factors",
            "r_dh_partials", "DerivativeTable"]
@@ -166,7 +166,8 @@ def r_dh_partials(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]]
 
 def _partials_block(n_amb, coating, n_exit, film_n, wavelengths, mu, weight) -> np.ndarray:
     """:func:`r_dh_partials` on one block of wavelengths."""
-    from drjit.llvm.ad import Float64 as ADFloat64, UInt32 as ADUInt32
+    from drjit.llvm.ad import Float64 as ADFloat64
+    from drjit.llvm.ad import UInt32 as ADUInt32
 
     nw, nm, F = wavelengths.size, mu.size, len(coating)
 
