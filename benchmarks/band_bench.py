@@ -14,7 +14,7 @@ and default settings: ``tabulate="auto"``, ``spectral_resolution`` 1 nm) and
 
 1. Builds: ``mi.load_dict`` of the 10- and 30-film BSDFs with default settings,
    empty table cache (the build kernels compiled by a first load of another
-   stack): load time and what the build obtained (``tables.last_build``).
+   stack): load time and what the build obtained (the side's ``build_report``).
 2. Steady render, 256x256, 16 spp: one warm-up render each, then --repeats
    round-robin rounds (every configuration once per round), medians.
 3. First image with an empty kernel cache (subprocess, fresh DRJIT_CACHE_DIR):
@@ -68,7 +68,6 @@ def build() -> None:
     import mitsuba as mi
 
     from thinfilm_mi.render import kernel as K
-    from thinfilm_mi.tabulate import exact as tables
     print("\n### Band-limited builds (default settings)\n")
     print("| films | load (s) | result | table | rounds (nu x nv: err_u, err_v) "
           "| exact evaluations | colour check ΔE2000 (D65 / A / F11) |")
@@ -81,7 +80,7 @@ def build() -> None:
         t = time.perf_counter()
         b = mi.load_dict(bsdf(L, "default"))
         dt = time.perf_counter() - t
-        s = tables.last_build
+        s = b.stack.plan[False].build_report
         tab = b.stack.plan[False].table
         rounds = "; ".join(f"{nu}x{nv}: {eu:.1e}, {ev:.1e}" for nu, nv, eu, ev in s["errors"])
         ce = s.get("colour_errors") or {}

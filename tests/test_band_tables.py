@@ -86,8 +86,8 @@ def test_a_resonant_stack_gets_a_verified_band_limited_table(monkeypatch):
     brute-force R_σ within the verified error (plus the float32 texture's
     rounding), and its colours under D65/A/F11 pass the check."""
     side = _resonant_side(monkeypatch)
-    table = band_tables.build_table(side, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0)
-    stats = tables.last_build
+    stats = tabulate_base.BuildReport()
+    table = band_tables.build_table(side, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0, report=stats)
     assert table is not None, stats
     assert stats["exact_attempt"]["result"] != "table"
     assert table.resolution == 1.0 and table.error <= 1e-3
@@ -112,7 +112,8 @@ def test_band_limiting_is_off_by_default_and_leaves_thin_stacks_alone(monkeypatc
     b = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "tabulate": True,
                       "layers": "2.3 130; 1.46 101; 2.3 105", "spectral_resolution": 1.0})
     assert b.stack.mode() == "table"
-    assert tables.last_build["result"] == "table" and tables.last_build["resolution"] == 0.0
+    report = b.stack.plan[False].build_report
+    assert report["result"] == "table" and report["resolution"] == 0.0
     K.TABLE_CACHE.clear()
 
 

@@ -329,22 +329,23 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     (up to tabulate_base.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
     table is tried after it; tests/test_band_tables.py covers those.)"""
     from thinfilm_mi.tabulate import base as tabulate_base
-    from thinfilm_mi.tabulate import exact as tables
     K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
     assert bsdf.stack.mode() == "table"
-    assert tables.last_build["result"] == "table" and tables.last_build["rounds"] == 1
-    assert tables.last_build["probe_points"] < 0.5 * tables.last_build["points"]
+    report = bsdf.stack.plan[False].build_report
+    assert report["result"] == "table" and report["rounds"] == 1
+    assert report["probe_points"] < 0.5 * report["points"]
     d = np.random.default_rng(6).uniform(50.0, 200.0, 30)
     layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(30))
     with pytest.warns(UserWarning, match="cannot be tabulated"):
         deep = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                              "tabulate": True, "spectral_resolution": 0.0})
     assert deep.stack.mode() == "exact"
-    assert tables.last_build["result"] == "rejected by the probe"
-    assert tables.last_build["rounds"] == 0
-    assert tables.last_build["points"] < 0.05 * tabulate_base.MAX_BUILD_POINTS
+    report = deep.stack.plan[False].build_report
+    assert report["result"] == "rejected by the probe"
+    assert report["rounds"] == 0
+    assert report["points"] < 0.05 * tabulate_base.MAX_BUILD_POINTS
 
 
 def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
@@ -359,7 +360,7 @@ def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
     K.TABLE_CACHE.clear()
     table = bsdf.stack.plan[False].table
     assert table is not None and table.error <= 1e-3
-    assert tables.last_build["rounds"] > 1
+    assert bsdf.stack.plan[False].build_report["rounds"] > 1
     cos, wls = random_points(20000, seed=7)
     R = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32))))
     ref = tf.Stack(STACK, substrate="Cu", ambient=media_mod.DEFAULT_EXT_IOR)
@@ -375,7 +376,6 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     fits the cache (the 1 nm resolution damps the fringes of these 3 µm of optical
     thickness by exp(-2 π² (σ_ν 2 Σ n d)²) < 1 %, yet the table is 160x824)."""
     from thinfilm_mi.tabulate import base as tabulate_base
-    from thinfilm_mi.tabulate import exact as tables
     layers = "2.3 800; 1.46 800"
     K.TABLE_CACHE.clear()
     big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
@@ -386,7 +386,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                          "spectral_resolution": 0.0})
     assert auto.stack.mode() == "exact"
-    assert tables.last_build["rounds"] == 0   # the probe's estimate alone says so
+    assert auto.stack.plan[False].build_report["rounds"] == 0   # the probe's estimate alone
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
     table = auto.stack.plan[False].table
     assert table is not None and table.resolution == K.DEFAULT_SPECTRAL_RESOLUTION
@@ -431,7 +431,6 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     independent float64 reference like the unrolled builds (tolerance as in the
     first test)."""
     from thinfilm_mi.tabulate import base as tabulate_base
-    from thinfilm_mi.tabulate import exact as tables
     calls = []
     loop = unpolarised.unpolarised_rt_loop
 
@@ -444,7 +443,7 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
                          "tabulate": True})
     K.TABLE_CACHE.clear()
     table = bsdf.stack.plan[False].table
-    assert table is not None and tables.last_build["result"] == "table"
+    assert table is not None and bsdf.stack.plan[False].build_report["result"] == "table"
     assert len(layers.split(";")) >= tabulate_base.BUILD_LOOP_MIN_FILMS and calls
     assert all((m is None) == ("j" in layers) for m in calls)   # complex loop iff absorbing
     cos, wls = random_points(20000, seed=8)

@@ -28,3 +28,5 @@ __all__ = [
     "render_file", "render_scene", "load_scene", "RenderResult", "scene_variant", "setup_variant",
     "DEFAULT_VARIANT", "read_exr", "write_exr", "write_png",
 ]
+
+__all__ = ["RenderResult", "load_scene", "render_file", "render_scene"]

@@ -13,3 +13,19 @@ The work itself is the batch layer's (:mod:`thinfilm_mi.batch`); the progress ba
 :func:`thinfilm_mi.batch.scene.progress_bar` (tqdm).
 """
 __all__: list[str] = []
+
+def render_main(argv=None) -> int:
+    """``thinfilm-render`` (:func:`thinfilm_mi.cli.render.render_main`)."""
+    from thinfilm_mi.cli.render import render_main as main
+
+    return main(argv)
+
+
+def main(argv=None) -> int:
+    """``python -m thinfilm_mi`` (:func:`thinfilm_mi.cli.tools.main`)."""
+    from thinfilm_mi.cli.tools import main as tools_main
+
+    return tools_main(argv)
+
+
+__all__ = ["main", "render_main"]

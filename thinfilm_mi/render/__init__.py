@@ -10,3 +10,9 @@
 * :mod:`thinfilm_mi.render.params` -- validation of ``mi.traverse`` edits.
 * :mod:`thinfilm_mi.render.registry` -- registration of the plugins with Mitsuba.
 """
+from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.media import SpectralIndex, real_index
+from thinfilm_mi.render.params import ParameterGuard
+from thinfilm_mi.render.registry import PLUGINS, register
+
+__all__ = ["KernelStack", "PLUGINS", "ParameterGuard", "SpectralIndex", "real_index", "register"]

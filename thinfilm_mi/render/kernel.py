@@ -101,6 +101,8 @@ class _Side:
         self.opaque = opaque
         self.transmission = transmission
         self.table = None
+        #: What the build of :attr:`table` did (a ``tabulate.base.BuildReport``), or None
+        self.build_report = None
         self.loop = None   # a LoopFilms where the films are evaluated in a loop
         #: RGB/mono variants: the side's integrated.ColourTable, or None where the
         #: plugin evaluates per channel (no films over an index given per channel)
@@ -237,8 +239,8 @@ class KernelStack:
                 if side.table is None:
                     self.table_failed.append(inside)
                     # "auto" does not retry after every parameter edit: a failed
-                    # build costs up to ~1 s (tables.MAX_BUILD_POINTS), a failed
-                    # band-limited one ~2 s more (band_tables.MAX_BUILD_POINTS).
+                    # build costs up to ~1 s (tabulate.base.MAX_BUILD_POINTS), a failed
+                    # band-limited one ~2 s more (the same budget).
                     self._gave_up.add(inside)
         if self.tabulate is True and self.table_failed:
             import warnings
@@ -478,11 +480,13 @@ def _tables_cache(stack: KernelStack, side: _Side):
     key = h.hexdigest()
     found, table = TABLE_CACHE.get(key)
     if found:
+        side.build_report = tabulate_base.BuildReport(result="from the cache")
         return table
 
     data = side_data(side, transmission)
+    side.build_report = tabulate_base.BuildReport()
     table = _band_tables.build_table(data, stack.table_error, GRID, max_texels,
-                                     stack.spectral_resolution)
+                                     stack.spectral_resolution, report=side.build_report)
     TABLE_CACHE.put(key, table)
     return table
 

@@ -9,3 +9,10 @@
 * :mod:`thinfilm_mi.tabulate.diffuse` -- the coated-diffuse product film-in x base x film-out.
 * :mod:`thinfilm_mi.tabulate.hemispherical` -- hemispherical terms ``R_dh``, ``T_hemi``.
 """
+from thinfilm_mi.tabulate.band import build_table
+from thinfilm_mi.tabulate.base import SideData, Table, TableCache, evaluate_side
+from thinfilm_mi.tabulate.colour import ColourTable
+from thinfilm_mi.tabulate.hemispherical import hemispherical_factors, r_dh_partials
+
+__all__ = ["ColourTable", "SideData", "Table", "TableCache", "build_table", "evaluate_side",
+           "hemispherical_factors", "r_dh_partials"]

@@ -68,9 +68,11 @@ from thinfilm_mi.tabulate.band_rows import ILLUMINANTS, V_SPACING, Rows
 from thinfilm_mi.tabulate.base import (
     GHOST,
     GRAZING_COS,
+    MAX_BUILD_POINTS,
     MAX_U,
     MAX_V,
     SPLIT_ENDS,
+    BuildReport,
     SideData,
     Table,
     bspline_coefficients,
@@ -99,29 +101,28 @@ FIRST_ORDER = 3.5
 MAX_ROUNDS = 4
 #: Exact evaluations a band-limited build may spend (~2 s on two cores; the
 #: 30-film benchmark stack needs 1.6e6).
-MAX_BUILD_POINTS = 3_000_000
+
 
 
 
 
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
-                max_texels: int = tabulate_base.MAX_TEXELS, resolution: float = 0.0) -> Table | None:
+                max_texels: int = tabulate_base.MAX_TEXELS, resolution: float = 0.0,
+                report: BuildReport | None = None) -> Table | None:
     """The table of one side: of the exact values (:func:`tables.build_table`) if
     one resolves them within ``error`` (1-3 films: unchanged by band-limiting),
     else, if ``resolution`` > 0, of ``R_σ`` (:func:`build_band_table`); ``None``
-    if neither can be built. What the build did is left in
-    :data:`tables.last_build` (the exact attempt under ``"exact_attempt"``).
-
-    Nothing here reads :data:`tables.last_build` to decide: Mitsuba's parallel
-    scene loading runs builds on several threads, each of which replaces it
-    (a build of a side whose critical angle varies returns ``None`` from both
-    builders by itself)."""
-    table = _tables.build_table(side, error, wavelengths, max_texels)
+    if neither can be built. What the build did is written into ``report`` (a
+    :class:`~thinfilm_mi.tabulate.base.BuildReport`; the exact attempt's report
+    under ``"exact_attempt"`` when a band-limited table was tried after it)."""
+    report = report if report is not None else BuildReport()
+    exact = BuildReport()
+    table = _tables.build_table(side, error, wavelengths, max_texels, report=exact)
     if table is not None or resolution <= 0:
+        report.update(exact)
         return table
-    before = _tables.last_build
-    table = build_band_table(side, error, wavelengths, max_texels, resolution)
-    _tables.last_build["exact_attempt"] = before
+    table = build_band_table(side, error, wavelengths, max_texels, resolution, report=report)
+    report["exact_attempt"] = exact
     return table
 
 
@@ -154,11 +155,10 @@ def _axis(kind: str, nu: int):
 
 
 def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
-                     max_texels: int, resolution: float) -> Table | None:
+                     max_texels: int, resolution: float, report: BuildReport | None = None) -> Table | None:
     """A verified table of ``R_σ`` (see the module), or ``None`` if the colour
     check fails or the target needs more than ``max_texels`` texels or
-    :data:`MAX_BUILD_POINTS` exact evaluations. Leaves its account in
-    :data:`tables.last_build`.
+    :data:`MAX_BUILD_POINTS` exact evaluations. Writes its account into ``report``.
 
     Rounds: the rows of the angle nodes (a plain axis's ghosts included) and of
     their midpoints are computed (each row: every bin, so the v nodes and their
@@ -169,9 +169,9 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     convergence order predicts (the v spacing is reduced instead, all rows
     computed again, where ``err_v`` alone exceeds half the target)."""
     kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
-    stats = {"kind": kind, "rounds": 0, "points": 0, "result": "critical angle varies",
-             "resolution": resolution, "colour_error": None, "errors": []}
-    _tables.last_build = stats
+    stats = report if report is not None else BuildReport()
+    stats.update({"kind": kind, "rounds": 0, "points": 0, "result": "critical angle varies",
+                  "resolution": resolution, "colour_error": None, "errors": []})
     if kind is None:
         return None
     side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)

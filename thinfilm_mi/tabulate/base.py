@@ -55,7 +55,7 @@ GRAZING_COS = 0.02
 #: (sharp resonances, such as the surface plasmon of a metal film seen from
 #: inside glass, or the high-Q cavity modes of a deep random stack on a metal)
 #: is evaluated exactly. (fig8b's table lit from inside glass needs ~2e5.)
-MAX_BUILD_POINTS = 3_000_000
+MAX_BUILD_POINTS = 3_000_000   # one budget for every build, exact (~1 s) or band-limited (~2 s)
 #: Builds evaluate stacks of this many films or more as a loop over the films: its
 #: float64 kernel is compiled once for every depth (the unrolled kernel of 30
 #: films took ~0.9 s to compile, once per depth with an empty kernel cache).
@@ -453,6 +453,17 @@ def evaluate_side(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
     res = res if side.transmission else (res,)
     dr.eval(*res)
     return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1)
+
+
+class BuildReport(dict):
+    """What one table build did, returned through the builders' ``report`` argument
+    (never left in a module global: Mitsuba runs constructors, and so builds, on
+    several threads). Keys: ``kind`` (the angle axis), ``points`` (exact
+    evaluations in all), ``rounds`` (tables built and verified), ``result``
+    ("table", "rejected by the probe", "over budget", "critical angle varies",
+    "colour check failed"), ``resolution`` (nm, 0 for exact values); exact builds
+    add ``probe_points``, band-limited ones ``colour_error(s)``, ``errors`` (per
+    round) and ``exact_attempt`` (the report of the exact build tried first)."""
 
 
 class TableCache:

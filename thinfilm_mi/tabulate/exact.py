@@ -77,6 +77,7 @@ from thinfilm_mi.tabulate.base import (
     SIGMA_MAX,
     SIGMA_MIN,
     SPLIT_ENDS,
+    BuildReport,
     SideData,
     Table,
     bspline_at,
@@ -364,16 +365,8 @@ def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: d
     return cu.need(a * budget), cv.need((1.0 - a) * budget)
 
 
-#: What the last :func:`build_table` did: ``kind``, ``probe_points`` and
-#: ``points`` (exact evaluations by the probe and in all), ``rounds`` (tables
-#: built and verified) and ``result`` ("table", "rejected by the probe", "over
-#: budget", "critical angle varies"). For inspection only: under Mitsuba's
-#: parallel scene loading, builds on other threads replace it.
-last_build: dict = {}
-
-
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
-                max_texels: int = MAX_TEXELS) -> Table | None:
+                max_texels: int = MAX_TEXELS, report: BuildReport | None = None) -> Table | None:
     """Build and verify a table of the exact values of one side, or ``None`` if
     the target cannot be met within ``max_texels`` texels and
     :data:`MAX_BUILD_POINTS` evaluations (or the exit medium's critical angle
@@ -393,12 +386,12 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     width in angle and is skipped. Otherwise the axis that exceeds its share
     is refined, at the convergence order observed between rounds.
 
-    What the build did is left in :data:`last_build`.
+    What the build did is written into ``report`` (a :class:`BuildReport`).
     """
-    global last_build
     kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
-    last_build = stats = {"kind": kind, "probe_points": 0, "rounds": 0, "points": 0,
-                          "result": "critical angle varies", "resolution": 0.0}
+    stats = report if report is not None else BuildReport()
+    stats.update({"kind": kind, "probe_points": 0, "rounds": 0, "points": 0,
+                  "result": "critical angle varies", "resolution": 0.0})
     if kind is None:
         return None
     g, order = GHOST, 4
