@@ -231,6 +231,8 @@ def test_mono_render_matches_spectral_luminance(temperature, spectral_renders):
     ({"temperature": 1e30}, "1e\\+30 K"),         # beyond float32 range
     ({}, "is required"),
 ], ids=["zero", "negative", "nan", "inf", "huge", "missing"])
+
+
 def test_bad_temperature_is_refused_naming_it(variant, props, shown):
     mi.set_variant(variant)
     with pytest.raises(Exception, match=f"thinfilm_blackbody: 'temperature'.*{shown}"):

@@ -289,6 +289,8 @@ def test_bad_input_names_parameter_and_value(extra, needle):
     ({"material": "2+3j", "eta": 1.0, "k": 2.0}, "not both"),
     ({"eta": 1.0}, "together"),
 ])
+
+
 def test_conductor_substrate_errors(props, needle):
     mi.set_variant("llvm_ad_spectral")
     with pytest.raises(Exception, match=needle):
@@ -303,6 +305,8 @@ def test_dielectric_int_ior_must_be_real():
 
 @pytest.mark.parametrize("substrate,layers", [("Cu", "SiO2 500; Au 20"), ("Si", "SiO2 500"),
                                               ("Al", "TiO2 60; MgF2 95")])
+
+
 def test_named_materials_in_kernel_match_numpy_datasets(variant, substrate, layers):
     # Wavelengths between the datasets' knots and off the 1 nm grid: the kernel's
     # spectra must reproduce the datasets' own linear interpolation, so the only

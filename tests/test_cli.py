@@ -233,6 +233,8 @@ def test_polarization_is_found_through_includes_and_parameters(tmp_path):
     ("cuda_ad_rgb", False, "cuda_ad_rgb_polarized"),
     ("llvm_ad_mono_polarized", True, "llvm_ad_mono_polarized"),
 ])
+
+
 def test_polarized_variant_of_a_family(variant, thin_films, expected):
     assert tf_scene.polarized_variant(variant, thin_films) == expected
     if not thin_films:  # not in the build: the spectral one of the same backend
@@ -329,6 +331,8 @@ def test_scene_with_a_malformed_material_file_names_it(tmp_path, capfd):
 
 @pytest.mark.parametrize("spp,pixels,cap", [(1, 100, 1 << 22), (7, 100, 1 << 22),
                                             (1000, 1000, 10_000), (64, 1 << 22, 1 << 22)])
+
+
 def test_plan_passes(spp, pixels, cap):
     plan = tf_scene.plan_passes(spp, pixels, cap)
     assert sum(plan) == spp

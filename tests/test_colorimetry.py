@@ -226,6 +226,8 @@ def test_as_lit_swatch_is_not_adapted():
     ({"polarizations": []}, "polarizations"),
     ({"chromatic_adaptation": "nope"}, "chromatic_adaptation.*'nope'"),
 ])
+
+
 def test_bad_input_names_the_parameter(kwargs, match):
     args = {"angles": 0.0, **kwargs}
     with pytest.raises(ThinFilmError, match=match):
@@ -297,6 +299,8 @@ def test_cli_table_and_polarization(capsys):
     (["--polarization", "circular"], "polarizations"),
     (["--observer", "5"], "--observer"),
 ])
+
+
 def test_cli_bad_input_is_one_line(extra, word, capsys):
     assert tf_main.main(ARGS + extra) == 2
     err = [l for l in capsys.readouterr().err.splitlines() if l.strip()]

@@ -333,6 +333,8 @@ def _doc(**change):
     (_doc(colour=1), r"colour: unknown key"),
     (_doc(t1_illuminant="D99"), r"targets\[1\] \(colour\): illuminant: unknown illuminant 'D99'"),
 ])
+
+
 def test_bad_targets_name_the_entry(doc, match):
     with pytest.raises(ThinFilmError, match=match):
         load_problem(doc)

@@ -69,6 +69,8 @@ def mc_albedo(b, wi, n=1 << 18, seed=1, ctx=None):
 # ---------------------------------------------------------------------------
 @pytest.mark.parametrize("theta, model", [(0.0, "multiple"), (50.0, "multiple"),
                                           (85.0, "single")])
+
+
 def test_chi2_diffuse_lobe(theta, model):
     # Si 20 nm under SiO2 passes enough light that both lobes are picked often,
     # so a wrong selection probability in pdf() would show as a scale error.
@@ -101,6 +103,8 @@ def test_chi2_diffuse_lobe(theta, model):
 # ---------------------------------------------------------------------------
 @pytest.mark.parametrize("layers", ["SiO2 500; Au 2", "SiO2 500; Si 50", "Au 20",
                                     "Si 50; SiO2 100; Cu 5", "Au 3; 1.46 200"])
+
+
 @pytest.mark.parametrize("model", ["single", "multiple"])
 def test_albedo_at_most_one(layers, model):
     b = bsdf(layers, model, reflectance=1.0)
@@ -233,6 +237,8 @@ def test_no_films_is_mitsuba_diffuse(model):
 
 @pytest.mark.parametrize("layers, int_ior", [("1.46 300", None), ("SiO2 500", None),
                                              ("2.35 80; 1.38 120", None)])
+
+
 def test_lossless_film_specular_equals_thinfilm_dielectric(layers, int_ior):
     # With no absorbing film N the coating is the whole stack over a base medium
     # of index ext_ior: the same stack as thinfilm_dielectric with int_ior = ext_ior.
@@ -257,6 +263,8 @@ def test_lossless_film_specular_equals_thinfilm_dielectric(layers, int_ior):
 @pytest.mark.parametrize("layers, material, cover", [("Au 20", "Au", ""),
                                                      ("SiO2 500; Au 2", "Au", "SiO2 500"),
                                                      ("1.46 500; Si 20", "Si", "1.46 500")])
+
+
 def test_absorbing_film_specular_equals_thinfilm_conductor(layers, material, cover):
     # The paper's table step: k_r is films 1..N-1 over (bulk) film N.
     ours = bsdf(layers, reflectance=0.5)
@@ -305,6 +313,8 @@ def test_traverse_thickness_updates_hemispherical_factors():
     ({"ext_ior": "Au"}, r"ext_ior"),
     ({"roughness": 0.1}, r"roughness"),
 ])
+
+
 def test_bad_input(extra, pattern):
     d = {"type": "thinfilm_diffuse", **extra}
     with pytest.raises(Exception, match=pattern):

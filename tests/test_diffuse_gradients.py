@@ -194,6 +194,8 @@ def lhs(n, dims, seed):
 
 @pytest.mark.parametrize("model,theta", [("multiple", 35.0), ("multiple", 70.0),
                                          ("single", 35.0)])
+
+
 def test_mean_sample_weight_gradient_issue_setup(model, theta):
     """The issue's measurement: the mean AD gradient of the sample weights (both
     lobes, the lobe choice detached; 2^17 seeded Latin-hypercube samples) with
@@ -245,6 +247,8 @@ def _partials_case(coating, film_n):
     ([(2.3, 90.0), (1.46 + 0.01j, 150.0)], (0.4 + 2.4j, 6.0)),
     ([(2.3 if i % 2 else 1.46, 40.0 + 7 * i) for i in range(9)], None),     # the film loop
 ], ids=["lossless", "absorbing", "nine_films"])
+
+
 def test_r_dh_partials_match_float64_differences(coating, film_n, monkeypatch):
     """The rows of ``r_dh_partials`` (thickness, Re n, Im n of every film, then film
     N; of the first, middle and last film of a deep stack) against float64
@@ -378,6 +382,8 @@ def rgb():
 
 @pytest.mark.parametrize("model,layers,key,step", RGB_CASES,
                          ids=[f"{c[0]}-{len(c[1].split(';'))}films-{c[2]}" for c in RGB_CASES])
+
+
 def test_rgb_gradient_matches_product_integral(model, layers, key, step, rgb):
     """eval of the diffuse lobe at two direction pairs, 2^16 hits each (distinct hit
     points, so distinct stratified wavelengths): the mean forward-mode derivative

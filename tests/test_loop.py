@@ -106,6 +106,8 @@ NON_ABSORBING = "SiO2 95; 2.3 60; MgF2 110; Si3N4 70; SiO2 95; 1.7 30"
 
 @pytest.mark.parametrize("layers, uniform, real", [(DISPERSIVE, False, False),
                                                    (NON_ABSORBING, True, True)])
+
+
 def test_conductor_reads_the_loop_and_matches_float64(llvm, layers, uniform, real):
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                          "tabulate": False})
@@ -238,6 +240,7 @@ def test_tabulated_sides_build_no_loop_buffers(llvm):
 # Films of real index above the ambient's: the kernels' loop then divides each
 # Rouard step by a_j + a_j+1 and works with real Fresnel amplitudes.
 
+
 def real_loop_rt(n0, cos, n, d, n_exit, wl, Arr=Float64, films_max="count"):
     """stack_rt_loop with the hints of a kernel whose films are real: the
     real-amplitude loop (``films_max``: the count, or None to force rescaling)."""
@@ -264,6 +267,8 @@ def real_path_calls(monkeypatch):
 @pytest.mark.parametrize("n0, n_exit", [(1.0, Cx(0.2, 3.4)), (1.5, Cx(1.0, 0.0)),
                                         (1.33, Cx(1.52, 0.0))],
                          ids=["metal", "exit-tir", "glass"])
+
+
 def test_real_loop_is_the_unrolled_recursion(count, n0, n_exit, real_path_calls):
     """Same Rouard step divided by a_j + a_j+1 instead of multiplied by it, so the
     results differ by float64 rounding, amplified by the conditioning of
@@ -328,6 +333,8 @@ def test_real_loop_without_rescaling_stays_in_float32_range():
 
 @pytest.mark.parametrize("layers, constant", [("1.46 100; 2.3 60; 1.46 100", True),
                                               (NON_ABSORBING, False), ("2.3 150", True)])
+
+
 def test_real_films_run_the_real_loop_at_any_depth(llvm, layers, constant, real_path_calls):
     """Real films above the ambient use the loop from one film on
     (REAL_LOOP_MIN_FILMS); constant ones gather one index per lane, shared by the
@@ -359,6 +366,8 @@ def test_films_below_the_ambient_index_keep_the_complex_loop(llvm, real_path_cal
 
 @pytest.mark.parametrize("n0, lo, hi", [(1.0, 1.0011, 6.0), (1.000277, 1.38, 2.6),
                                         (1.5, 1.52, 2.5), (1.0, 1.46, 2.3)])
+
+
 def test_rescale_bound_covers_every_interface(n0, lo, hi):
     """real_loop_rescale's film count keeps |D| and |T|^2 within 2^+-100: every
     interface between two films of index in [lo, hi] at any angle has an

@@ -170,6 +170,8 @@ def test_contract_attributes():
 
 @pytest.mark.parametrize("bad, words", [(-1.0, "n must be > 0"), ("1.5-0.1j", "k must be >= 0"),
                                         (float("nan"), "finite"), (True, "True")])
+
+
 def test_constant_validation(bad, words):
     with pytest.raises(MaterialError, match=words):
         M.resolve(bad)
@@ -314,6 +316,8 @@ def test_csv_variants(tmp_path):
     ("350 -1.5 0\n850 1.5 0\n", "n must be > 0"),
     ("350 1.5 0\n450 1.5 0\n", "350-450 nm.*360-830"),
 ])
+
+
 def test_bad_csv_files_name_the_problem(tmp_path, text, words):
     p = tmp_path / "film.csv"
     p.write_text(text)
@@ -329,6 +333,8 @@ def test_bad_csv_files_name_the_problem(tmp_path, text, words):
     ("DATA:\n  - type: tabulated nk\n\tdata: 1\n",
      "at line 3, column 1: found a tab character that violates indentation"),
 ])
+
+
 def test_malformed_yaml_names_the_file_and_the_line(tmp_path, text, where):
     # issue 30: PyYAML's own message says 'in "<unicode string>", line 2, column 6'
     p = tmp_path / "film.yml"

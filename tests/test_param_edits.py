@@ -104,6 +104,8 @@ def test_bad_edit_raises_naming_key_and_value_and_keeps_last_valid_state(plugin,
 @pytest.mark.parametrize("plugin", ["thinfilm_dielectric", "thinfilm_roughconductor",
                                     "thinfilm_roughdielectric", "thinfilm_conductor",
                                     "thinfilm_diffuse"])
+
+
 def test_index_set_to_zero_then_back_renders_as_before(plugin):
     """The issue's sequence: eta = 0 (refused), then the original value set again."""
     bsdf = load(plugin, "auto", "layers")

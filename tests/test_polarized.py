@@ -392,6 +392,8 @@ def test_s0_of_polarized_render_equals_unpolarized_render():
 
 @pytest.mark.parametrize("props,theta", [(PLUGINS[3], 40.0), (PLUGINS[4], 130.0)],
                          ids=["roughconductor", "roughdielectric"])
+
+
 def test_chi2_rough_plugins(props, theta):
     """sample() draws what pdf() says in the polarized variant too (the lobe choice of
     the rough dielectric uses the unpolarized R and T of the exact amplitudes; from

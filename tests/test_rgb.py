@@ -304,6 +304,8 @@ def _fd_reference(plugin, layers, extra, key, what, theta, h):
 
 @pytest.mark.parametrize("plugin,layers,extra,key,what", GRAD_CASES,
                          ids=[f"{c[0]}-{c[3]}-{len(c[1].split(';'))}" for c in GRAD_CASES])
+
+
 def test_gradients_match_finite_differences(plugin, layers, extra, key, what):
     """Forward-mode derivative of the sampled weight, averaged over many hits (the
     estimator is unbiased; its noise is measured), against central differences of

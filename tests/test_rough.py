@@ -265,6 +265,8 @@ def test_reflection_matches_float64_reference(dist, au, av, kind):
     ("beckmann", 0.25, 0.25, True, mi.TransportMode.Importance),
     ("ggx", 0.1, 0.3, False, mi.TransportMode.Importance),
 ])
+
+
 def test_transmission_matches_float64_reference(dist, au, av, inside, mode):
     rng = np.random.default_rng(23)
     n = 512
@@ -374,6 +376,8 @@ def test_radiance_scaling_of_transmission():
     ("conductor", "1.46 300; 2.3 60"), ("conductor", "0.42+2.47j 15; 1.46 200"),
     ("dielectric", "1.46 300; 0.42+2.47j 10"), ("dielectric", "2.3 80; 1.38 120"),
 ])
+
+
 def test_albedo_at_most_one(plugin, layers):
     b = (conductor if plugin == "conductor" else dielectric)(layers=layers, alpha=0.4,
                                                              distribution="ggx")

@@ -163,6 +163,8 @@ def _edit(params, key, value):
 
 @pytest.mark.parametrize("variant, plugin, tabulate, texture", configs(),
                          indirect=["variant"])
+
+
 def test_every_bad_scene_edit_is_refused_and_leaves_the_image_unchanged(variant, plugin,
                                                                         tabulate, texture):
     scene = make_scene(plugin, tabulate, texture)

@@ -404,6 +404,8 @@ THIRTY = list(PLUGINS)
                          ids=[f"{p}-bragg30" for p in THIRTY]
                          + [f"{p}-guide-thick-metal" for p in PLUGINS]
                          + [f"{p}-opaque-metal-coating" for p in PLUGINS])
+
+
 def test_tabulated_stacks_stay_physical(plugin, case):
     _skip_if_missing(plugin)
     s = FIXED[case]

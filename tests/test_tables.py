@@ -268,6 +268,8 @@ def test_scalar_variant_uses_tables_too():
 
 @pytest.mark.parametrize("ends", [("values", "values"), ("mirror", "extrapolate"),
                                   ("extrapolate", "mirror")])
+
+
 def test_probe_lines_know_their_interpolation_error(ends):
     """The probe's subsampled lines against the closed form for a sinusoid: at a
     midpoint the interpolating cubic spline gives H(theta) f, H = ((23 cos(theta/2)
@@ -425,6 +427,8 @@ def test_a_table_build_does_not_import_scipy():
 
 @pytest.mark.parametrize("layers", ["1.46 100; 2.3 60; 1.38 90; 2.1 50; 1.46 80",
                                     "1.46 100; 2.3 60; 0.2+3j 6; 2.1 50; 1.46 80"])
+
+
 def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     """From tabulate_base.BUILD_LOOP_MIN_FILMS films the build evaluates the stack as a
     loop over buffers of the films (real and complex loops): the table meets the

@@ -70,6 +70,8 @@ def test_out_of_range_rgb_bitmap_is_refused_naming_the_range(variant, bitmap, tm
 
 @pytest.mark.parametrize("variant, channels", [("llvm_ad_rgb", 3), ("llvm_ad_mono", 3),
                                                ("llvm_ad_spectral", 1)])
+
+
 def test_one_texel_just_out_of_range_is_caught(variant, channels, tmp_path):
     # A single texel at 1.01 among 0.5s: the old 64 x 64 UV grid sampled a 4 x 4
     # bitmap between texel centres and saw at most 0.98, so it was accepted.

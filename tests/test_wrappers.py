@@ -95,6 +95,8 @@ def outputs(bsdf, si, s1, s2, wo_eval):
 
 @pytest.mark.parametrize("wrapper", ["none", "blendbsdf", "twosided", "mask", "bumpmap",
                                      "normalmap"])
+
+
 @pytest.mark.parametrize("kind", list(PAIRS))
 def test_wrapped_plugin_matches_wrapped_mitsuba_plugin_without_films(kind, wrapper):
     if wrapper == "twosided" and kind in TRANSMISSIVE:

@@ -14,6 +14,7 @@ The work itself is the batch layer's (:mod:`thinfilm_mi.batch`); the progress ba
 """
 __all__: list[str] = []
 
+
 def render_main(argv=None) -> int:
     """``thinfilm-render`` (:func:`thinfilm_mi.cli.render.render_main`)."""
     from thinfilm_mi.cli.render import render_main as main

@@ -27,6 +27,8 @@ __all__ = ["ToleranceSpec", "parse_tolerance", "ToleranceResult", "tolerance_ana
 
 _SPEC = re.compile(r"^\s*(?P<sigma>[0-9.eE+\-]+)\s*(?P<unit>%|nm)\s*(?::\s*(?P<n>\d+))?"
                    r"\s*(?::\s*(?P<dist>normal|uniform))?\s*$", re.IGNORECASE)
+
+
 #: Most draws one analysis may ask for.
 MAX_DRAWS = 100_000
 

@@ -240,6 +240,7 @@ from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple")
 
+
 def _absorbs(index) -> bool:
     mat = index.material
     if mat is None:

@@ -21,6 +21,8 @@ from thinfilm_mi.render.textures import GRID, irregular, mitsuba_module, texture
 
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
 DEFAULT_EXT_IOR = 1.000277
+
+
 def _same_variables(a, b) -> bool:
     """Whether two Dr.Jit arrays refer to the same JIT variables (no evaluation);
     other values are compared by value."""
@@ -28,6 +30,8 @@ def _same_variables(a, b) -> bool:
         return (dr.detail.collect_indices(dr.detach(a))
                 == dr.detail.collect_indices(dr.detach(b)))
     return bool(np.array_equal(np.asarray(a, np.float64), np.asarray(b, np.float64)))
+
+
 class SpectralIndex:
     """A complex refractive index as textures ``eta(λ)`` and ``k(λ)``."""
 
@@ -231,6 +235,8 @@ class SpectralIndex:
             self.knots = np.unique(np.concatenate(
                 [np.asarray(dr.detach(a["wavelengths"]), np.float64).ravel()
                  for a in self.arrays.values()]))
+
+
 def _check_real_medium(index: SpectralIndex, name: str) -> SpectralIndex:
     mat = index.material
     if mat is None:
@@ -245,6 +251,8 @@ def _check_real_medium(index: SpectralIndex, name: str) -> SpectralIndex:
         raise ThinFilmError(f"{name}: must be a non-absorbing medium, got {mat.name!r} "
                             f"(k up to {k.max():.3g} in 360-830 nm)")
     return index
+
+
 def real_index(spec: Any, name: str) -> SpectralIndex:
     """A non-absorbing medium (``ext_ior``, ``int_ior``) as a :class:`SpectralIndex`.
 

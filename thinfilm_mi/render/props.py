@@ -33,6 +33,8 @@ def optional_texture(props, name: str, plugin: str):
                             f"got {value!r} ({e})") from None
     check_texture_range(tex, f"{plugin}: '{name}'", 0.0)
     return tex
+
+
 def films_from_props(props, plugin: str) -> list[tuple[SpectralIndex, float]]:
     """The film list of a plugin: ``layers`` or ``thin_film_ior`` + ``thin_film_thickness``."""
     has_layers = ("layers" in props)
@@ -56,6 +58,8 @@ def films_from_props(props, plugin: str) -> list[tuple[SpectralIndex, float]]:
         raise ThinFilmError(f"{plugin}: {e}") from None
     return [(SpectralIndex.from_material(m, f"layers[{i}] material"), d)
             for i, (m, d) in enumerate(parsed)]
+
+
 def thickness_texture_from_props(props, plugin: str):
     """The optional ``thickness`` scale texture (any Mitsuba texture, or a number)."""
     if "thickness" not in props:
@@ -73,6 +77,8 @@ def thickness_texture_from_props(props, plugin: str):
     check_texture_range(tex, f"{plugin}: 'thickness' (a scale on every film's thickness)", 0.0,
                         mono=True)
     return tex
+
+
 def tabulate_from_props(props, plugin: str) -> bool | str:
     """``tabulate``: ``"auto"`` (default), ``true`` or ``false`` (bool or string)."""
     value = props.get("tabulate", "auto")
@@ -82,6 +88,8 @@ def tabulate_from_props(props, plugin: str) -> bool | str:
     if isinstance(value, bool):
         return value
     raise ThinFilmError(f"{plugin}: 'tabulate' must be \"auto\", true or false, got {value!r}")
+
+
 def _positive_float(props, name: str, default: float, plugin: str, upper: float = math.inf) -> float:
     value = props.get(name, default)
     if (isinstance(value, bool) or not isinstance(value, (int, float))
@@ -89,9 +97,13 @@ def _positive_float(props, name: str, default: float, plugin: str, upper: float 
         bound = f" and <= {upper:g}" if math.isfinite(upper) else ""
         raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0{bound}, got {value!r}")
     return float(value)
+
+
 #: Largest ``spectral_resolution`` (nm) accepted: a Gaussian wider than this
 #: would wash out the colours of single films.
 MAX_SPECTRAL_RESOLUTION = 20.0
+
+
 def _nonnegative_float(props, name: str, default: float, plugin: str, upper: float) -> float:
     value = props.get(name, default)
     if (isinstance(value, bool) or not isinstance(value, (int, float))
@@ -99,6 +111,8 @@ def _nonnegative_float(props, name: str, default: float, plugin: str, upper: flo
         raise ThinFilmError(f"{plugin}: '{name}' must be a number >= 0 and <= {upper:g}, "
                             f"got {value!r}")
     return float(value)
+
+
 def stack_from_props(props, plugin: str, substrate: SpectralIndex,
                      ambient: SpectralIndex | None = None, *,
                      sides: dict | None = None) -> KernelStack:
@@ -117,6 +131,8 @@ def stack_from_props(props, plugin: str, substrate: SpectralIndex,
         ambient = ext_ior_from_props(props)
     return KernelStack(films, ambient, substrate, sides=sides,
                        **stack_options_from_props(props, plugin))
+
+
 def stack_options_from_props(props, plugin: str, thickness_texture: bool = True) -> dict:
     """The :class:`KernelStack` keyword options every thin-film BSDF accepts."""
     options = dict(
@@ -131,8 +147,12 @@ def stack_options_from_props(props, plugin: str, thickness_texture: bool = True)
     if thickness_texture:
         options["thickness_texture"] = thickness_texture_from_props(props, plugin)
     return options
+
+
 def ext_ior_from_props(props) -> SpectralIndex:
     return real_index(props.get("ext_ior", DEFAULT_EXT_IOR), "ext_ior")
+
+
 def check_unqueried(props, plugin: str) -> None:
     """Report parameters the plugin did not read, as Mitsuba does for its own plugins."""
     left = [k for k in props.unqueried()]

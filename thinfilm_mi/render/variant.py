@@ -31,6 +31,8 @@ def check_variant(plugin: str) -> None:
         )
     if variant.startswith("llvm") or not mi.is_spectral:
         require_llvm()
+
+
 def opaque_float(value: float):
     """``value`` as a ``mi.Float`` that is an opaque kernel input (a scalar in
     scalar variants), so that changing it never recompiles a kernel."""
@@ -39,6 +41,8 @@ def opaque_float(value: float):
     if dr.is_jit_v(x):
         dr.make_opaque(x)
     return x
+
+
 def spectral_mean(x):
     """Average of a spectrum over its wavelengths (a Float), in every variant (a
     scalar variant's spectrum is one array of four numbers)."""

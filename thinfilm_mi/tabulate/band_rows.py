@@ -59,10 +59,14 @@ GRADING = 0.5
 RESOLVE_DISTANCE = 2.0 / GRADING
 #: The Gaussian is cut at this many standard deviations.
 TAIL = 6.0
+
+
 def sigma_nu(resolution: float) -> float:
     """The Gaussian's standard deviation in wavenumber (nm⁻¹) for a
     ``spectral_resolution`` of ``resolution`` nm at :data:`REFERENCE_WAVELENGTH`."""
     return resolution / REFERENCE_WAVELENGTH ** 2
+
+
 def _row_cos(x: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str) -> np.ndarray:
     """cos(θ_i) of angle rows at ``x`` (broadcasting with the real indices ``n0``,
     ``n_exit``): a ``"band"`` axis's coordinate (:func:`tables.band_cos`, ghosts
@@ -75,8 +79,12 @@ def _row_cos(x: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str) -> np
     rho = np.sqrt(np.maximum(n0 * n0 - n_exit * n_exit, 0.0))
     w = np.clip(x - 2.0, 0.0, 1.0)
     return np.where(x < 1.5, cos_t, rho * np.sin((1.0 - w) ** 2 * HALF_PI) / n0)
+
+
 _GL3_X = (-0.5 * math.sqrt(0.6), 0.0, 0.5 * math.sqrt(0.6))
 _GL3_W = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
+
+
 def first_step(side: SideData, w: float) -> float:
     """The first level's sample step (bins of width ``w``, nm⁻¹): 32 samples per
     interference fringe of the stack's whole optical thickness (period ``1 / (2 Σ
@@ -89,10 +97,14 @@ def first_step(side: SideData, w: float) -> float:
     period = 1.0 / max(2.0 * ot, 1e-9) / w
     k = math.floor(math.log2(max(period / 32.0, 0.5)))
     return float(min(2.0 ** k, MAX_STEP))
+
+
 def _bspline_weights(t):
     """The four uniform cubic B-spline basis values at ``t`` in [0, 1] (knots i-1 .. i+2)."""
     return ((1 - t) ** 3 / 6, (3 * t ** 3 - 6 * t ** 2 + 4) / 6,
             (-3 * t ** 3 + 3 * t ** 2 + 3 * t + 1) / 6, t ** 3 / 6)
+
+
 class _Resonances:
     """The resonances the first level found (zeros ``x_p + i d`` of ``D`` near the
     axis; per row, positions and distances in bins), and the graded panels they
@@ -133,7 +145,11 @@ class _Resonances:
             gap = np.maximum(np.maximum(start - self.keys[j], self.keys[j] - (start + h)), 0.0)
             out |= valid & (h * h > GRADING ** 2 * (gap * gap + self.dist[j] * self.dist[j]))
         return out
+
+
 ILLUMINANTS = ("D65", "A", "F11")
+
+
 class Rows:
     """Band-limited angle rows of one side: ``R_σ`` [, ``T_σ``] on a grid of bins
     uniform in ``ν`` whose every other bin is a v node of a table of ``nv`` nodes.
@@ -403,15 +419,21 @@ class Rows:
             de = cie.delta_e2000(cie.lab(100.0 * xyz / white[1], ref), cie.lab(100.0 * xyz_s / white[1], ref))
             worst[i] = float(np.max(de))
         return worst
+
+
 #: :func:`smooth_terms` runs without the render kernels' power-of-two
 #: rescaling (it would make the amplitudes jump along λ): |N|, |D| grow by at
 #: most ~2.8 per film, within float64 to ~600 films. Deeper stacks, and sides
 #: with incoherent films (whose evaluator has no such amplitudes), are sampled
 #: without the resonance search.
 MAX_SMOOTH_FILMS = 250
+
+
 def _smooth_applies(side: SideData) -> bool:
     return (0 < len(side.films) <= MAX_SMOOTH_FILMS
             and len(side.fringe_films) == len(side.films))
+
+
 def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
                   indices) -> np.ndarray:
     """The stack's projective amplitudes at points ``(cos0[i], wl[rows[i]])``:
@@ -507,6 +529,8 @@ def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndar
         out += [dr.select(grazing, 0.0, ts[0] * fac["s"]), dr.select(grazing, 0.0, ts[1] * fac["p"])]
     dr.eval(*out)
     return np.stack([np.array(v, dtype=np.float64) for v in out], axis=-1)
+
+
 def powers_of(terms: np.ndarray, transmission: bool) -> np.ndarray:
     """``R`` [, ``T``] (last axis) from :func:`smooth_terms` channels (any leading shape)."""
     Ns = terms[..., 0] ** 2 + terms[..., 1] ** 2
@@ -521,6 +545,8 @@ def powers_of(terms: np.ndarray, transmission: bool) -> np.ndarray:
     R = np.where(np.isfinite(R), R, 1.0)
     T = np.clip(np.where(np.isfinite(T), T, 0.0), 0.0, 1.0 - R)
     return np.stack([R, T], axis=-1)
+
+
 def near_zeros(samples: np.ndarray, channel: int) -> tuple:
     """Zeros of the complex function ``samples[..., channel] + i samples[...,
     channel + 1]`` (shape ``(rows, n, K)``, smooth on the samples' scale) near the
