@@ -17,19 +17,11 @@ from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.render.colour import channel_mean_texture, colour_channels
+from thinfilm_mi.render.params import unchanged
 from thinfilm_mi.render.textures import GRID, irregular, mitsuba_module, texture_on_grid, uniform
 
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
 DEFAULT_EXT_IOR = 1.000277
-
-
-def _same_variables(a, b) -> bool:
-    """Whether two Dr.Jit arrays refer to the same JIT variables (no evaluation);
-    other values are compared by value."""
-    if dr.is_jit_v(a) and dr.is_jit_v(b):
-        return (dr.detail.collect_indices(dr.detach(a))
-                == dr.detail.collect_indices(dr.detach(b)))
-    return bool(np.array_equal(np.asarray(a, np.float64), np.asarray(b, np.float64)))
 
 
 class SpectralIndex:
@@ -213,7 +205,7 @@ class SpectralIndex:
             tex = getattr(self, part)
             tp = mi.traverse(tex)
             wl, values = arrays["wavelengths"], arrays["values"]
-            if _same_variables(tp["wavelengths"], wl) and _same_variables(tp["values"], values):
+            if unchanged(tp["wavelengths"], wl) and unchanged(tp["values"], values):
                 continue
             w = np.asarray(dr.detach(wl), np.float64).ravel()
             n = dr.width(values)

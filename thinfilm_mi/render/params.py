@@ -2,9 +2,11 @@
 
 A thin-film BSDF's parameters can be changed after load (``params[key] = v;
 params.update()``); Mitsuba writes the new values into the objects first and then
-calls ``parameters_changed``. :class:`ParameterGuard` checks every traversed
-value of the BSDF there, with the same ranges the plugins enforce at load time
-(:data:`RULES`). On a bad value it writes the last valid values back (the
+calls ``parameters_changed``. :class:`ParameterGuard` checks there every traversed
+value of the BSDF that changed since its last valid state (found by comparing JIT
+variables, :func:`unchanged`, so that an edit through ``mi.traverse(scene)`` is
+checked as one through ``mi.traverse(bsdf)``), with the same ranges the plugins
+enforce at load time (:data:`RULES`). On a bad value it writes the last valid values back (the
 BSDF's textures are notified again) and raises :class:`ThinFilmError` naming the
 key and the value, so a rejected edit never leaves a black or NaN BSDF behind.
 """
