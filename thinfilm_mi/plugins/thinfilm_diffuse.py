@@ -343,11 +343,7 @@ class ThinFilmDiffuse(mi.BSDF):
         """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
         in RGB/mono variants the integrated diffuse tables instead. In AD variants
         (model "multiple") also ``R_dh``'s derivatives (:attr:`r_dh_grad`)."""
-        factors = None
-        if not self.no_films:
-            thickness = None if self.film_n is None else scalar(self.film_n_thickness)
-            factors = DiffuseFactors(self.coating, self.film_n, thickness)
-        self._factors_now = factors
+        factors = self._diffuse_factors()
         self.r_dh_grad = None
         self._update_derivatives()
         if self.mode.integrated:
@@ -364,10 +360,17 @@ class ThinFilmDiffuse(mi.BSDF):
         self.t_hemi = _spectrum(self.t_hemi, t_hemi)
         self.r_dh = _spectrum(self.r_dh, r_dh)
 
+    def _diffuse_factors(self) -> DiffuseFactors | None:
+        """The coating's spectral factors at the current parameters (``None`` without films)."""
+        if self.no_films:
+            return None
+        thickness = None if self.film_n is None else scalar(self.film_n_thickness)
+        return DiffuseFactors(self.coating, self.film_n, thickness)
+
     def _update_derivatives(self) -> None:
         """``R_dh``'s derivative table, built or dropped
         (:func:`thinfilm_mi.render.diffuse.update_derivative_table`)."""
-        self.r_dh_grad = update_derivative_table(self, self._factors_now, self.model,
+        self.r_dh_grad = update_derivative_table(self, self._diffuse_factors(), self.model,
                                                  self.r_dh_grad)
 
     # -- kernel helpers ------------------------------------------------------

@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import math
 
+import drjit as dr
 import numpy as np
 
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.render.kernel import side_rt
-from thinfilm_mi.render.textures import scalar
-from thinfilm_mi.tabulate.hemispherical import hemispherical_factors, r_dh_partials
+from thinfilm_mi.render.textures import mitsuba_module, scalar
+from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable, hemispherical_factors, r_dh_partials
 
 
 class DiffuseFactors:
@@ -66,9 +69,7 @@ class DiffuseFactors:
 
 def film_gradients(bsdf) -> bool:
     """Whether a film parameter of ``bsdf`` (a ``layers.*`` value) carries gradients."""
-    import drjit as dr
-    import mitsuba as mi
-
+    mi = mitsuba_module()
     if not dr.is_diff_v(mi.Float):
         return False
     params = mi.traverse(bsdf)
@@ -82,9 +83,6 @@ def update_derivative_table(bsdf, factors, model: str, table):
     missing, kept if it is there, ``None`` when nothing carries gradients (or for
     model "single", or no films). Never needed at scene load, where nothing carries
     gradients: the reverse-mode pass then never runs on Mitsuba's loader threads."""
-    from thinfilm_mi.materials.model import GRID
-    from thinfilm_mi.tabulate.hemispherical import DerivativeTable
-
     if factors is None or model != "multiple" or not film_gradients(bsdf):
         return None
     return table if table is not None else DerivativeTable(factors.r_dh_partials(GRID))
@@ -97,12 +95,7 @@ def with_derivatives(table, r_dh, films, si, wavelengths, index_at, active, plug
     (``table``, a :class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`).
     ``index_at(ix)``: a film's index at ``wavelengths``. Gradients that reach here
     without a table (enabled without ``params.update()``) raise, never bias."""
-    import drjit as dr
-    import mitsuba as mi
-
-    from thinfilm_mi.errors import ThinFilmError
-    from thinfilm_mi.tabulate.hemispherical import PER_FILM
-
+    mi = mitsuba_module()
     carriers = {}
     for f, (ix, d) in enumerate(films):
         if dr.grad_enabled(d):
