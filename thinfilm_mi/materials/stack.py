@@ -23,12 +23,9 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import catalog as _materials
-from thinfilm_mi.materials.model import Material
+from thinfilm_mi.materials.model import SPECTRAL_RANGE, Material
 
 __all__ = ["Layer", "Stack", "RTResult", "parse_layers", "check_thickness"]
-
-#: Mitsuba's spectral range (nm); named materials are checked against it.
-SPECTRAL_RANGE = (360.0, 830.0)
 
 #: Largest extinction coefficient k accepted for a medium that light comes *from*
 #: (the ambient, or the substrate of a reversed stack). Real glasses and water

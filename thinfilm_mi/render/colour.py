@@ -28,7 +28,7 @@ import numpy as np
 
 from thinfilm_mi.colour import cie
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.stack import SPECTRAL_RANGE
+from thinfilm_mi.materials.model import SPECTRAL_RANGE
 from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar, texture_range, uniform
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate import colour as integrated

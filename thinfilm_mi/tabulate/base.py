@@ -26,8 +26,7 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.materials.stack import SPECTRAL_RANGE
+from thinfilm_mi.materials.model import GRID, SPECTRAL_RANGE
 from thinfilm_mi.optics.core import Cx
 
 SIGMA_MAX = 1.0 / SPECTRAL_RANGE[0]   # 1/nm at 360 nm

@@ -48,7 +48,7 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.colour.cie import colour_differences, colour_weights, normalised_weights
-from thinfilm_mi.materials.stack import SPECTRAL_RANGE
+from thinfilm_mi.materials.model import SPECTRAL_RANGE
 from thinfilm_mi.tabulate.base import u_nodes_cos, u_texel
 
 #: The nodes are dense enough when the 4-point rule predicts the integrals at

@@ -44,7 +44,7 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.colour import cie
-from thinfilm_mi.materials.stack import SPECTRAL_RANGE
+from thinfilm_mi.materials.model import SPECTRAL_RANGE
 from thinfilm_mi.tabulate import colour as integrated
 from thinfilm_mi.tabulate.base import grid_coordinate, u_texel
 
