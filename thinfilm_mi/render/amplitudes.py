@@ -1,10 +1,12 @@
-"""Exact polarised response of a :class:`~thinfilm_mi.render.kernel.KernelStack` at a hit.
+"""Polarised response of a :class:`~thinfilm_mi.render.kernel.KernelStack` at a hit.
 
-Polarized variants need the stack's complex amplitudes ``r_s, r_p, t_s, t_p``,
-not only its powers: the tables (:mod:`thinfilm_mi.tabulate.exact`) and the film loops
-(:func:`optics.stack_rt_loop`) hold powers only, so here every side is
-evaluated exactly with :func:`optics.stack_amplitudes` (films unrolled) at
-``si.wavelengths``, after the same skips as the unpolarised path (films of zero
+Polarized variants need the stack's Mueller matrices, not only its powers. A side
+planned with a table (:mod:`thinfilm_mi.tabulate.mueller`: ``tabulate`` true, or
+``"auto"`` from :data:`~thinfilm_mi.tabulate.mueller.AUTO_MIN_FILMS` films) reads its
+Mueller components from it (:func:`table_response`); otherwise it is evaluated
+exactly from the complex amplitudes ``r_s, r_p, t_s, t_p``
+(:func:`optics.stack_amplitudes`, films unrolled: the film loops hold powers only)
+at ``si.wavelengths``, after the same skips as the unpolarised path (films of zero
 thickness dropped, nothing below an optically opaque film).
 
 The result is what a Mueller matrix needs, in Mitsuba's convention (see the
@@ -17,9 +19,12 @@ conjugates of ours):
 * a :class:`Shape` per lobe: the Mueller matrix in the s/p frame divided by its
   ``M00``, so that ``M = R * shape`` (:mod:`thinfilm_mi.render.modes` rotates it).
 
-Films thicker than ``coherence_thickness`` are evaluated coherently here (an
-incoherent average has no amplitude): polarized renders of such stacks show
-their fine fringes where the unpolarised ones average them.
+Films thicker than ``coherence_thickness`` are averaged incoherently by the tables
+(:mod:`thinfilm_mi.optics.incoherent_mueller`: the parts' Mueller matrices add as
+intensities do). The exact path (no table: ``tabulate`` false, fewer films, a
+``thickness`` texture, gradients) evaluates them coherently (an incoherent average
+has no amplitude): there polarized renders of such stacks show their fine fringes
+where the unpolarised ones average them.
 """
 from __future__ import annotations
 
@@ -99,10 +104,51 @@ class Polarised:
                          self.reflection.select(mask, other.reflection), t)
 
 
+def table_shape(P, B, c_re, c_im) -> Shape:
+    """The :class:`Shape` of tabulated Mueller components (the lobe's power ``P``, and
+    ``B``, ``C`` of :mod:`thinfilm_mi.optics.mueller`), made physical: a cubic lookup may
+    overshoot between nodes, so ``|B| <= P`` and ``|C|² <= P² - B²`` are enforced
+    (``C`` scaled towards 0), the bounds every average of Jones-Mueller matrices
+    keeps; then no Stokes vector gains polarization. ``P = 0`` gives the
+    depolarizer's shape."""
+    B = dr.clip(B, -P, P)
+    room = dr.maximum(P * P - B * B, 0.0)
+    c2 = c_re * c_re + c_im * c_im
+    shrink = dr.select(c2 > room, dr.sqrt(room / dr.select(c2 > 0, c2, 1.0)), 1.0)
+    inv = dr.select(P > 0, dr.rcp(dr.select(P > 0, P, 1.0)), 0.0)
+    k = shrink * inv
+    return Shape(B * inv, 1.0, c_re * k, c_im * k)
+
+
+def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised:
+    """The :class:`Polarised` response of a planned ``side`` from its Mueller table
+    (channels of :mod:`thinfilm_mi.optics.mueller`; ``R``, ``T`` clamped as the
+    powers' tables clamp them)."""
+    mi = mitsuba_module()
+    table = side.table
+    n0 = side.n0.eval_real(si, active)
+    n_exit = side.exit.eval_real(si, active) if table.kind == "tir" else None
+    ch = table.lookup_channels(cos_theta, n0, n_exit, si.wavelengths, active)
+    R = dr.clip(ch[0], 0.0, 1.0)
+    if table.channels == 8:
+        T = dr.clip(ch[1], 0.0, 1.0 - R)
+        r_shape, t_shape = table_shape(R, *ch[2:5]), table_shape(T, *ch[5:8])
+    else:
+        r_shape = table_shape(R, *ch[1:4])
+    if not transmission:
+        return Polarised(R, None, r_shape, None)
+    if side.opaque:
+        return Polarised(R, mi.UnpolarizedSpectrum(0.0), r_shape, depolarizing_shape())
+    return Polarised(R, T, r_shape, t_shape)
+
+
 def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
           thickness_scale) -> Polarised:
     mi = mitsuba_module()
-    side = stack.evaluation_side(inside, transmission)
+    side = stack.evaluation_side(inside, transmission, stack.index_gradients(si, active))
+    if side.table is not None and thickness_scale is None and (
+            not transmission or side.opaque or side.table.channels == 8):
+        return table_response(side, si, cos_theta, active, transmission)
     n0 = side.n0.eval_real(si, active)
     exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
         else side.exit.eval(si, active)
