@@ -104,42 +104,56 @@ class Polarised:
                          self.reflection.select(mask, other.reflection), t)
 
 
+def physical(P, B, c_re, c_im, limit):
+    """Tabulated Mueller components ``(P, B, C)`` (a lobe's power and the ``B``, ``C`` of
+    :mod:`thinfilm_mi.optics.mueller`) made physical.
+
+    Every average of Jones-Mueller matrices of this form has ``P >= sqrt(B² +
+    |C|²)``: its components lie in a second-order (Lorentz) cone, the condition
+    under which no Stokes vector gains polarization. A cubic lookup may overshoot
+    between nodes, so the point is projected onto the cone (closed form: unchanged
+    inside, 0 in the polar cone, else ``((P + |x|)/2) (1, x/|x|)`` with ``x = (B, C)``).
+    The exact components lie in the cone and a projection onto a convex set is
+    non-expansive, so the result is at least as close to them as the lookup (in the
+    Euclidean norm of the four components: within twice the largest channel's
+    error). Then the whole point is scaled so that ``P <= limit`` (``1``, or ``1 - R``
+    for transmission), as the powers' tables clamp ``R`` and ``T``."""
+    n = dr.sqrt(B * B + c_re * c_re + c_im * c_im)
+    outside = n > P
+    t = dr.select(outside, dr.maximum(0.5 * (P + n), 0.0), P)
+    k = dr.select(outside, t * dr.rcp(dr.select(n > 0, n, 1.0)), 1.0)
+    over = dr.select(t > limit, dr.maximum(limit, 0.0) * dr.rcp(dr.select(t > 0, t, 1.0)), 1.0)
+    k = k * over
+    return t * over, B * k, c_re * k, c_im * k
+
+
 def table_shape(P, B, c_re, c_im) -> Shape:
-    """The :class:`Shape` of tabulated Mueller components (the lobe's power ``P``, and
-    ``B``, ``C`` of :mod:`thinfilm_mi.optics.mueller`), made physical: a cubic lookup may
-    overshoot between nodes, so ``|B| <= P`` and ``|C|² <= P² - B²`` are enforced
-    (``C`` scaled towards 0), the bounds every average of Jones-Mueller matrices
-    keeps; then no Stokes vector gains polarization. ``P = 0`` gives the
-    depolarizer's shape."""
-    B = dr.clip(B, -P, P)
-    room = dr.maximum(P * P - B * B, 0.0)
-    c2 = c_re * c_re + c_im * c_im
-    shrink = dr.select(c2 > room, dr.sqrt(room / dr.select(c2 > 0, c2, 1.0)), 1.0)
+    """The :class:`Shape` of physical components (:func:`physical`); ``P = 0`` gives
+    the depolarizer's shape."""
     inv = dr.select(P > 0, dr.rcp(dr.select(P > 0, P, 1.0)), 0.0)
-    k = shrink * inv
-    return Shape(B * inv, 1.0, c_re * k, c_im * k)
+    return Shape(B * inv, 1.0, c_re * inv, c_im * inv)
 
 
 def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised:
     """The :class:`Polarised` response of a planned ``side`` from its Mueller table
-    (channels of :mod:`thinfilm_mi.optics.mueller`; ``R``, ``T`` clamped as the
-    powers' tables clamp them)."""
+    (channels of :mod:`thinfilm_mi.optics.mueller`), each lobe made physical
+    (:func:`physical`)."""
     mi = mitsuba_module()
     table = side.table
     n0 = side.n0.eval_real(si, active)
     n_exit = side.exit.eval_real(si, active) if table.kind == "tir" else None
     ch = table.lookup_channels(cos_theta, n0, n_exit, si.wavelengths, active)
-    R = dr.clip(ch[0], 0.0, 1.0)
     if table.channels == 8:
-        T = dr.clip(ch[1], 0.0, 1.0 - R)
-        r_shape, t_shape = table_shape(R, *ch[2:5]), table_shape(T, *ch[5:8])
+        R, *refl = physical(ch[0], *ch[2:5], 1.0)
+        T, *trans = physical(ch[1], *ch[5:8], 1.0 - R)
     else:
-        r_shape = table_shape(R, *ch[1:4])
+        R, *refl = physical(ch[0], *ch[1:4], 1.0)
+    r_shape = table_shape(R, *refl)
     if not transmission:
         return Polarised(R, None, r_shape, None)
     if side.opaque:
         return Polarised(R, mi.UnpolarizedSpectrum(0.0), r_shape, depolarizing_shape())
-    return Polarised(R, T, r_shape, t_shape)
+    return Polarised(R, T, r_shape, table_shape(T, *trans))
 
 
 def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
