@@ -36,7 +36,7 @@ from thinfilm_mi.render.amplitudes import polarised_response
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR
 from thinfilm_mi.tabulate import band_rows
 from thinfilm_mi.tabulate import base as tabulate_base
-from thinfilm_mi.tabulate.mueller import AUTO_MIN_FILMS, MUELLER
+from thinfilm_mi.tabulate.mueller import AUTO_MAX_FLOATS, AUTO_MIN_FILMS, MUELLER
 
 VARIANT = "llvm_ad_spectral_polarized"
 DEFAULT = "llvm_ad_spectral"
@@ -340,21 +340,67 @@ def test_plugins_read_the_table_and_stay_physical(mode="Radiance"):
     assert np.all(np.linalg.norm(S[..., 1:], axis=-1) <= S[..., 0] * (1 + 1e-5) + 1e-6)
 
 
-def test_auto_tabulates_polarized_stacks_from_four_films():
+def test_auto_tabulates_deep_polarized_stacks():
     """``tabulate="auto"`` in a polarized variant: fewer than AUTO_MIN_FILMS films
-    stay exact (their amplitudes cost what a lookup of 4-8 channels costs, and the
+    stay exact (their amplitudes cost less than a lookup of 4 channels, and the
     matrices stay at tests/test_polarized.py's tolerances); from it on a Mueller
-    table (reflection: 4 channels) within the auto texel budget; gradients bypass it."""
-    assert AUTO_MIN_FILMS == 4
-    three = mi.load_dict({"type": "thinfilm_conductor", "layers": layers(3, 10.0, 30.0)})
-    four = mi.load_dict({"type": "thinfilm_conductor", "layers": layers(4, 10.0, 30.0)})
-    assert three.stack.mode() == "exact"
-    assert four.stack.mode() == "table"
-    table = four.stack.plan[False].table
-    assert table.channels == 4 and table.texels * 4 <= K.AUTO_MAX_TEXELS
-    assert four.stack.plan[False].build_report["result"] == "table"
-    params = mi.traverse(four)
+    table (reflection: 4 channels) within the auto budget of AUTO_MAX_FLOATS;
+    gradients bypass it."""
+    fewer = mi.load_dict({"type": "thinfilm_conductor",
+                          "layers": layers(AUTO_MIN_FILMS - 1, 10.0, 30.0)})
+    deep = mi.load_dict({"type": "thinfilm_conductor", "layers": layers(AUTO_MIN_FILMS, 10.0, 30.0)})
+    assert fewer.stack.mode() == "exact"
+    assert deep.stack.mode() == "table"
+    table = deep.stack.plan[False].table
+    assert table.channels == 4 and table.texels * 4 <= AUTO_MAX_FLOATS
+    assert deep.stack.plan[False].build_report["result"] == "table"
+    params = mi.traverse(deep)
     key = next(k for k in params.keys() if k.endswith("layers.0.thickness"))
     dr.enable_grad(params[key])
-    side = four.stack.evaluation_side(False, False)
-    assert side.table is None
+    assert deep.stack.evaluation_side(False, False).table is None
+
+
+@pytest.mark.parametrize("plugin,films,tol", [("thinfilm_conductor", 10, 5e-5),
+                                              ("thinfilm_dielectric", 30, 2e-4)])
+def test_exact_deep_stacks_run_as_a_film_loop(plugin, films, tol):
+    """Without a table, stacks of LOOP_MIN_FILMS films or more are evaluated by a loop
+    over the films' buffers (optics.mueller.loop_amplitudes: one loop body in the
+    kernel whatever the depth), against tmm's matrices (tests/test_polarized.py's
+    construction and rotation), both lobes of the dielectric from both sides.
+    Tolerances: 10 films at tests/test_polarized.py's TMM_TOL (measured 1.6e-5);
+    30 resonant films on glass carry float32 rounding through 30 steps, measured
+    7.6e-5 for the loop and 8.3e-5 for the unrolled recursion it replaces."""
+    from test_polarized import directions, interaction, mat, rotated, tmm_matrix
+
+    d = np.random.default_rng(6).uniform(50.0, 200.0, films)
+    stack = [(2.3 if i % 2 == 0 else 1.46, float(d[i])) for i in range(films)]
+    substrate = {"thinfilm_conductor": {"eta": 0.2, "k": 3.0}, "thinfilm_dielectric": {"int_ior": 1.5}}
+    n_sub = 0.2 + 3.0j if plugin == "thinfilm_conductor" else 1.5
+    bsdf = mi.load_dict({"type": plugin, "layers": "; ".join(f"{n} {t!r}" for n, t in stack),
+                         "ext_ior": 1.0, "tabulate": False, **substrate[plugin]})
+    assert all(side.loop is not None for side in bsdf.stack.plan.values())
+    rng = np.random.default_rng(11)
+    dielectric = plugin == "thinfilm_dielectric"
+    for component in ((0, 1) if dielectric else (0,)):
+        wi = directions(rng, 120, 0.0, np.pi if dielectric else np.pi / 2)
+        wi = wi[np.abs(wi[:, 2]) > 0.02][:60]
+        wls = rng.uniform(360.0, 830.0, (len(wi), 4))
+        ctx = mi.BSDFContext(mi.TransportMode.Radiance)
+        ctx.component = component
+        bs, w = bsdf.sample(ctx, interaction(wi, wls), mi.Float(0.5), mi.Point2f(0.5, 0.5))
+        ours, wo = mat(w), np.array(bs.wo).T.astype(np.float64)
+        ref = np.zeros((len(wi), 4, 4, 4))
+        for i in range(len(wi)):
+            n_list = [1.0, *[n for n, _ in stack], n_sub]
+            d_list = [np.inf, *[t for _, t in stack], np.inf]
+            if wo[i, 2] <= 0:       # light arrives along -wo from inside
+                n_list, d_list = n_list[::-1], d_list[::-1]
+            for k in range(4):
+                ref[i, k] = tmm_matrix(n_list, d_list, abs(wo[i, 2]), wls[i, k], component == 1)
+            if component == 1:
+                ref[i] *= (1.0 / n_sub if wi[i, 2] > 0 else n_sub) ** 2
+        ref = rotated(ref, wo, wi)
+        valid = np.abs(ref[:, :, 0, 0]).max(axis=1) > 0
+        assert valid.mean() > 0.3
+        assert np.abs(ours - ref)[valid].max() < tol
+        assert np.abs(ref[valid][:, :, 2:, 2:]).max() > 0.1

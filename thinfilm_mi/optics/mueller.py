@@ -49,6 +49,7 @@ import drjit as dr
 
 from thinfilm_mi.optics.core import (
     Cx,
+    StackAmplitudes,
     cinv,
     cmul,
     exit_admittances,
@@ -66,7 +67,7 @@ from thinfilm_mi.optics.core import (
 )
 
 __all__ = ["channel_count", "components", "mueller_rt", "amplitude_loop", "loop_components",
-           "mueller_rt_loop", "POWER_CHANNELS"]
+           "loop_amplitudes", "mueller_rt_loop", "POWER_CHANNELS"]
 
 #: Channels that hold unpolarised powers (``R``, and ``T`` with transmission).
 POWER_CHANNELS = {False: 1, True: 2}
@@ -225,6 +226,28 @@ def loop_components(amps: dict, transmission: bool) -> tuple:
     tp = cmul(Tp_, Dp.conj()) * inv_p
     Ts, Tp, c_t = _transmitted(ts, tp, w_s, w_p)
     return components(Rs, Rp, c_r, Ts, Tp, c_t, grazing=grazing)
+
+
+def loop_amplitudes(n0, cos0, count, film, n_exit, wl, transmission: bool = True, *,
+                    n0_max: float | None = None, film_n_min: float | None = None,
+                    film_n_max: float | None = None, films_max: int | None = None) -> StackAmplitudes:
+    """:func:`~thinfilm_mi.optics.core.stack_amplitudes` with the films visited by a loop
+    (:func:`amplitude_loop`; the signature of
+    :func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt_loop`, ``film_n_max`` and
+    ``films_max`` accepted and not needed): the exact path of polarized variants for
+    deep stacks, whose kernel does not grow with the number of films. ``r = -1`` and
+    ``t = 0`` at grazing incidence."""
+    amps = amplitude_loop(n0, cos0, count, film, n_exit, wl, transmission=transmission,
+                          n0_max=n0_max, film_n_min=film_n_min)
+    grazing = amps["grazing"]
+    out = {}
+    for pol in ("s", "p"):
+        N, D, T = amps[pol]
+        inv = cinv(D)
+        out[pol] = (Cx(-1.0, 0.0).select(grazing, cmul(N, inv)),
+                    None if T is None else Cx(0.0, 0.0).select(grazing, cmul(T, inv)))
+    return StackAmplitudes(out["s"][0], out["p"][0], out["s"][1], out["p"][1], amps["q0"],
+                           amps["q_exit"], amps["n_exit"], grazing)
 
 
 def mueller_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = True, *,

@@ -4,9 +4,11 @@ Polarized variants need the stack's Mueller matrices, not only its powers. A sid
 planned with a table (:mod:`thinfilm_mi.tabulate.mueller`: ``tabulate`` true, or
 ``"auto"`` from :data:`~thinfilm_mi.tabulate.mueller.AUTO_MIN_FILMS` films) reads its
 Mueller components from it (:func:`table_response`); otherwise it is evaluated
-exactly from the complex amplitudes ``r_s, r_p, t_s, t_p``
-(:func:`optics.stack_amplitudes`, films unrolled: the film loops hold powers only)
-at ``si.wavelengths``, after the same skips as the unpolarised path (films of zero
+exactly from the complex amplitudes ``r_s, r_p, t_s, t_p`` at ``si.wavelengths``
+(:func:`optics.stack_amplitudes`, films unrolled; from
+:data:`~thinfilm_mi.optics.unpolarised.LOOP_MIN_FILMS` films a loop over the films'
+buffers, :func:`optics.mueller.loop_amplitudes`, so that the kernel does not grow
+with the depth), after the same skips as the unpolarised path (films of zero
 thickness dropped, nothing below an optically opaque film).
 
 The result is what a Mueller matrix needs, in Mitsuba's convention (see the
@@ -34,6 +36,7 @@ from typing import Any
 import drjit as dr
 
 from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
+from thinfilm_mi.optics.mueller import loop_amplitudes
 from thinfilm_mi.optics.unpolarised import unpolarised_powers
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
@@ -166,10 +169,14 @@ def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission:
     n0 = side.n0.eval_real(si, active)
     exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
         else side.exit.eval(si, active)
-    films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
-             for ix, d, _ in side.films]
     want_t = transmission and not side.opaque
-    a = stack_amplitudes(n0, cos_theta, films, exit_, si.wavelengths, transmission=want_t)
+    if side.loop is not None:   # deep stacks: a loop over the films' buffers
+        a = side.loop.rt(n0, cos_theta, exit_, si.wavelengths, want_t, thickness_scale,
+                         evaluator=loop_amplitudes)
+    else:
+        films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
+                 for ix, d, _ in side.films]
+        a = stack_amplitudes(n0, cos_theta, films, exit_, si.wavelengths, transmission=want_t)
     r_shape = jones_shape(a.rs, a.rp)
     if not transmission:
         return Polarised(unpolarised_powers(a, False), None, r_shape, None)

@@ -204,25 +204,25 @@ class KernelStack:
             if dr.is_diff_v(mitsuba_module().Float):
                 prepare_gradients([self.ambient, self.substrate] + list(self.indices))
             return
-        if mitsuba_module().is_polarized:
-            # Polarized variants read tables of the Mueller components
-            # (thinfilm_mi.tabulate.mueller) or evaluate the amplitudes exactly, films
-            # unrolled (thinfilm_mi.render.amplitudes): the film loops hold powers only.
-            self._plan_tables(MUELLER)
-            return
-        self._plan_tables()
+        # Polarized variants read tables of the Mueller components
+        # (thinfilm_mi.tabulate.mueller) or evaluate the complex amplitudes
+        # (thinfilm_mi.render.amplitudes; their film loop has no real-amplitude form)
+        polarized = mitsuba_module().is_polarized
+        quantity = MUELLER if polarized else None
+        self._plan_tables(quantity)
+        reflection_channels = quantity.channels(False) if quantity else 1
         if dr.is_jit_v(mitsuba_module().Float):
             for side in self.plan.values():
                 # A side whose table serves the calls its plan is for (R, and T
                 # where the plan asks for it) does not evaluate its films: no
                 # buffers for it (other calls fall back to the unrolled films).
-                served = side.table is not None and (side.table.channels > 1 or side.opaque
-                                                     or not side.transmission)
+                served = side.table is not None and (side.table.channels > reflection_channels
+                                                     or side.opaque or not side.transmission)
                 if (not served and len(side.films) >= min(LOOP_MIN_FILMS, REAL_LOOP_MIN_FILMS)
                         and not any(side.incoherent)
                         and all(ix.knots is not None for ix, _, _ in side.films)):
                     loop = LoopFilms(side.films, side.n0)
-                    if len(side.films) >= (REAL_LOOP_MIN_FILMS if loop.real_steps
+                    if len(side.films) >= (REAL_LOOP_MIN_FILMS if loop.real_steps and not polarized
                                            else LOOP_MIN_FILMS):
                         side.loop = loop
 
@@ -480,7 +480,8 @@ def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
     h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
     transmission = side.transmission and not side.opaque
     channels = quantity.channels(transmission) if quantity else (2 if transmission else 1)
-    max_texels = (AUTO_MAX_TEXELS // channels if stack.tabulate == "auto"
+    budget = quantity.auto_max_floats if quantity else AUTO_MAX_TEXELS
+    max_texels = (budget // channels if stack.tabulate == "auto"
                   else tabulate_base.MAX_TEXELS)
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
                    stack.table_error, stack.spectral_resolution, max_texels,

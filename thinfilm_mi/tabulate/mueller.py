@@ -44,13 +44,23 @@ from thinfilm_mi.optics.mueller import (
 )
 from thinfilm_mi.tabulate.base import SideData, evaluate_side
 
-__all__ = ["MUELLER", "MuellerQuantity", "AUTO_MIN_FILMS"]
+__all__ = ["MUELLER", "MuellerQuantity", "AUTO_MIN_FILMS", "AUTO_MAX_FLOATS"]
 
 #: ``tabulate="auto"`` gives a polarized stack a table from this many films on
-#: (after the skips). Below it the exact amplitudes cost what a lookup of 4-8
-#: channels costs (measured in benchmarks/polarized_bench.py: 1-3 films 0.99-1.05x
-#: Mitsuba's polarized ``conductor`` exact), are exact, and need no build.
-AUTO_MIN_FILMS = 4
+#: (after the skips). A lookup of 4 channels at 4 wavelengths (64 texels each)
+#: costs about as much as the exact amplitudes of ~15 films: measured with
+#: benchmarks/polarized_bench.py's scene (process CPU time, median of 15
+#: round-robin rounds, ratio to Mitsuba's polarized ``conductor``), exact 1.09x /
+#: 1.26x / 1.73x and tables 1.30x / 1.45x / 1.41x for 4 / 10 / 30 films. Below it
+#: the exact amplitudes are cheaper, exact, and need no build.
+AUTO_MIN_FILMS = 16
+#: ``tabulate="auto"`` keeps Mueller tables of at most this many floats (texels x
+#: channels, 8 MiB): a lookup slows with the table's size (4 films, 1.5 MiB:
+#: 1.30x; 30 films, 6.2 MiB: 1.41x), but the exact amplitudes of the stacks that
+#: need such tables cost more (the powers' budget,
+#: :data:`thinfilm_mi.render.kernel.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
+#: 10- and 30-film band-limited tables of the benchmark).
+AUTO_MAX_FLOATS = 1 << 21
 
 
 def _smooth_loop(n0, cos0, count, film, n_exit, wl, transmission, **hints):
@@ -85,6 +95,7 @@ class MuellerQuantity:
 
     name = "mueller"
     auto_min_films = AUTO_MIN_FILMS
+    auto_max_floats = AUTO_MAX_FLOATS
     #: First v-node spacing of band-limited tables (in σ_ν; the powers' is
     #: ``band_rows.V_SPACING`` = 0.6): the cross term ``C`` interpolates ~3.5x worse
     #: along v than ``R`` (measured at 0.6 on the 10- and 30-film benchmark stacks:
