@@ -17,7 +17,7 @@ and at default settings ("auto"); the mode obtained is printed.
    compilation included, is reported as "first render"; load time, table builds
    included, separately), then --repeats rounds in which every configuration
    renders once (round-robin), median per configuration (``dr.eval`` +
-   ``dr.sync_thread``).
+   ``dr.sync_thread``) of the wall-clock time and of the process's CPU time.
 2. First image with an empty kernel cache (``render_bench.first_images``: a fresh
    process and ``DRJIT_CACHE_DIR`` per run, ``mi.load_dict`` + the first
    ``mi.render``, imports not timed; always 256x256, 16 spp), for ``conductor`` and
@@ -84,26 +84,30 @@ def steady(films, args):
         print(f"  {c}: load {load[c]:.2f} s, first render {first[c]:.2f} s, "
               f"mode {mode_of(scenes[c])}", file=sys.stderr, flush=True)
     ts = {c: [] for c in configs}
+    cpu = {c: [] for c in configs}
     for i in range(args.repeats):
         for c in configs:
-            t = time.perf_counter()
+            t, p = time.perf_counter(), time.process_time()
             render_sync(scenes[c], seed=i + 1)
             ts[c].append(time.perf_counter() - t)
-    base = float(np.median(ts["conductor"]))
+            cpu[c].append(time.process_time() - p)
+    base, base_cpu = float(np.median(ts["conductor"])), float(np.median(cpu["conductor"]))
     print(f"\n### {VARIANT}: steady render time ({args.res}x{args.res}, {args.spp} spp, "
           f"median of {args.repeats} round-robin; Dr.Jit {dr.__version__}, "
           f"Mitsuba {mi.__version__})\n")
+    print("Wall-clock time and the process's CPU time (all its threads; steadier than the "
+          "wall clock on a shared machine).\n")
     print("| BSDF | films | tabulate | mode obtained | load (s) | render median (s) | min (s) "
-          "| ratio to conductor | first render incl. compile (s) |")
-    print("|---|---:|---|---|---:|---:|---:|---:|---:|")
+          "| ratio to conductor | CPU median (s) | CPU ratio | first render incl. compile (s) |")
+    print("|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|")
     for c in configs:
-        med, mn = float(np.median(ts[c])), float(np.min(ts[c]))
+        med, mn, mc = float(np.median(ts[c])), float(np.min(ts[c])), float(np.median(cpu[c]))
         if c == "conductor":
             name, L, m = "conductor (Al)", "–", "–"
         else:
             name, (L, m) = "thinfilm_conductor", c.split(":")
         print(f"| {name} | {L} | {m} | {mode_of(scenes[c])} | {load[c]:.2f} | {med:.3f} | "
-              f"{mn:.3f} | {med / base:.2f} | {first[c]:.2f} |")
+              f"{mn:.3f} | {med / base:.2f} | {mc:.3f} | {mc / base_cpu:.2f} | {first[c]:.2f} |")
 
 
 def first(films, args):
