@@ -48,8 +48,8 @@ Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
      values or one of the band-limited values (``spectral_resolution``) (then: exact).
      In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
      components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
-     within ``table_error``, and ``auto`` tabulates from 16 films (fewer are cheaper
-     exact) within 2^21 floats.
+     within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
+     cheap exact) within 2^21 floats.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).

@@ -48,18 +48,23 @@ __all__ = ["MUELLER", "MuellerQuantity", "AUTO_MIN_FILMS", "AUTO_MAX_FLOATS"]
 
 #: ``tabulate="auto"`` gives a polarized stack a table from this many films on
 #: (after the skips). A lookup of 4 channels at 4 wavelengths (64 texels each)
-#: costs about as much as the exact amplitudes of ~15 films: measured with
-#: benchmarks/polarized_bench.py's scene (process CPU time, median of 15
-#: round-robin rounds, ratio to Mitsuba's polarized ``conductor``), exact 1.09x /
-#: 1.26x / 1.73x and tables 1.30x / 1.45x / 1.41x for 4 / 10 / 30 films. Below it
-#: the exact amplitudes are cheaper, exact, and need no build.
-AUTO_MIN_FILMS = 16
+#: costs about what the exact amplitudes of ~25 films cost: measured with
+#: benchmarks/polarized_bench.py's scene (process CPU time, medians of 9-15
+#: round-robin rounds in 4-6 processes, ratio to Mitsuba's polarized
+#: ``conductor``), exact 1.11x / 1.25x / 1.58-1.75x and tables 1.01-1.36x /
+#: 1.14-1.84x / 1.27-1.75x for 3 / 10 / 30 films (a lookup's cost varies from
+#: process to process with where its texels land in the caches; the exact
+#: path's does not). At 30 films a table saves ~10 % per render on average
+#: and its build costs ~4 s (~25 renders of the benchmark); the exact loop's
+#: first image is 1.35x ``conductor``'s. From 40 films the exact cost (~1 +
+#: 0.024 per film) clearly exceeds a lookup's.
+AUTO_MIN_FILMS = 40
 #: ``tabulate="auto"`` keeps Mueller tables of at most this many floats (texels x
-#: channels, 8 MiB): a lookup slows with the table's size (4 films, 1.5 MiB:
-#: 1.30x; 30 films, 6.2 MiB: 1.41x), but the exact amplitudes of the stacks that
-#: need such tables cost more (the powers' budget,
+#: channels, 8 MiB): a lookup slows with the table's size (a 1.5 MiB table
+#: 1.01-1.36x, a 6.2 MiB one 1.27-1.75x, above), but the exact amplitudes of the
+#: deep stacks that need such tables cost more (the powers' budget,
 #: :data:`thinfilm_mi.render.kernel.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
-#: 10- and 30-film band-limited tables of the benchmark).
+#: band-limited tables of the benchmark's 10- and 30-film stacks).
 AUTO_MAX_FLOATS = 1 << 21
 
 
