@@ -230,15 +230,17 @@ from thinfilm_mi.render.colour import (
     prepare_gradients,
 )
 from thinfilm_mi.render.diffuse import DiffuseFactors, update_derivative_table, with_derivatives
+from thinfilm_mi.render.diffuse_exact import ExactFactors, SpectralTerms, scale_bounds
 from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.media import real_index
 from thinfilm_mi.render.params import ALBEDO_SLACK, ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
-from thinfilm_mi.render.textures import check_texture_range, regular, scalar, uniform
+from thinfilm_mi.render.textures import check_texture_range, scalar, uniform
 from thinfilm_mi.render.variant import check_variant, opaque_float, spectral_mean
 from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 
 NAME = "thinfilm_diffuse"
-MODELS = ("single", "multiple")
+MODELS = ("single", "multiple", "exact")
 
 
 def _absorbs(index) -> bool:
@@ -271,22 +273,6 @@ def _reflectance_from_props(props):
     return tex
 
 
-def _spectrum(tex, values):
-    """``values`` on the 1 nm grid as a ``regular`` spectrum, updating ``tex`` in place
-    when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
-    ``regular`` spectrum refuses a zero integral). In scalar variants a new one is
-    made (their ``mi.Float`` holds one number, not the values)."""
-    values = np.asarray(values, dtype=np.float64)
-    if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
-        return uniform(0.0)
-    params = mi.traverse(tex) if tex is not None and dr.is_jit_v(mi.Float) else None
-    if params is not None and "values" in params:
-        params["values"] = mi.Float(values.astype(np.float32))
-        params.update()
-        return tex
-    return regular(values, GRID[0], GRID[-1])
-
-
 class ThinFilmDiffuse(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
@@ -294,19 +280,30 @@ class ThinFilmDiffuse(mi.BSDF):
         self.mode = modes.current()
         model = props.get("model", "multiple")
         if model not in MODELS:
-            raise ThinFilmError(f"{NAME}: 'model' must be 'single' or 'multiple', got {model!r}")
+            raise ThinFilmError(f"{NAME}: 'model' must be 'single', 'multiple' or 'exact', "
+                                f"got {model!r}")
         self.model = model
         films = films_from_props(props, NAME)
         ext = ext_ior_from_props(props)
+        if "base_ior" in props and model != "exact":
+            raise ThinFilmError(f"{NAME}: 'base_ior' is a parameter of model 'exact' only "
+                                f"(model is {model!r})")
+        base = real_index(props.get("base_ior"), "base_ior") if "base_ior" in props else ext
         self.reflectance = _reflectance_from_props(props)
-        options = stack_options_from_props(props, NAME, thickness_texture=False)
+        options = stack_options_from_props(props, NAME)
+        self.texture = options["thickness_texture"]
         check_unqueried(props, NAME)
 
         self.no_films = len(films) == 0
         # RGB/mono variants read only k_r from the coating's colour table: the
         # transmission enters through the diffuse table (coated_diffuse)
         sides = {False: not self.mode.integrated}
-        if films and _absorbs(films[-1][0]):
+        if model == "exact":
+            # The whole stack, coherent, over the base medium.
+            self.coating = KernelStack(films, ext, base, sides=sides, **options)
+            self.film_n = None
+            self.film_n_thickness = None
+        elif films and _absorbs(films[-1][0]):
             # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
             self.coating = KernelStack(films[:-1], ext, films[-1][0], sides=sides, **options)
             self.film_n = films[-1][0]
@@ -317,8 +314,10 @@ class ThinFilmDiffuse(mi.BSDF):
             self.film_n = None
             self.film_n_thickness = None
 
-        self.t_hemi = None
-        self.r_dh = None
+        #: spectral variants: R_dh and T_hemi (SpectralTerms)
+        self.terms = None
+        #: model "exact" over a base medium that differs from the ambient: t carries n_0/n_b
+        self.base_ratio = model == "exact" and base is not ext
         #: RGB/mono variants: the diffuse term integrated as a product (coated_diffuse)
         self.colour = None
         self._update_hemispherical()
@@ -348,22 +347,26 @@ class ThinFilmDiffuse(mi.BSDF):
         self._update_derivatives()
         if self.mode.integrated:
             if factors is not None:
+                if self.texture is not None:
+                    if self.texture.is_spatially_varying():
+                        raise ThinFilmError(
+                            f"{NAME}: a 'thickness' texture that varies over the surface is "
+                            f"not supported in the {mi.variant()!r} variant (use a spectral "
+                            "variant, or a constant scale)")
+                    factors = factors.at_scale(scale_bounds(self.texture, NAME))
                 self.colour = ColourDiffuse(factors, self.model, colour_channels(),
                                             self._constant_albedo())
                 if self.film_n is not None and dr.is_diff_v(mi.Float):
                     prepare_gradients([self.film_n])
             return
-        if factors is None:
-            t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
-        else:
-            r_dh, t_hemi = factors.hemispherical(GRID)
-        self.t_hemi = _spectrum(self.t_hemi, t_hemi)
-        self.r_dh = _spectrum(self.r_dh, r_dh)
+        self.terms = SpectralTerms(factors, self.texture, NAME, self.terms)
 
     def _diffuse_factors(self) -> DiffuseFactors | None:
         """The coating's spectral factors at the current parameters (``None`` without films)."""
         if self.no_films:
             return None
+        if self.model == "exact":
+            return ExactFactors(self.coating)
         thickness = None if self.film_n is None else scalar(self.film_n_thickness)
         return DiffuseFactors(self.coating, self.film_n, thickness)
 
@@ -372,28 +375,44 @@ class ThinFilmDiffuse(mi.BSDF):
         (:func:`thinfilm_mi.render.diffuse.update_derivative_table`)."""
         self.r_dh_grad = update_derivative_table(self, self._diffuse_factors(), self.model,
                                                  self.r_dh_grad)
+        if self.r_dh_grad is not None and self.texture is not None:
+            self.r_dh_grad = None
+            raise ThinFilmError(f"{NAME}: gradients of the films' parameters together with a "
+                                f"'thickness' texture are not supported with model "
+                                f"{self.model!r} (R_dh's derivatives are tabulated at scale 1); "
+                                "differentiate the texture, or use model 'single'")
 
     # -- kernel helpers ------------------------------------------------------
     def _factors(self, si, cos_theta, active, transmission: bool):
         """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
         and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
         resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
+        # (the polarized amplitudes of a scaled stack come back as plain Array4f)
+        k_r = mi.UnpolarizedSpectrum(resp.R)
         if not transmission:
-            return resp.R, None, resp.reflection
-        k_r, k_t = resp.R, resp.T
+            return k_r, None, resp.reflection
+        k_t = mi.UnpolarizedSpectrum(resp.T)
+        n0 = self.coating.ambient.eval_real(si, active)
         if self.film_n is not None:
-            n0 = self.coating.ambient.eval_real(si, active)
-            k_t = k_t * film_attenuation(n0, cos_theta, self.film_n.eval(si, active),
-                                         self.film_n_thickness, si.wavelengths)
-        return k_r, k_t, resp.reflection
+            scale = self.coating.thickness_scale_at(si, active)
+            d = self.film_n_thickness if scale is None else self.film_n_thickness * scale
+            k_t = k_t * film_attenuation(n0, cos_theta, self.film_n.eval(si, active), d,
+                                         si.wavelengths)
+        if self.base_ratio:
+            k_t = k_t * n0 / self.coating.substrate.eval_real(si, active)
+        return k_r, mi.UnpolarizedSpectrum(k_t), resp.reflection
 
     def _series(self, si, kd, active):
         """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
         if self.model == "single":
-            return mi.Spectrum(1.0)
-        r_dh = self._with_derivatives(self.r_dh.eval(si, active), si, si.wavelengths,
+            return mi.UnpolarizedSpectrum(1.0)
+        r_dh = self._with_derivatives(self._terms(si, active)[0], si, si.wavelengths,
                                       lambda ix: ix.eval(si, active), active)
         return dr.rcp(1.0 - kd * r_dh)
+
+    def _terms(self, si, active):
+        """``(R_dh, T_hemi)`` at the hit (spectral variants)."""
+        return self.terms.lookup(si, self.coating.thickness_scale_at(si, active), active)
 
     def _with_derivatives(self, r_dh, si, wavelengths, index_at, active):
         """``R_dh`` carrying its derivatives (:func:`thinfilm_mi.render.diffuse.with_derivatives`)."""
@@ -430,14 +449,18 @@ class ThinFilmDiffuse(mi.BSDF):
         sampler = GradientSampler.get()
         wl = sampler.wavelengths(si)
 
+        scale = self.coating.thickness_scale_at(si, active)
+        n0, _ = index_on_wavelengths(self.coating.ambient, si, wl, active)
+
         def t(cos):
-            _, k_t = self.coating.at_wavelengths(False, si, cos, active, True, None, wl)
+            _, k_t = self.coating.at_wavelengths(False, si, cos, active, True, scale, wl)
+            if self.base_ratio:
+                k_t = k_t * n0 / index_on_wavelengths(self.coating.substrate, si, wl, active)[0]
             if self.film_n is None:
                 return k_t
-            n0, _ = index_on_wavelengths(self.coating.ambient, si, wl, active)
+            d = self.film_n_thickness if scale is None else self.film_n_thickness * scale
             return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(self.film_n, si, wl,
-                                                                          active)),
-                                          self.film_n_thickness, wl)
+                                                                          active)), d, wl)
         product = t(cos_i) * t(cos_o)
         r_dh = self._with_derivatives(
             self.colour.r_dh_at(wl, active), si, wl,
@@ -451,7 +474,7 @@ class ThinFilmDiffuse(mi.BSDF):
         if self.colour is not None:
             diff = spectral_mean(self.colour.albedo(cos_i, kd, active))
         else:
-            diff = spectral_mean(t_i * kd * self.t_hemi.eval(si, active) * series)
+            diff = spectral_mean(t_i * kd * self._terms(si, active)[1] * series)
         total = spec + diff
         return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
 
@@ -571,9 +594,8 @@ class ThinFilmDiffuse(mi.BSDF):
             if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
                 dr.make_opaque(self.film_n_thickness)
             colour_albedo = self.colour is not None and self.colour.fixed
-            if changed is None or any(k.startswith("layers.") or (colour_albedo and
-                                                                  k.startswith("reflectance"))
-                                      for k in changed):
+            if changed is None or any(k.startswith(("layers.", "thickness")) or (
+                    colour_albedo and k.startswith("reflectance")) for k in changed):
                 self._update_hemispherical()
             else:
                 # gradients enabled or disabled on an unchanged value (the guard

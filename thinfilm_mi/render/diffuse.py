@@ -19,6 +19,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.render.kernel import side_rt
 from thinfilm_mi.render.textures import mitsuba_module, scalar
+from thinfilm_mi.tabulate.diffuse_scale import exact_hemispherical, paper_hemispherical
 from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable, hemispherical_factors, r_dh_partials
 
 
@@ -28,14 +29,28 @@ class DiffuseFactors:
     (R_dh, T_hemi)`` (over ``wl``), for the coating ``coating`` (a
     :class:`~thinfilm_mi.render.kernel.KernelStack`) over the absorbing film ``film_n``
     (a ``SpectralIndex``) of ``film_n_thickness`` nm, or over the base medium
-    (``film_n`` ``None``)."""
+    (``film_n`` ``None``); every thickness times ``scale`` (a ``thickness`` texture's
+    value). :meth:`hemispherical_scales` gives the terms at several scales."""
 
-    def __init__(self, coating, film_n, film_n_thickness: float | None):
+    def __init__(self, coating, film_n, film_n_thickness: float | None, scale: float = 1.0):
         self.coating, self.film_n, self.film_n_thickness = coating, film_n, film_n_thickness
+        self.scale = float(scale)
+
+    def at_scale(self, scale: float) -> "DiffuseFactors":
+        """The same factors with every thickness times ``scale`` (instead of :attr:`scale`)."""
+        return DiffuseFactors(self.coating, self.film_n, self.film_n_thickness, scale)
+
+    def hemispherical_scales(self, wl, scales):
+        """``(R_dh, T_hemi)`` at every thickness scale of ``scales``, each of shape
+        ``(len scales, len wl)``."""
+        n0, coat, n_exit, fn = self.at_scale(1.0)._arguments(wl)
+        if fn is None:   # the coating over the (matched) base medium: the exact terms
+            return exact_hemispherical(n0, coat, n_exit.real, wl, scales)
+        return paper_hemispherical(n0, coat, fn, wl, scales)
 
     def t(self, cos, wl):
 
-        _, T = side_rt(self.coating, False, cos, wl)
+        _, T = side_rt(self.coating, False, cos, wl, self.scale)
         if self.film_n is None:
             return T
         n0 = self.coating.ambient.spectral_values(wl, real=True)
@@ -43,16 +58,18 @@ class DiffuseFactors:
         beta2 = (n0 ** 2)[None, :] * (1.0 - cos ** 2)[:, None]
         q = np.sqrt((n_f ** 2)[None, :] - beta2 + 0j)
         q = np.where(q.imag < 0, -q, q)           # the decaying root
-        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness)
+        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness
+                          * self.scale)
 
     def _arguments(self, wl):
         """:func:`~thinfilm_mi.tabulate.hemispherical.hemispherical_factors`'s arguments at ``wl``."""
 
         c = self.coating
         n0 = c.ambient.spectral_values(wl, real=True)
-        coat = [(ix.spectral_values(wl), scalar(d)) for ix, d in zip(c.indices, c.thickness)]
+        coat = [(ix.spectral_values(wl), scalar(d) * self.scale)
+                for ix, d in zip(c.indices, c.thickness)]
         fn = None if self.film_n is None else (self.film_n.spectral_values(wl),
-                                               self.film_n_thickness)
+                                               self.film_n_thickness * self.scale)
         return n0, coat, c.substrate.spectral_values(wl), fn
 
     def hemispherical(self, wl):
@@ -83,7 +100,7 @@ def update_derivative_table(bsdf, factors, model: str, table):
     missing, kept if it is there, ``None`` when nothing carries gradients (or for
     model "single", or no films). Never needed at scene load, where nothing carries
     gradients: the reverse-mode pass then never runs on Mitsuba's loader threads."""
-    if factors is None or model != "multiple" or not film_gradients(bsdf):
+    if factors is None or model == "single" or not film_gradients(bsdf):
         return None
     return table if table is not None else DerivativeTable(factors.r_dh_partials(GRID))
 
