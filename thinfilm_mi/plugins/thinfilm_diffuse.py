@@ -26,7 +26,18 @@ Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
    - |string|
    - ``"multiple"`` (default): the paper's model plus the interreflection
      between the base and the coating; ``"single"``: the paper's first-order
-     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10).
+     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10);
+     ``"exact"``: the whole stack, coherent, over a base medium (see below).
+ * - base_ior
+   - |float| or |string|
+   - Model ``"exact"`` only: the real index of the medium between the films and
+     the base (default: ``ext_ior``).
+ * - thickness
+   - |float| or |texture|
+   - Optional scale on every film's thickness, evaluated at the hit, as on the
+     other plugins (e.g. a ``bitmap`` with ``raw="true"``). Its range is read at
+     load: ``R_dh`` and ``T_hemi`` are tabulated over the scale. RGB/mono
+     variants accept a constant scale only.
  * - tabulate
    - |string| or |bool|
    - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
@@ -138,7 +149,21 @@ lossless stack ``T_hemi = 1 - R_dh`` and a white base gives exactly 1; for any
 stack it is at most ``k_r + t <= 1``. ``"single"`` is the first term of the
 series, hence never brighter than ``"multiple"``.
 
-**Specular part.** Both models use the paper's ``k_r`` (coating over film
+**model = "exact"**. Every film, absorbing or not, is part of one coherent stack
+between the ambient and a base medium of index ``n_b`` (``base_ior``); the base
+is Lambertian in that medium. Specular part: the stack's exact ``R(θ_i)``.
+Diffuse part: ``f = t(θ_i) t(θ_o) k_d / (π (1 - k_d R_dh))`` with ``t = T n_0/n_b``
+(``T``: the exact transmittance into the base medium; the two factors ``n_0/n_b``
+are ``plastic``'s radiance factor ``1/η²``) and ``R_dh = 2∫R_up μ dμ`` over the
+base medium's directions (``R_up``: the reversed stack lit from the base; total
+reflection beyond its critical angle, frustrated by absorbing films). Assumes
+a smooth, parallel stack, incoherent light in the base and a base that re-diffuses
+all it receives. The albedo ``R + t k_d T_hemi/(1 - k_d R_dh)`` (``T_hemi = 2∫T_up μ
+dμ``) is at most 1 (``R + T <= 1`` for the same stack), 1 for a lossless stack on a
+white base; ``f`` is symmetric. Where film ``N`` is a few nm of metal the paper's
+models treat it as bulk: for ``SiO2 300; Au 4`` their diffuse term is 20-500x darker.
+
+**Specular part.** The paper's models use the paper's ``k_r`` (coating over film
 ``N``; the exact full-stack reflectance when there is no absorbing film ``N``).
 The exact reflectance of *all* films over the base medium is not used with an
 absorbing film ``N``: paired with the first-order ``t`` it can exceed energy
@@ -216,10 +241,8 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.optics.core import Cx, film_attenuation
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.colour import (
@@ -230,47 +253,25 @@ from thinfilm_mi.render.colour import (
     prepare_gradients,
 )
 from thinfilm_mi.render.diffuse import DiffuseFactors, update_derivative_table, with_derivatives
-from thinfilm_mi.render.diffuse_exact import ExactFactors, SpectralTerms, scale_bounds
+from thinfilm_mi.render.diffuse_exact import (
+    ExactFactors,
+    SpectralTerms,
+    absorbs,
+    constant_albedo,
+    reflectance_from_props,
+    scale_bounds,
+    texture_gradients_refused,
+)
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.media import real_index
-from thinfilm_mi.render.params import ALBEDO_SLACK, ParameterGuard
+from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
-from thinfilm_mi.render.textures import check_texture_range, scalar, uniform
+from thinfilm_mi.render.textures import scalar
 from thinfilm_mi.render.variant import check_variant, opaque_float, spectral_mean
 from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple", "exact")
-
-
-def _absorbs(index) -> bool:
-    mat = index.material
-    if mat is None:
-        return True
-    if mat.constant is not None:
-        return mat.constant.imag > 0
-    return bool(np.any(mat.index(GRID).imag > 0))
-
-
-def _reflectance_from_props(props):
-    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
-    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
-    ``1 - k_d R_dh`` approach 0)."""
-    if "reflectance" not in props:
-        return uniform(0.5)
-    value = props.get("reflectance")
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        if not (0.0 <= value <= 1.0):
-            raise ThinFilmError(f"{NAME}: 'reflectance' must be in [0, 1] (an albedo), "
-                                f"got {value!r}")
-    try:
-        tex = props.get_texture("reflectance")
-    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-        raise ThinFilmError(f"{NAME}: 'reflectance' must be a number, a spectrum or a texture, "
-                            f"got {value!r} ({e})") from None
-    check_texture_range(tex, f"{NAME}: 'reflectance' (an albedo, energy conservation)", 0.0,
-                        1.0 + ALBEDO_SLACK)
-    return tex
 
 
 class ThinFilmDiffuse(mi.BSDF):
@@ -289,7 +290,7 @@ class ThinFilmDiffuse(mi.BSDF):
             raise ThinFilmError(f"{NAME}: 'base_ior' is a parameter of model 'exact' only "
                                 f"(model is {model!r})")
         base = real_index(props.get("base_ior"), "base_ior") if "base_ior" in props else ext
-        self.reflectance = _reflectance_from_props(props)
+        self.reflectance = reflectance_from_props(props, NAME)
         options = stack_options_from_props(props, NAME)
         self.texture = options["thickness_texture"]
         check_unqueried(props, NAME)
@@ -303,7 +304,7 @@ class ThinFilmDiffuse(mi.BSDF):
             self.coating = KernelStack(films, ext, base, sides=sides, **options)
             self.film_n = None
             self.film_n_thickness = None
-        elif films and _absorbs(films[-1][0]):
+        elif films and absorbs(films[-1][0]):
             # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
             self.coating = KernelStack(films[:-1], ext, films[-1][0], sides=sides, **options)
             self.film_n = films[-1][0]
@@ -330,14 +331,6 @@ class ThinFilmDiffuse(mi.BSDF):
         self.guard = ParameterGuard(self, NAME)
 
     # -- load-time tables ----------------------------------------------------
-    def _constant_albedo(self) -> np.ndarray | None:
-        """The base albedo per colour channel where it does not vary over the
-        surface (the colour tables then integrate the series with it), else ``None``."""
-        if self.reflectance.is_spatially_varying():
-            return None
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        return np.array(dr.ravel(self.reflectance.eval(si)), np.float64).reshape(-1)
-
     def _update_hemispherical(self) -> None:
         """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
         in RGB/mono variants the integrated diffuse tables instead. In AD variants
@@ -355,7 +348,7 @@ class ThinFilmDiffuse(mi.BSDF):
                             "variant, or a constant scale)")
                     factors = factors.at_scale(scale_bounds(self.texture, NAME))
                 self.colour = ColourDiffuse(factors, self.model, colour_channels(),
-                                            self._constant_albedo())
+                                            constant_albedo(self.reflectance))
                 if self.film_n is not None and dr.is_diff_v(mi.Float):
                     prepare_gradients([self.film_n])
             return
@@ -377,10 +370,7 @@ class ThinFilmDiffuse(mi.BSDF):
                                                  self.r_dh_grad)
         if self.r_dh_grad is not None and self.texture is not None:
             self.r_dh_grad = None
-            raise ThinFilmError(f"{NAME}: gradients of the films' parameters together with a "
-                                f"'thickness' texture are not supported with model "
-                                f"{self.model!r} (R_dh's derivatives are tabulated at scale 1); "
-                                "differentiate the texture, or use model 'single'")
+            raise ThinFilmError(texture_gradients_refused(NAME, self.model))
 
     # -- kernel helpers ------------------------------------------------------
     def _factors(self, si, cos_theta, active, transmission: bool):
@@ -406,13 +396,9 @@ class ThinFilmDiffuse(mi.BSDF):
         """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
         if self.model == "single":
             return mi.UnpolarizedSpectrum(1.0)
-        r_dh = self._with_derivatives(self._terms(si, active)[0], si, si.wavelengths,
+        r_dh = self._with_derivatives(self.terms.lookup(si, self.coating, active)[0], si, si.wavelengths,
                                       lambda ix: ix.eval(si, active), active)
         return dr.rcp(1.0 - kd * r_dh)
-
-    def _terms(self, si, active):
-        """``(R_dh, T_hemi)`` at the hit (spectral variants)."""
-        return self.terms.lookup(si, self.coating.thickness_scale_at(si, active), active)
 
     def _with_derivatives(self, r_dh, si, wavelengths, index_at, active):
         """``R_dh`` carrying its derivatives (:func:`thinfilm_mi.render.diffuse.with_derivatives`)."""
@@ -474,7 +460,7 @@ class ThinFilmDiffuse(mi.BSDF):
         if self.colour is not None:
             diff = spectral_mean(self.colour.albedo(cos_i, kd, active))
         else:
-            diff = spectral_mean(t_i * kd * self._terms(si, active)[1] * series)
+            diff = spectral_mean(t_i * kd * self.terms.lookup(si, self.coating, active)[1] * series)
         total = spec + diff
         return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
 

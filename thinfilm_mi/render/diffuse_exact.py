@@ -11,6 +11,8 @@
   spectra (no texture), or a :class:`~thinfilm_mi.tabulate.diffuse_scale.ScaleTable`
   over the thickness scale with ``∂R_dh/∂s`` for the texture's gradients.
 * :func:`scale_bounds` — the largest value of a ``thickness`` texture, read at load.
+* :func:`absorbs`, :func:`reflectance_from_props`, :func:`constant_albedo` — the
+  plugin's reading of its films and base albedo.
 """
 from __future__ import annotations
 
@@ -20,10 +22,19 @@ import numpy as np
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.render.diffuse import DiffuseFactors
-from thinfilm_mi.render.textures import mitsuba_module, regular, scalar, texture_range, uniform
+from thinfilm_mi.render.params import ALBEDO_SLACK
+from thinfilm_mi.render.textures import (
+    check_texture_range,
+    mitsuba_module,
+    regular,
+    scalar,
+    texture_range,
+    uniform,
+)
 from thinfilm_mi.tabulate.diffuse_scale import ScaleTable, exact_hemispherical
 
-__all__ = ["ExactFactors", "SpectralTerms", "scale_bounds", "spectrum_on_grid"]
+__all__ = ["ExactFactors", "SpectralTerms", "scale_bounds", "spectrum_on_grid", "absorbs",
+           "reflectance_from_props", "constant_albedo", "texture_gradients_refused"]
 
 class ExactFactors(DiffuseFactors):
     """The factors of model ``"exact"`` for the stack ``coating`` (a
@@ -113,13 +124,64 @@ class SpectralTerms:
         self.t_hemi = spectrum_on_grid(None if old is None else old.t_hemi, t_hemi)
         self.r_dh = spectrum_on_grid(None if old is None else old.r_dh, r_dh)
 
-    def lookup(self, si, scale, active=True):
-        """``(R_dh, T_hemi)`` at the hit's wavelengths and the thickness ``scale`` (the
-        texture's value; its gradient reaches ``R_dh`` through ``∂R_dh/∂s``)."""
+    def lookup(self, si, stack, active=True):
+        """``(R_dh, T_hemi)`` at the hit's wavelengths and the thickness scale of the
+        :class:`~thinfilm_mi.render.kernel.KernelStack` ``stack`` there (its texture's
+        gradient reaches ``R_dh`` through ``∂R_dh/∂s``)."""
         if self.table is None:
             return self.r_dh.eval(si, active), self.t_hemi.eval(si, active)
+        scale = stack.thickness_scale_at(si, active)
         out = self.table.lookup(si.wavelengths, scale, active)
         r_dh = out[0]
         if dr.grad_enabled(scale):
             r_dh = r_dh + out[2] * (scale - dr.detach(scale))
         return r_dh, out[1]
+
+
+def absorbs(index) -> bool:
+    """Whether the film index ``index`` absorbs (``k > 0``) somewhere in 360-830 nm."""
+    mat = index.material
+    if mat is None:
+        return True
+    if mat.constant is not None:
+        return mat.constant.imag > 0
+    return bool(np.any(mat.index(GRID).imag > 0))
+
+
+def reflectance_from_props(props, plugin: str):
+    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
+    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
+    ``1 - k_d R_dh`` approach 0)."""
+    if "reflectance" not in props:
+        return uniform(0.5)
+    value = props.get("reflectance")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if not (0.0 <= value <= 1.0):
+            raise ThinFilmError(f"{plugin}: 'reflectance' must be in [0, 1] (an albedo), "
+                                f"got {value!r}")
+    try:
+        tex = props.get_texture("reflectance")
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{plugin}: 'reflectance' must be a number, a spectrum or a texture, "
+                            f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{plugin}: 'reflectance' (an albedo, energy conservation)", 0.0,
+                        1.0 + ALBEDO_SLACK)
+    return tex
+
+
+def constant_albedo(reflectance) -> np.ndarray | None:
+    """The base albedo per colour channel where it does not vary over the surface
+    (the colour tables then integrate the series with it), else ``None``."""
+    if reflectance.is_spatially_varying():
+        return None
+    mi = mitsuba_module()
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    return np.array(dr.ravel(reflectance.eval(si)), np.float64).reshape(-1)
+
+
+def texture_gradients_refused(plugin: str, model: str) -> str:
+    """Why film-parameter gradients are refused together with a ``thickness`` texture
+    (models with ``R_dh``: its derivative table holds scale 1 only)."""
+    return (f"{plugin}: gradients of the films' parameters together with a 'thickness' "
+            f"texture are not supported with model {model!r} (R_dh's derivatives are "
+            "tabulated at scale 1); differentiate the texture, or use model 'single'")

@@ -238,7 +238,7 @@ class ColourDiffuse:
     def _at_one(self, M, nodes):
         """``π f`` at ``k_d = 1`` (the series) and the single term (the ``ℓ_j`` sum
         to 1), shape ``(nu, nu, 2 C)``; with a fixed ``k_d``: ``M`` (twice)."""
-        g = np.ones(1) if self.fixed else _g(1.0, nodes, self.model)
+        g = np.ones(1) if self.fixed else np.broadcast_to(_g(1.0, nodes, self.model), nodes.shape)
         return np.concatenate([np.einsum("iojc,j->ioc", M, g), M.sum(axis=2)], axis=-1)
 
     def _close(self, M, nodes, M2, nodes2) -> bool:
