@@ -231,6 +231,7 @@ from thinfilm_mi.render.colour import (
 )
 from thinfilm_mi.render.diffuse import DiffuseFactors, update_derivative_table, with_derivatives
 from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.orennayar import OrenNayar, coated, coated_integrated, series_term
 from thinfilm_mi.render.params import ALBEDO_SLACK, ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
 from thinfilm_mi.render.textures import check_texture_range, regular, scalar, uniform
@@ -300,6 +301,7 @@ class ThinFilmDiffuse(mi.BSDF):
         ext = ext_ior_from_props(props)
         self.reflectance = _reflectance_from_props(props)
         options = stack_options_from_props(props, NAME, thickness_texture=False)
+        self.base = OrenNayar(props, NAME)   # roughness: render/orennayar.py
         check_unqueried(props, NAME)
 
         self.no_films = len(films) == 0
@@ -334,7 +336,7 @@ class ThinFilmDiffuse(mi.BSDF):
     def _constant_albedo(self) -> np.ndarray | None:
         """The base albedo per colour channel where it does not vary over the
         surface (the colour tables then integrate the series with it), else ``None``."""
-        if self.reflectance.is_spatially_varying():
+        if self.reflectance.is_spatially_varying() or self.base.rough:
             return None
         si = dr.zeros(mi.SurfaceInteraction3f)
         return np.array(dr.ravel(self.reflectance.eval(si)), np.float64).reshape(-1)
@@ -391,9 +393,11 @@ class ThinFilmDiffuse(mi.BSDF):
         """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
         if self.model == "single":
             return mi.Spectrum(1.0)
-        r_dh = self._with_derivatives(self.r_dh.eval(si, active), si, si.wavelengths,
+        return dr.rcp(1.0 - kd * self._r_dh(si, active))
+
+    def _r_dh(self, si, active):
+        return self._with_derivatives(self.r_dh.eval(si, active), si, si.wavelengths,
                                       lambda ix: ix.eval(si, active), active)
-        return dr.rcp(1.0 - kd * r_dh)
 
     def _with_derivatives(self, r_dh, si, wavelengths, index_at, active):
         """``R_dh`` carrying its derivatives (:func:`thinfilm_mi.render.diffuse.with_derivatives`)."""
@@ -405,17 +409,35 @@ class ThinFilmDiffuse(mi.BSDF):
         return with_derivatives(self.r_dh_grad, r_dh, films, si, wavelengths, index_at, active,
                                 NAME)
 
-    def _diffuse(self, si, kd, cos_i, cos_o, t_i, series, active):
-        """``π f`` at ``cos_o``: ``k_d t_i t_o S`` per wavelength, or its integral
-        over wavelengths in RGB/mono variants."""
+    def _diffuse(self, si, kd, cos_i, wo, t_i, series, active):
+        """``π f`` towards ``wo``: ``k_d t_i t_o S`` per wavelength (a rough base:
+        :func:`~thinfilm_mi.render.orennayar.coated`), or its integral over wavelengths
+        in RGB/mono variants."""
+        cos_o = mi.Frame3f.cos_theta(wo)
+        base = self.base.terms(si, kd, wo, active) if self.base.rough else None
         if self.colour is not None:
-            value = self.colour.value(cos_i, cos_o, kd, active)
+            multiple = self.model == "multiple"
+            if base is None:
+                value = self.colour.value(cos_i, cos_o, kd, active)
+                g = lambda c, r_dh: self.colour.series(kd[c], r_dh)
+            else:
+                value = coated_integrated(self.colour.node_values(cos_i, cos_o, active), base,
+                                          multiple)
+                g = lambda c, r_dh: series_term(base.channel(c), r_dh, multiple)
             if self._colour_gradients(si, active):
                 value = attach_gradient(value, self._colour_estimate(si, kd, cos_i, cos_o,
-                                                                     active))
+                                                                     active, g))
             return value
         _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
+        if base is not None:
+            r_dh = self._r_dh(si, active) if self.model == "multiple" else None
+            return coated(base, t_i, t_o, r_dh, self.model == "multiple")
         return kd * t_i * t_o * series
+
+    def _bare(self, si, wo, active):
+        """``π f`` without films: ``k_d`` (exactly Mitsuba's ``diffuse``) or the rough base's."""
+        kd = self.reflectance.eval(si, active)
+        return self.base.terms(si, kd, wo, active).pi_f if self.base.rough else kd
 
     def _colour_gradients(self, si, active) -> bool:
         """RGB/mono AD variants: whether a film thickness or index carries gradients."""
@@ -423,10 +445,11 @@ class ThinFilmDiffuse(mi.BSDF):
         return self.coating.colour_gradients(si, active) or (n is not None and (
             dr.grad_enabled(self.film_n_thickness) or n.carries_gradients(si, active)))
 
-    def _colour_estimate(self, si, kd, cos_i, cos_o, active):
+    def _colour_estimate(self, si, kd, cos_i, cos_o, active, g):
         """An unbiased estimate of the integrated diffuse term at stratified wavelengths
         (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose gradients the
-        table's value takes; ``R_dh`` with its derivatives (:meth:`_with_derivatives`)."""
+        table's value takes; ``R_dh`` with its derivatives (:meth:`_with_derivatives`);
+        ``g(c, R_dh)``: the base's term of channel ``c`` (``G(k_d,c, R_dh)`` for Lambert's)."""
         sampler = GradientSampler.get()
         wl = sampler.wavelengths(si)
 
@@ -442,7 +465,7 @@ class ThinFilmDiffuse(mi.BSDF):
         r_dh = self._with_derivatives(
             self.colour.r_dh_at(wl, active), si, wl,
             lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)
-        channels = [sampler.estimate(wl, product * self.colour.series(kd[c], r_dh))[c]
+        channels = [sampler.estimate(wl, product * g(c, r_dh))[c]
                     for c in range(dr.size_v(mi.Spectrum))]
         return mi.Spectrum(*channels)
 
@@ -459,6 +482,7 @@ class ThinFilmDiffuse(mi.BSDF):
     def sample(self, ctx, si, sample1, sample2, active=True):
         has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
         has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        self.base.check_lambertian()
         bs = dr.zeros(mi.BSDFSample3f)
         cos_i = mi.Frame3f.cos_theta(si.wi)
         active = mi.Bool(active) & (cos_i > 0)
@@ -471,7 +495,7 @@ class ThinFilmDiffuse(mi.BSDF):
             bs.eta = 1.0
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
             bs.sampled_component = mi.UInt32(1)
-            value = self.mode.value(self.reflectance.eval(si, active), self.mode.depolarized,
+            value = self.mode.value(self._bare(si, bs.wo, active), self.mode.depolarized,
                                     ctx, si.wi, bs.wo)
             return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
 
@@ -504,9 +528,8 @@ class ThinFilmDiffuse(mi.BSDF):
         if has_spec:
             weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
         if has_diff:
-            cos_o = mi.Frame3f.cos_theta(wo_diff)
             # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
-            w_diff = (self._diffuse(si, kd, cos_i, cos_o, t_i, series, sel_diff)
+            w_diff = (self._diffuse(si, kd, cos_i, wo_diff, t_i, series, sel_diff)
                       / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0))
             weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
         # the film's reflection is polarized, the light through the base depolarized
@@ -519,13 +542,14 @@ class ThinFilmDiffuse(mi.BSDF):
         has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
         if not has_diff:
             return mi.Spectrum(0.0), mi.Float(0.0)
+        self.base.check_lambertian()
         cos_i = mi.Frame3f.cos_theta(si.wi)
         cos_o = mi.Frame3f.cos_theta(wo)
         active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0)
         pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo) if want_pdf else mi.Float(0.0)
 
         if self.no_films:  # exactly Mitsuba's diffuse
-            value = (self.reflectance.eval(si, active) * dr.inv_pi * cos_o) if want_value \
+            value = (self._bare(si, wo, active) * dr.inv_pi * cos_o) if want_value \
                 else mi.UnpolarizedSpectrum(0.0)
             value = self.mode.value(value, self.mode.depolarized, ctx, si.wi, wo)
             return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
@@ -539,7 +563,7 @@ class ThinFilmDiffuse(mi.BSDF):
             k_r, t_i, _ = self._factors(si, cos_i, active, transmission=spectral)
         if want_value:
             value = self.mode.value(
-                self._diffuse(si, kd, cos_i, cos_o, t_i, series, active) * dr.inv_pi * cos_o,
+                self._diffuse(si, kd, cos_i, wo, t_i, series, active) * dr.inv_pi * cos_o,
                 self.mode.depolarized, ctx, si.wi, wo)
         if need_prob:
             pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
@@ -562,6 +586,7 @@ class ThinFilmDiffuse(mi.BSDF):
                          mi.ParamFlags.Differentiable)
             self.film_n.traverse(callback, f"layers.{i}.")
         callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
+        self.base.traverse(callback)
 
     def parameters_changed(self, keys):
         def refresh(changed):
@@ -571,7 +596,7 @@ class ThinFilmDiffuse(mi.BSDF):
             if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
                 dr.make_opaque(self.film_n_thickness)
             colour_albedo = self.colour is not None and self.colour.fixed
-            if changed is None or any(k.startswith("layers.") or (colour_albedo and
+            if self.base.refresh() or changed is None or any(k.startswith("layers.") or (colour_albedo and
                                                                   k.startswith("reflectance"))
                                       for k in changed):
                 self._update_hemispherical()
@@ -587,5 +612,5 @@ class ThinFilmDiffuse(mi.BSDF):
             d = self.film_n_thickness
             d = float(dr.ravel(d)[0]) if dr.is_array_v(d) else d
             layers = f"{layers} over absorbing film {self.film_n.label} {d:g} nm"
-        return (f"ThinFilmDiffuse[\n  model = {self.model},\n  layers = {layers},\n"
+        return (f"ThinFilmDiffuse[\n  model = {self.model},\n{self.base.describe()}  layers = {layers},\n"
                 f"  ext_ior = {self.coating.ambient.label}\n]")
