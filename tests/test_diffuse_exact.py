@@ -330,3 +330,25 @@ def test_bad_texture_edit_through_the_scene():
     # the last valid value is back and the BSDF renders
     assert float(params[key][0]) == 0.5
     assert np.all(np.isfinite(np.array(mi.render(scene, spp=1))))
+
+
+@pytest.mark.parametrize("roughness_model", ["qualitative", "eon"])
+def test_exact_with_a_rough_base_and_a_texture(roughness_model):
+    """The rough base (render/orennayar.py) under the exact model and a thickness
+    texture: the albedo stays at most 1, and σ = 0 is the Lambertian exact model."""
+    tex = {"type": "checkerboard", "color0": 0.6, "color1": 1.2}
+    rough = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300; Au 4", "model": "exact",
+                          "reflectance": 1.0, "roughness": 0.8, "roughness_model": roughness_model,
+                          "thickness": tex})
+    for theta in (0.0, 60.0):
+        mean, err = mc_albedo(rough, theta, n=1 << 16)
+        # 5 standard errors plus 1e-5 (float32)
+        assert np.all(mean <= 1.0 + 5 * err + 1e-5) and np.all(mean > 0.2), (theta, mean)
+    smooth = [mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300; Au 4", "model": "exact",
+                            "reflectance": 0.7, "thickness": tex, **extra})
+              for extra in ({}, {"roughness": 0.0, "roughness_model": roughness_model})]
+    si = make_si(64, direction(35.0))
+    wo = mi.warp.square_to_cosine_hemisphere(mi.Point2f(np.linspace(0.01, 0.99, 64),
+                                                        np.linspace(0.99, 0.01, 64)))
+    a, b = (np.array(s.eval(mi.BSDFContext(), si, wo)) for s in smooth)
+    assert np.array_equal(a, b)

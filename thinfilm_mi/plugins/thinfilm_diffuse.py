@@ -1,8 +1,8 @@
 r"""
 .. _bsdf-thinfilm_diffuse:
 
-Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
-----------------------------------------------------------------
+Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
+-------------------------------------------------------------
 
 .. pluginparameters::
 
@@ -34,10 +34,17 @@ Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
      the base (default: ``ext_ior``).
  * - thickness
    - |float| or |texture|
-   - Optional scale on every film's thickness, evaluated at the hit, as on the
-     other plugins (e.g. a ``bitmap`` with ``raw="true"``). Its range is read at
-     load: ``R_dh`` and ``T_hemi`` are tabulated over the scale. RGB/mono
-     variants accept a constant scale only.
+   - Optional scale on every film's thickness at the hit (e.g. a ``bitmap`` with
+     ``raw="true"``); ``R_dh``, ``T_hemi`` are tabulated over its range (read at
+     load). RGB/mono variants accept a constant scale only.
+ * - roughness
+   - |float| or |texture|
+   - Oren–Nayar roughness ``σ`` of the base (radians, the standard deviation of the
+     facet slope angles), in [0, π/2] (default: 0, Lambert). |differentiable|.
+ * - roughness_model
+   - |string|
+   - ``"qualitative"`` (default): Oren and Nayar's qualitative formula;
+     ``"eon"``: energy-preserving (OpenPBR's). See **Rough base**.
  * - tabulate
    - |string| or |bool|
    - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
@@ -69,8 +76,8 @@ Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
      ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
      shows (default: 5000).
 
-A perfectly diffuse (Lambertian) base under a stack of thin films, after
-Hirayama et al. section 2.4. Component 0 is the delta reflection of the
+A diffuse base (Lambertian, or Oren–Nayar with ``roughness``) under a stack of
+thin films, after Hirayama et al. section 2.4. Component 0 is the delta reflection of the
 coating, component 1 the diffuse lobe; the thin films are evaluated at the
 path's wavelengths in the render kernel (float32), for unpolarised light. In
 ``*_spectral_polarized`` variants component 0 is the Mueller matrix of the
@@ -148,6 +155,41 @@ the exit factor is the same ``t(θ)`` and the radiance scaling ``1/η^2`` of
 lossless stack ``T_hemi = 1 - R_dh`` and a white base gives exactly 1; for any
 stack it is at most ``k_r + t <= 1``. ``"single"`` is the first term of the
 series, hence never brighter than ``"multiple"``.
+
+**Rough base** (``roughness`` ``σ > 0``; ``thinfilm_mi/render/orennayar.py``). The base
+BRDF ``f_b`` is Oren–Nayar's: ``"qualitative"``, with ``μ = cos θ``,
+``A = 1 - 0.5σ²/(σ²+0.33)``, ``B = 0.45σ²/(σ²+0.09)``, ``α = max(θ_i, θ_o)``,
+``β = min(θ_i, θ_o)``::
+
+    f_b = k_d/π · (A + B · max(0, cos(φ_o - φ_i)) · sin α · tan β)
+
+or ``"eon"`` (Portsmouth, Kutz, Hill 2025), Fujii's lobe plus an analytic
+multiple-scattering lobe, with OpenPBR's roughness ``r = B/A`` (0.78 at ``σ = π/2``).
+``E(μ) = ∫ f_b μ_o dω_o`` is its directional albedo and ``Ē = 2∫E μ dμ`` its
+hemispherical one, both in closed form (qualitative: ``k_d (A + B h(μ))``, ``Ē = k_d (A +
+B (2/3 - 64/(45π)))``; EON: ``k_d`` for ``k_d = 1``). The base medium is matched to the
+ambient, so the directions at the base are the outside ones (the ambient
+parametrisation used above) and light crosses the films as for a Lambertian base::
+
+    f = t(θ_i) t(θ_o) · [f_b(ω_i, ω_o) + E(μ_i) E(μ_o) R_dh / (π (1 - Ē R_dh))]
+
+The first term crossed the coating once each way; the second is the series of the
+light the coating sends back. Its assumption (exact for Lambert, where it
+is ``"multiple"`` above) is that the light leaving the base after its first bounce is
+reflected by the coating as if it were cosine-distributed (``R_dh``) and that all light
+sent back reaches the base as diffuse light, which the base re-emits with the exitance
+profile ``E(μ_o)/π`` (by reciprocity, its reflection of uniform light) and re-reflects
+with ``Ē``. ``"single"`` keeps the first term. ``f`` is symmetric in ``ω_i, ω_o``
+(reciprocal). Energy (``benchmarks/orennayar_energy.py``): the qualitative formula loses
+light (a white base at ``σ = π/2`` reflects 0.56 at normal incidence, 0.65 on average) and
+gains up to 0.8 % towards grazing for ``σ < 0.33``; EON reflects all of it. Under lossless
+films the second term's cosine assumption leaves a white EON base's albedo within
+[0.987, 1.011] (most at ``σ = π/2`` and normal incidence, where the base's lobe favours
+the normal and escapes more than ``R_dh`` assumes); under the absorbing films measured
+it stays below 1. Sampling is cosine-weighted (weight ``π f``). RGB/mono variants combine
+the terms of the colour table of a textured ``reflectance`` (its expansion in ``R_dh``)
+with ``f_b``, ``E``, ``Ē`` per channel; polarized ones depolarize, as for Lambert. While
+``roughness`` is 0 everywhere without gradients the Lambertian code runs.
 
 **model = "exact"**. Every film, absorbing or not, is part of one coherent stack
 between the ambient and a base medium of index ``n_b`` (``base_ior``); the base
@@ -243,31 +285,35 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.optics.core import Cx, film_attenuation
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.colour import (
-    GradientSampler,
     attach_gradient,
     colour_channels,
-    index_on_wavelengths,
     prepare_gradients,
 )
-from thinfilm_mi.render.diffuse import DiffuseFactors, update_derivative_table, with_derivatives
-from thinfilm_mi.render.diffuse_exact import (
-    ExactFactors,
-    SpectralTerms,
+from thinfilm_mi.render.diffuse import (
     absorbs,
-    constant_albedo,
+    colour_estimate,
     reflectance_from_props,
-    scale_bounds,
+    update_derivative_table,
+)
+from thinfilm_mi.render.diffuse_exact import (
+    SpectralTerms,
+    coating_transmission,
+    colour_factors,
+    colour_gradients,
+    constant_albedo,
+    diffuse_factors,
+    prob_specular,
+    r_dh_with_derivatives,
     texture_gradients_refused,
 )
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.media import real_index
+from thinfilm_mi.render.orennayar import OrenNayar, coated, coated_integrated, series_term
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
-from thinfilm_mi.render.textures import scalar
-from thinfilm_mi.render.variant import check_variant, opaque_float, spectral_mean
+from thinfilm_mi.render.variant import check_variant, opaque_float
 from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 
 NAME = "thinfilm_diffuse"
@@ -293,6 +339,7 @@ class ThinFilmDiffuse(mi.BSDF):
         self.reflectance = reflectance_from_props(props, NAME)
         options = stack_options_from_props(props, NAME)
         self.texture = options["thickness_texture"]
+        self.base = OrenNayar(props, NAME)   # roughness: render/orennayar.py
         check_unqueried(props, NAME)
 
         self.no_films = len(films) == 0
@@ -302,8 +349,7 @@ class ThinFilmDiffuse(mi.BSDF):
         if model == "exact":
             # The whole stack, coherent, over the base medium.
             self.coating = KernelStack(films, ext, base, sides=sides, **options)
-            self.film_n = None
-            self.film_n_thickness = None
+            self.film_n = self.film_n_thickness = None
         elif films and absorbs(films[-1][0]):
             # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
             self.coating = KernelStack(films[:-1], ext, films[-1][0], sides=sides, **options)
@@ -335,38 +381,23 @@ class ThinFilmDiffuse(mi.BSDF):
         """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
         in RGB/mono variants the integrated diffuse tables instead. In AD variants
         (model "multiple") also ``R_dh``'s derivatives (:attr:`r_dh_grad`)."""
-        factors = self._diffuse_factors()
+        factors = diffuse_factors(self)
         self.r_dh_grad = None
         self._update_derivatives()
         if self.mode.integrated:
             if factors is not None:
-                if self.texture is not None:
-                    if self.texture.is_spatially_varying():
-                        raise ThinFilmError(
-                            f"{NAME}: a 'thickness' texture that varies over the surface is "
-                            f"not supported in the {mi.variant()!r} variant (use a spectral "
-                            "variant, or a constant scale)")
-                    factors = factors.at_scale(scale_bounds(self.texture, NAME))
+                factors = colour_factors(factors, self.texture, NAME)
                 self.colour = ColourDiffuse(factors, self.model, colour_channels(),
-                                            constant_albedo(self.reflectance))
+                                            constant_albedo(self.reflectance, self.base.rough))
                 if self.film_n is not None and dr.is_diff_v(mi.Float):
                     prepare_gradients([self.film_n])
             return
         self.terms = SpectralTerms(factors, self.texture, NAME, self.terms)
 
-    def _diffuse_factors(self) -> DiffuseFactors | None:
-        """The coating's spectral factors at the current parameters (``None`` without films)."""
-        if self.no_films:
-            return None
-        if self.model == "exact":
-            return ExactFactors(self.coating)
-        thickness = None if self.film_n is None else scalar(self.film_n_thickness)
-        return DiffuseFactors(self.coating, self.film_n, thickness)
-
     def _update_derivatives(self) -> None:
         """``R_dh``'s derivative table, built or dropped
         (:func:`thinfilm_mi.render.diffuse.update_derivative_table`)."""
-        self.r_dh_grad = update_derivative_table(self, self._diffuse_factors(), self.model,
+        self.r_dh_grad = update_derivative_table(self, diffuse_factors(self), self.model,
                                                  self.r_dh_grad)
         if self.r_dh_grad is not None and self.texture is not None:
             self.r_dh_grad = None
@@ -377,97 +408,61 @@ class ThinFilmDiffuse(mi.BSDF):
         """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
         and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
         resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
-        # (the polarized amplitudes of a scaled stack come back as plain Array4f)
         k_r = mi.UnpolarizedSpectrum(resp.R)
         if not transmission:
             return k_r, None, resp.reflection
-        k_t = mi.UnpolarizedSpectrum(resp.T)
-        n0 = self.coating.ambient.eval_real(si, active)
-        if self.film_n is not None:
-            scale = self.coating.thickness_scale_at(si, active)
-            d = self.film_n_thickness if scale is None else self.film_n_thickness * scale
-            k_t = k_t * film_attenuation(n0, cos_theta, self.film_n.eval(si, active), d,
-                                         si.wavelengths)
-        if self.base_ratio:
-            k_t = k_t * n0 / self.coating.substrate.eval_real(si, active)
-        return k_r, mi.UnpolarizedSpectrum(k_t), resp.reflection
+        return k_r, coating_transmission(self, si, cos_theta, resp.T, active), resp.reflection
 
     def _series(self, si, kd, active):
         """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
         if self.model == "single":
             return mi.UnpolarizedSpectrum(1.0)
-        r_dh = self._with_derivatives(self.terms.lookup(si, self.coating, active)[0], si, si.wavelengths,
+        return dr.rcp(1.0 - kd * self._r_dh(si, active))
+
+    def _r_dh(self, si, active):
+        return r_dh_with_derivatives(self, self.terms.lookup(si, self.coating, active)[0], si, si.wavelengths,
                                       lambda ix: ix.eval(si, active), active)
-        return dr.rcp(1.0 - kd * r_dh)
 
-    def _with_derivatives(self, r_dh, si, wavelengths, index_at, active):
-        """``R_dh`` carrying its derivatives (:func:`thinfilm_mi.render.diffuse.with_derivatives`)."""
-        if self.model == "single" or self.no_films:
-            return r_dh
-        films = list(zip(self.coating.indices, self.coating.thickness))
-        if self.film_n is not None:
-            films.append((self.film_n, self.film_n_thickness))
-        return with_derivatives(self.r_dh_grad, r_dh, films, si, wavelengths, index_at, active,
-                                NAME)
-
-    def _diffuse(self, si, kd, cos_i, cos_o, t_i, series, active):
-        """``π f`` at ``cos_o``: ``k_d t_i t_o S`` per wavelength, or its integral
-        over wavelengths in RGB/mono variants."""
+    def _diffuse(self, si, kd, cos_i, wo, t_i, series, active):
+        """``π f`` towards ``wo``: ``k_d t_i t_o S`` per wavelength (a rough base:
+        :func:`~thinfilm_mi.render.orennayar.coated`), or its integral over wavelengths
+        in RGB/mono variants."""
+        cos_o = mi.Frame3f.cos_theta(wo)
+        base = self.base.terms(si, kd, wo, active) if self.base.rough else None
         if self.colour is not None:
-            value = self.colour.value(cos_i, cos_o, kd, active)
-            if self._colour_gradients(si, active):
-                value = attach_gradient(value, self._colour_estimate(si, kd, cos_i, cos_o,
-                                                                     active))
+            multiple = self.model != "single"
+            if base is None:
+                value = self.colour.value(cos_i, cos_o, kd, active)
+                g = lambda c, r_dh: self.colour.series(kd[c], r_dh)
+            else:
+                value = coated_integrated(self.colour.node_values(cos_i, cos_o, active), base,
+                                          multiple)
+                g = lambda c, r_dh: series_term(base.channel(c), r_dh, multiple)
+            if colour_gradients(self, si, active):
+                value = attach_gradient(value, self._colour_estimate(si, cos_i, cos_o, active, g))
             return value
         _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
+        if base is not None:
+            r_dh = self._r_dh(si, active) if self.model != "single" else None
+            return coated(base, t_i, t_o, r_dh, self.model != "single")
         return kd * t_i * t_o * series
 
-    def _colour_gradients(self, si, active) -> bool:
-        """RGB/mono AD variants: whether a film thickness or index carries gradients."""
-        n = self.film_n
-        return self.coating.colour_gradients(si, active) or (n is not None and (
-            dr.grad_enabled(self.film_n_thickness) or n.carries_gradients(si, active)))
+    def _bare(self, si, wo, active):
+        """``π f`` without films: ``k_d`` (exactly Mitsuba's ``diffuse``) or the rough base's."""
+        kd = self.reflectance.eval(si, active)
+        return self.base.terms(si, kd, wo, active).pi_f if self.base.rough else kd
 
-    def _colour_estimate(self, si, kd, cos_i, cos_o, active):
-        """An unbiased estimate of the integrated diffuse term at stratified wavelengths
-        (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose gradients the
-        table's value takes; ``R_dh`` with its derivatives (:meth:`_with_derivatives`)."""
-        sampler = GradientSampler.get()
-        wl = sampler.wavelengths(si)
-
-        scale = self.coating.thickness_scale_at(si, active)
-        n0, _ = index_on_wavelengths(self.coating.ambient, si, wl, active)
-
-        def t(cos):
-            _, k_t = self.coating.at_wavelengths(False, si, cos, active, True, scale, wl)
-            if self.base_ratio:
-                k_t = k_t * n0 / index_on_wavelengths(self.coating.substrate, si, wl, active)[0]
-            if self.film_n is None:
-                return k_t
-            d = self.film_n_thickness if scale is None else self.film_n_thickness * scale
-            return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(self.film_n, si, wl,
-                                                                          active)), d, wl)
-        product = t(cos_i) * t(cos_o)
-        r_dh = self._with_derivatives(
-            self.colour.r_dh_at(wl, active), si, wl,
-            lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)
-        channels = [sampler.estimate(wl, product * self.colour.series(kd[c], r_dh))[c]
-                    for c in range(dr.size_v(mi.Spectrum))]
-        return mi.Spectrum(*channels)
-
-    def _prob_specular(self, si, k_r, t_i, kd, series, active, cos_i):
-        spec = spectral_mean(k_r)
-        if self.colour is not None:
-            diff = spectral_mean(self.colour.albedo(cos_i, kd, active))
-        else:
-            diff = spectral_mean(t_i * kd * self.terms.lookup(si, self.coating, active)[1] * series)
-        total = spec + diff
-        return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
+    def _colour_estimate(self, si, cos_i, cos_o, active, g):
+        """:func:`~thinfilm_mi.render.diffuse.colour_estimate` of this BSDF."""
+        return colour_estimate(self.coating, self.film_n, self.film_n_thickness, self.colour.r_dh_at,
+                               lambda *a: r_dh_with_derivatives(self, *a), si, cos_i, cos_o, active, g,
+                               self.base_ratio)
 
     # -- BSDF interface ------------------------------------------------------
     def sample(self, ctx, si, sample1, sample2, active=True):
         has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
         has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        self.base.check_lambertian()
         bs = dr.zeros(mi.BSDFSample3f)
         cos_i = mi.Frame3f.cos_theta(si.wi)
         active = mi.Bool(active) & (cos_i > 0)
@@ -480,7 +475,7 @@ class ThinFilmDiffuse(mi.BSDF):
             bs.eta = 1.0
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
             bs.sampled_component = mi.UInt32(1)
-            value = self.mode.value(self.reflectance.eval(si, active), self.mode.depolarized,
+            value = self.mode.value(self._bare(si, bs.wo, active), self.mode.depolarized,
                                     ctx, si.wi, bs.wo)
             return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
 
@@ -494,7 +489,7 @@ class ThinFilmDiffuse(mi.BSDF):
         if has_spec and has_diff:
             # detached: a sampling decision divides the weight as a constant
             # (the weight's gradient is then that of k_r, resp. the diffuse term)
-            prob_spec = dr.detach(self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+            prob_spec = dr.detach(prob_specular(self, si, k_r, t_i, kd, series, active, cos_i))
         else:
             prob_spec = mi.Float(1.0 if has_spec else 0.0)
         sel_spec = active & (sample1 < prob_spec)
@@ -513,9 +508,8 @@ class ThinFilmDiffuse(mi.BSDF):
         if has_spec:
             weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
         if has_diff:
-            cos_o = mi.Frame3f.cos_theta(wo_diff)
             # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
-            w_diff = (self._diffuse(si, kd, cos_i, cos_o, t_i, series, sel_diff)
+            w_diff = (self._diffuse(si, kd, cos_i, wo_diff, t_i, series, sel_diff)
                       / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0))
             weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
         # the film's reflection is polarized, the light through the base depolarized
@@ -528,13 +522,14 @@ class ThinFilmDiffuse(mi.BSDF):
         has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
         if not has_diff:
             return mi.Spectrum(0.0), mi.Float(0.0)
+        self.base.check_lambertian()
         cos_i = mi.Frame3f.cos_theta(si.wi)
         cos_o = mi.Frame3f.cos_theta(wo)
         active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0)
         pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo) if want_pdf else mi.Float(0.0)
 
         if self.no_films:  # exactly Mitsuba's diffuse
-            value = (self.reflectance.eval(si, active) * dr.inv_pi * cos_o) if want_value \
+            value = (self._bare(si, wo, active) * dr.inv_pi * cos_o) if want_value \
                 else mi.UnpolarizedSpectrum(0.0)
             value = self.mode.value(value, self.mode.depolarized, ctx, si.wi, wo)
             return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
@@ -548,10 +543,10 @@ class ThinFilmDiffuse(mi.BSDF):
             k_r, t_i, _ = self._factors(si, cos_i, active, transmission=spectral)
         if want_value:
             value = self.mode.value(
-                self._diffuse(si, kd, cos_i, cos_o, t_i, series, active) * dr.inv_pi * cos_o,
+                self._diffuse(si, kd, cos_i, wo, t_i, series, active) * dr.inv_pi * cos_o,
                 self.mode.depolarized, ctx, si.wi, wo)
         if need_prob:
-            pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+            pdf = pdf * (1.0 - prob_specular(self, si, k_r, t_i, kd, series, active, cos_i))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
     def eval(self, ctx, si, wo, active=True):
@@ -571,6 +566,7 @@ class ThinFilmDiffuse(mi.BSDF):
                          mi.ParamFlags.Differentiable)
             self.film_n.traverse(callback, f"layers.{i}.")
         callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
+        self.base.traverse(callback)
 
     def parameters_changed(self, keys):
         def refresh(changed):
@@ -580,8 +576,9 @@ class ThinFilmDiffuse(mi.BSDF):
             if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
                 dr.make_opaque(self.film_n_thickness)
             colour_albedo = self.colour is not None and self.colour.fixed
-            if changed is None or any(k.startswith(("layers.", "thickness")) or (
-                    colour_albedo and k.startswith("reflectance")) for k in changed):
+            if self.base.refresh() or changed is None or any(
+                    k.startswith(("layers.", "thickness")) or (colour_albedo and k.startswith("reflectance"))
+                    for k in changed):
                 self._update_hemispherical()
             else:
                 # gradients enabled or disabled on an unchanged value (the guard
@@ -595,5 +592,5 @@ class ThinFilmDiffuse(mi.BSDF):
             d = self.film_n_thickness
             d = float(dr.ravel(d)[0]) if dr.is_array_v(d) else d
             layers = f"{layers} over absorbing film {self.film_n.label} {d:g} nm"
-        return (f"ThinFilmDiffuse[\n  model = {self.model},\n  layers = {layers},\n"
+        return (f"ThinFilmDiffuse[\n  model = {self.model},\n{self.base.describe()}  layers = {layers},\n"
                 f"  ext_ior = {self.coating.ambient.label}\n]")

@@ -11,8 +11,11 @@
   spectra (no texture), or a :class:`~thinfilm_mi.tabulate.diffuse_scale.ScaleTable`
   over the thickness scale with ``∂R_dh/∂s`` for the texture's gradients.
 * :func:`scale_bounds` — the largest value of a ``thickness`` texture, read at load.
-* :func:`absorbs`, :func:`reflectance_from_props`, :func:`constant_albedo` — the
-  plugin's reading of its films and base albedo.
+* :func:`coating_transmission` — ``t`` in the kernel: ``k_t`` times film ``N``'s attenuation
+  (scaled by the texture) or the exact model's ``n_0/n_b``; :func:`prob_specular`, the
+  lobe choice; :func:`colour_factors`, :func:`constant_albedo`, for the colour tables;
+  :func:`diffuse_factors`, :func:`r_dh_with_derivatives`, :func:`colour_gradients`: the
+  plugin's factors, its ``R_dh`` with derivatives, whether its films carry gradients.
 """
 from __future__ import annotations
 
@@ -21,20 +24,15 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.render.diffuse import DiffuseFactors
-from thinfilm_mi.render.params import ALBEDO_SLACK
-from thinfilm_mi.render.textures import (
-    check_texture_range,
-    mitsuba_module,
-    regular,
-    scalar,
-    texture_range,
-    uniform,
-)
+from thinfilm_mi.optics.core import film_attenuation
+from thinfilm_mi.render.diffuse import DiffuseFactors, grid_spectrum, with_derivatives
+from thinfilm_mi.render.textures import mitsuba_module, scalar, texture_range
+from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.diffuse_scale import ScaleTable, exact_hemispherical
 
-__all__ = ["ExactFactors", "SpectralTerms", "scale_bounds", "spectrum_on_grid", "absorbs",
-           "reflectance_from_props", "constant_albedo", "texture_gradients_refused"]
+__all__ = ["ExactFactors", "SpectralTerms", "scale_bounds", "coating_transmission",
+           "texture_gradients_refused", "colour_factors", "constant_albedo", "prob_specular", "diffuse_factors",
+           "r_dh_with_derivatives", "colour_gradients"]
 
 class ExactFactors(DiffuseFactors):
     """The factors of model ``"exact"`` for the stack ``coating`` (a
@@ -87,23 +85,6 @@ def scale_bounds(tex, plugin: str) -> float:
     return max(float(rng[1]), 0.0)
 
 
-def spectrum_on_grid(tex, values):
-    """``values`` on the 1 nm grid as a ``regular`` spectrum, updating ``tex`` in place
-    when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
-    ``regular`` spectrum refuses a zero integral). In scalar variants a new one is
-    made (their ``mi.Float`` holds one number, not the values)."""
-    mi = mitsuba_module()
-    values = np.asarray(values, dtype=np.float64)
-    if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
-        return uniform(0.0)
-    params = mi.traverse(tex) if tex is not None and dr.is_jit_v(mi.Float) else None
-    if params is not None and "values" in params:
-        params["values"] = mi.Float(values.astype(np.float32))
-        params.update()
-        return tex
-    return regular(values, GRID[0], GRID[-1])
-
-
 class SpectralTerms:
     """``R_dh`` and ``T_hemi`` of a ``thinfilm_diffuse`` in spectral variants, from
     ``factors`` (``None``: no films, ``R_dh = 0``, ``T_hemi = 1``). ``texture``: the
@@ -121,8 +102,8 @@ class SpectralTerms:
             t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
         else:
             r_dh, t_hemi = factors.hemispherical(GRID)
-        self.t_hemi = spectrum_on_grid(None if old is None else old.t_hemi, t_hemi)
-        self.r_dh = spectrum_on_grid(None if old is None else old.r_dh, r_dh)
+        self.t_hemi = grid_spectrum(None if old is None else old.t_hemi, t_hemi)
+        self.r_dh = grid_spectrum(None if old is None else old.r_dh, r_dh)
 
     def lookup(self, si, stack, active=True):
         """``(R_dh, T_hemi)`` at the hit's wavelengths and the thickness scale of the
@@ -138,50 +119,94 @@ class SpectralTerms:
         return r_dh, out[1]
 
 
-def absorbs(index) -> bool:
-    """Whether the film index ``index`` absorbs (``k > 0``) somewhere in 360-830 nm."""
-    mat = index.material
-    if mat is None:
-        return True
-    if mat.constant is not None:
-        return mat.constant.imag > 0
-    return bool(np.any(mat.index(GRID).imag > 0))
-
-
-def reflectance_from_props(props, plugin: str):
-    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
-    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
-    ``1 - k_d R_dh`` approach 0)."""
-    if "reflectance" not in props:
-        return uniform(0.5)
-    value = props.get("reflectance")
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        if not (0.0 <= value <= 1.0):
-            raise ThinFilmError(f"{plugin}: 'reflectance' must be in [0, 1] (an albedo), "
-                                f"got {value!r}")
-    try:
-        tex = props.get_texture("reflectance")
-    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-        raise ThinFilmError(f"{plugin}: 'reflectance' must be a number, a spectrum or a texture, "
-                            f"got {value!r} ({e})") from None
-    check_texture_range(tex, f"{plugin}: 'reflectance' (an albedo, energy conservation)", 0.0,
-                        1.0 + ALBEDO_SLACK)
-    return tex
-
-
-def constant_albedo(reflectance) -> np.ndarray | None:
-    """The base albedo per colour channel where it does not vary over the surface
-    (the colour tables then integrate the series with it), else ``None``."""
-    if reflectance.is_spatially_varying():
-        return None
-    mi = mitsuba_module()
-    si = dr.zeros(mi.SurfaceInteraction3f)
-    return np.array(dr.ravel(reflectance.eval(si)), np.float64).reshape(-1)
-
-
 def texture_gradients_refused(plugin: str, model: str) -> str:
     """Why film-parameter gradients are refused together with a ``thickness`` texture
     (models with ``R_dh``: its derivative table holds scale 1 only)."""
     return (f"{plugin}: gradients of the films' parameters together with a 'thickness' "
             f"texture are not supported with model {model!r} (R_dh's derivatives are "
             "tabulated at scale 1); differentiate the texture, or use model 'single'")
+
+
+def coating_transmission(bsdf, si, cos_theta, k_t, active):
+    """``t`` of the ``thinfilm_diffuse`` ``bsdf`` at the hit from its coating's ``k_t``
+    (``mi.UnpolarizedSpectrum``): times ``k_a`` of film ``N`` (its thickness times the
+    texture's scale) for the paper's models, times ``n_0/n_b`` for model "exact" over
+    a base medium unlike the ambient."""
+    mi = mitsuba_module()
+    n0 = bsdf.coating.ambient.eval_real(si, active)
+    if bsdf.film_n is not None:
+        scale = bsdf.coating.thickness_scale_at(si, active)
+        d = bsdf.film_n_thickness if scale is None else bsdf.film_n_thickness * scale
+        k_t = k_t * film_attenuation(n0, cos_theta, bsdf.film_n.eval(si, active), d,
+                                     si.wavelengths)
+    if bsdf.base_ratio:
+        k_t = k_t * n0 / bsdf.coating.substrate.eval_real(si, active)
+    # (the polarized amplitudes of a scaled stack come back as plain Array4f)
+    return mi.UnpolarizedSpectrum(k_t)
+
+
+def prob_specular(bsdf, si, k_r, t_i, kd, series, active, cos_i):
+    """The probability of choosing the delta component of ``bsdf``: the spectral mean
+    of ``k_r`` against that of the diffuse albedo estimate ``t_i k_d T_hemi S`` (its
+    colour table's in RGB/mono variants)."""
+    spec = spectral_mean(k_r)
+    if bsdf.colour is not None:
+        diff = spectral_mean(bsdf.colour.albedo(cos_i, kd, active))
+    else:
+        diff = spectral_mean(t_i * kd * bsdf.terms.lookup(si, bsdf.coating, active)[1] * series)
+    total = spec + diff
+    return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
+
+
+def colour_factors(factors, texture, plugin: str):
+    """``factors`` for the RGB/mono colour tables under a ``thickness`` texture: at its
+    constant scale (one that varies over the surface is refused there)."""
+    if texture is None:
+        return factors
+    if texture.is_spatially_varying():
+        raise ThinFilmError(f"{plugin}: a 'thickness' texture that varies over the surface is "
+                            f"not supported in the {mitsuba_module().variant()!r} variant (use a "
+                            "spectral variant, or a constant scale)")
+    return factors.at_scale(scale_bounds(texture, plugin))
+
+
+def constant_albedo(reflectance, rough: bool) -> np.ndarray | None:
+    """The base albedo per colour channel where it does not vary over the surface and
+    the base is Lambertian (the colour tables then integrate the series with it), else
+    ``None``."""
+    if reflectance.is_spatially_varying() or rough:
+        return None
+    mi = mitsuba_module()
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    return np.array(dr.ravel(reflectance.eval(si)), np.float64).reshape(-1)
+
+
+def diffuse_factors(bsdf):
+    """The coating's spectral factors of ``bsdf`` at the current parameters (``None``
+    without films): :class:`ExactFactors` for model "exact", else
+    :class:`~thinfilm_mi.render.diffuse.DiffuseFactors`."""
+    if bsdf.no_films:
+        return None
+    if bsdf.model == "exact":
+        return ExactFactors(bsdf.coating)
+    thickness = None if bsdf.film_n is None else scalar(bsdf.film_n_thickness)
+    return DiffuseFactors(bsdf.coating, bsdf.film_n, thickness)
+
+
+def r_dh_with_derivatives(bsdf, r_dh, si, wavelengths, index_at, active):
+    """``R_dh`` of ``bsdf`` carrying its derivatives
+    (:func:`thinfilm_mi.render.diffuse.with_derivatives`; as is for model "single")."""
+    if bsdf.model == "single" or bsdf.no_films:
+        return r_dh
+    films = list(zip(bsdf.coating.indices, bsdf.coating.thickness))
+    if bsdf.film_n is not None:
+        films.append((bsdf.film_n, bsdf.film_n_thickness))
+    return with_derivatives(bsdf.r_dh_grad, r_dh, films, si, wavelengths, index_at, active,
+                            bsdf.coating.plugin)
+
+
+def colour_gradients(bsdf, si, active) -> bool:
+    """RGB/mono AD variants: whether a film thickness or index of ``bsdf`` carries gradients."""
+    n = bsdf.film_n
+    return bsdf.coating.colour_gradients(si, active) or (n is not None and (
+        dr.grad_enabled(bsdf.film_n_thickness) or n.carries_gradients(si, active)))

@@ -284,6 +284,18 @@ class ColourDiffuse:
         res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
         return self._combine(res, kd)
 
+    def node_values(self, cos_i, cos_o, active=True):
+        """``[(r_j, M_j)]``: the nodes ``r_j`` of ``R_dh`` (opaque ``mi.Float``) and the
+        table's ``M_jc = ∫ ŵ_c t(θ_i) t(θ_o) ℓ_j(R_dh) dλ`` (``mi.Spectrum``) of a table
+        built without a fixed albedo, for a base other than Lambert's
+        (:func:`thinfilm_mi.render.orennayar.coated_integrated`)."""
+        import mitsuba as mi
+        assert not self.fixed, "node_values needs a table built without a fixed albedo"
+        res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
+        C = self.C
+        return [(r, mi.Spectrum(*res[j * C:(j + 1) * C]) if C > 1 else mi.Spectrum(res[j * C]))
+                for j, r in enumerate(self._r)]
+
     def albedo(self, cos_i, kd, active=True):
         """``∫ f cos θ_o dω_o``: the diffuse lobe's albedo for light from ``cos_i``."""
         import mitsuba as mi
