@@ -231,7 +231,10 @@ class KernelStack:
             and dr.is_jit_v(mitsuba_module().Float)
             and max((len(s.films) for s in self.plan.values()), default=0) >= AUTO_MIN_FILMS)
         self.table_failed = []
-        if not want:
+        if not want or self._differentiating():
+            # A thickness that carries gradients reads every film exactly
+            # (evaluation_side): a table built now would not be read, so an
+            # optimisation loop spends no time in builds.
             return
         for inside, side in self.plan.items():
             if side.films and not (self.tabulate == "auto" and inside in self._gave_up):
