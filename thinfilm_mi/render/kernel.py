@@ -242,8 +242,8 @@ class KernelStack:
                 if side.table is None:
                     self.table_failed.append(inside)
                     # "auto" does not retry after every parameter edit: a failed
-                    # build costs up to ~1 s (tabulate.base.MAX_BUILD_POINTS), a failed
-                    # band-limited one ~2 s more (the same budget).
+                    # build may cost up to the budget (tabulate.base.MAX_BUILD_WORK,
+                    # ~2 s) where the rejection cannot be predicted before the work.
                     self._gave_up.add(inside)
         if self.tabulate is True and self.table_failed:
             import warnings
