@@ -13,10 +13,8 @@ from thinfilm_mi.materials.catalog import refractive_index
 from thinfilm_mi.materials.catalog import resolve as resolve_material
 from thinfilm_mi.materials.model import Material
 from thinfilm_mi.materials.stack import Layer, RTResult, Stack, parse_layers
-
-__version__ = "0.1.0"
-
-from thinfilm_mi.render.registry import PLUGINS, register  # noqa: E402
+from thinfilm_mi.render.registry import PLUGINS, register
+from thinfilm_mi.version import __version__
 
 try:  # Mitsuba is a dependency, but keep the optics usable if its import fails.
     import mitsuba as _mi  # noqa: F401
@@ -42,6 +40,6 @@ def __getattr__(name: str):
 
 
 __all__ = [
-    "sweep", "design", "Stack", "Layer", "RTResult", "parse_layers", "Material", "refractive_index",
+    "__version__", "sweep", "design", "Stack", "Layer", "RTResult", "parse_layers", "Material", "refractive_index",
     "resolve_material", "register", "PLUGINS", "ThinFilmError", "MaterialError", "LLVMVersionError", "require_llvm",
 ]

@@ -47,7 +47,6 @@ here imports Dask or matplotlib.
 from __future__ import annotations
 
 import contextlib
-import inspect
 import math
 import os
 import re
@@ -171,18 +170,18 @@ def parse_size(text: str | None) -> tuple[int, int] | None:
 def setup_llvm_only() -> None:
     """:func:`thinfilm_mi.require_llvm`, its :class:`~thinfilm_mi.LLVMVersionError`
     (which says how to fix the machine) turned into a one-line :class:`UsageError`."""
-    import thinfilm_mi
+    from thinfilm_mi.llvm import LLVMVersionError, require_llvm
 
     try:
-        thinfilm_mi.require_llvm()
-    except thinfilm_mi.LLVMVersionError as e:
+        require_llvm()
+    except LLVMVersionError as e:
         raise UsageError(str(e)) from e
 
 
 def setup_variant(variant: str) -> None:
     """Check LLVM (``llvm_*`` variants), set the Mitsuba variant and register the
     thin-film plugins for it."""
-    import thinfilm_mi
+    from thinfilm_mi.render.registry import register
 
     if variant.startswith("llvm_"):
         setup_llvm_only()
@@ -194,16 +193,7 @@ def setup_variant(variant: str) -> None:
         raise UsageError(f"--variant {variant!r}: not available in this Mitsuba build; "
                          f"choose one of {', '.join(available)}")
     mi.set_variant(variant)
-    register = getattr(thinfilm_mi, "register", None)
-    if register is not None:
-        try:
-            params = inspect.signature(register).parameters
-        except (TypeError, ValueError):
-            params = {}
-        if "variant" in params:
-            register(variant=variant)
-        else:
-            register()
+    register()
 
 
 def _children(props, nodes) -> list[int]:
@@ -566,7 +556,7 @@ def output_attributes(scene_file: str | os.PathLike, variant: str, spp: int, sec
     """The EXR header attributes of a render (shared with ``thinfilm-render sweep``)."""
     import mitsuba as mi
 
-    import thinfilm_mi
+    from thinfilm_mi.version import __version__
 
     return {
         "scene": str(Path(scene_file).resolve()),
@@ -576,6 +566,6 @@ def output_attributes(scene_file: str | os.PathLike, variant: str, spp: int, sec
         "seed": int(seed),
         "passes": int(passes),
         "parameters": " ".join(f"{k}={v}" for k, v in (params or {}).items()),
-        "software": f"thinfilm-mi {thinfilm_mi.__version__}, Mitsuba {mi.__version__}",
+        "software": f"thinfilm-mi {__version__}, Mitsuba {mi.__version__}",
     }
 

@@ -33,6 +33,7 @@ from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate import colour as integrated
 from thinfilm_mi.tabulate.base import grid_coordinate
+from thinfilm_mi.tabulate.refine import LinearAxis, optical_thickness
 
 
 def colour_channels() -> str | None:
@@ -99,12 +100,12 @@ def colour_table(stack, side, side_data):
     if per_channel and not side.films:
         return None   # per-channel Fresnel, exactly as Mitsuba's conductor
     transmission = side.transmission and not side.opaque
-    axis = integrated.Axis()
+    axis = LinearAxis()
     n0 = side.n0.spectral_values(GRID, real=True)
     if side.exit_real and not per_channel:
         n_exit = side.exit.spectral_values(GRID, real=True)
         if (np.all(n0 == n0[0]) and np.all(n_exit == n_exit[0]) and n_exit[0] < n0[0]):
-            axis = integrated.Axis("tir", float(n0[0]), float(n_exit[0]))
+            axis = LinearAxis("tir", float(n0[0]), float(n_exit[0]))
     scale_max = fixed_scale = None
     tex = stack.thickness_texture
     if tex is not None and not tex.is_spatially_varying():
@@ -137,8 +138,8 @@ def colour_table(stack, side, side_data):
             return tabulate_base.evaluate_side(d, cos, rows, uniq, tabulate_base.side_indices(d, uniq),
                                      scale if per_point else None)
         # the stack's optical thickness at its thickest (the largest scale)
-        optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) * sum(
-            float(np.max(np.real(f(GRID)))) * t for f, t in data.films)
+        optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) \
+            * optical_thickness(data.films, GRID, np.real)
         return integrated.Source(evaluate, chans, integrated.first_step(optical))
 
     C = 1 if channels == "mono" else 3

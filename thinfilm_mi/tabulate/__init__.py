@@ -1,5 +1,18 @@
 """The tabulation layer: verified tables that replace the recursion in render kernels.
 
+The shared base, used by every builder:
+
+* :mod:`thinfilm_mi.tabulate.base` -- a lit side of a stack (:class:`SideData`) and its
+  exact float64 evaluation in batches, the cubic tables' angle and wavelength axes,
+  B-splines and their midpoint prediction, the :class:`Table` lookup, :class:`BuildReport`
+  and the :class:`TableCache`.
+* :mod:`thinfilm_mi.tabulate.refine` -- the :class:`~thinfilm_mi.tabulate.refine.Budget` a
+  build may spend, the first sample step from the stack's optical thickness, the
+  convergence-order refinement of the cubic tables, and the 4-point rule and angle axis
+  of the linear (colour and diffuse) tables.
+
+The builders on top:
+
 * :mod:`thinfilm_mi.tabulate.exact` -- cubic B-spline tables of the exact ``R``/``T`` over
   (angle, wavelength), their verification, and the table cache.
 * :mod:`thinfilm_mi.tabulate.band` -- tables of ``R``/``T`` convolved with a Gaussian in

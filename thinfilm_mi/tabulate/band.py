@@ -68,8 +68,6 @@ from thinfilm_mi.tabulate.band_rows import ILLUMINANTS, V_SPACING, Rows
 from thinfilm_mi.tabulate.base import (
     GHOST,
     GRAZING_COS,
-    MAX_BUILD_POINTS,
-    MAX_BUILD_WORK,
     MAX_U,
     MAX_V,
     SPLIT_ENDS,
@@ -83,6 +81,7 @@ from thinfilm_mi.tabulate.base import (
     tir_kind,
     with_ghosts,
 )
+from thinfilm_mi.tabulate.refine import Budget, convergence_factor
 
 #: Bins are half a v-node spacing wide, 0.3 σ_ν: the bins' B-spline departs
 #: from a Gaussian by its fourth cumulant, ~1e-6 of ``R_σ``.
@@ -173,25 +172,24 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     spacing = V_SPACING
     rows = Rows(side, kind, resolution, spacing)
     nu = 2 * FIRST_NU if split else FIRST_NU
+    budget = Budget(texels=max_texels, point_work=build_work(side, 1))
     first = EXPECTED_TOTAL * sum(len(x) for x in _axis(kind, nu)) * ((rows.nb - 1) / rows.step + 1)
     stats["expected_work"] = build_work(side, first)
-    if stats["expected_work"] > MAX_BUILD_WORK:
+    if not budget.allows(first):
         stats["result"] = "over budget (expected)"
         return None
-    last, points, per_row = None, 0, 0.0
+    last, per_row = None, 0.0
     for _ in range(MAX_ROUNDS + 1):
         nv = rows.nv
         # the round's new rows at the cost per row so far
         todo = sum(k not in rows._done for k in np.round(np.concatenate(_axis(kind, nu)), 12))
-        if (nu > MAX_U or nv > MAX_V or nu * nv > max_texels
-                or points + rows.points + todo * per_row > MAX_BUILD_POINTS
-                or build_work(side, points + rows.points + todo * per_row) > MAX_BUILD_WORK):
+        if nu > MAX_U or nv > MAX_V or not budget.allows(rows.points + todo * per_row, nu * nv):
             stats["result"] = "over budget"
             return None
         table, err_u, err_v = _round(rows, kind, nu)
         per_row = max(per_row, rows.points / len(rows._done))
         stats["rounds"] += 1
-        stats["points"] = points + rows.points
+        stats["points"] = budget.spent + rows.points
         stats["colour_error"] = rows.colour_error
         stats["colour_errors"] = dict(zip(ILLUMINANTS, rows.colour_errors.tolist()))
         stats["errors"].append((nu, nv, err_u, err_v))
@@ -201,20 +199,17 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
         if err_u + err_v <= error:
             stats["result"] = "table"
             return Table(table, kind, err_u + err_v, table.shape[-1], resolution)
-        if stats["points"] > MAX_BUILD_POINTS or build_work(side, stats["points"]) > MAX_BUILD_WORK:
+        if not budget.allows(rows.points):
             break
         if err_v > 0.5 * error:      # a finer v axis: every row again
             spacing *= 0.75 * (0.5 * error / err_v) ** 0.25
-            points += rows.points
+            budget.spend(rows.points)
             rows = Rows(side, kind, resolution, spacing)
         if err_u > 0.5 * error or err_u + min(err_v, 0.5 * error) > error:
             goal = 0.8 * error - min(err_v, 0.4 * error)
-            p = FIRST_ORDER
-            if last is not None and last[1] > err_u > 0 and last[0] != nu:
-                p = min(max(math.log(last[1] / err_u) / math.log((nu - 1) / (last[0] - 1)),
-                            1.0), 4.0)
+            factor = convergence_factor(nu, err_u, goal, last, FIRST_ORDER, margin=1.1, cap=6.0,
+                                        highest=4.0)
             last = (nu, err_u)
-            factor = min(1.1 * (err_u / goal) ** (1.0 / p), 6.0)
             if split:
                 nu = 2 * (int(math.ceil((nu // 2 - 1) * factor)) + 1)
             else:

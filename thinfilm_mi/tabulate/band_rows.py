@@ -25,6 +25,7 @@ from thinfilm_mi.tabulate.base import (
     evaluate_side,
     side_indices,
 )
+from thinfilm_mi.tabulate.refine import optical_thickness, power_of_two_step
 
 #: The wavelength (nm) at which ``spectral_resolution`` is the Gaussian's
 #: standard deviation in nm (it scales as λ² elsewhere).
@@ -92,11 +93,8 @@ def first_step(side: SideData, w: float) -> float:
     (Accepted panels stand for their quadratics, so the step bounds ``R_σ``'s
     error where no resonance refines it: measured on the 10-film stack against a
     brute-force convolution, 5e-5 at 16 samples per fringe, 4e-6 at 32.)"""
-    wl = np.linspace(360.0, 830.0, 48)
-    ot = sum(float(np.max(np.abs(n(wl)))) * d for n, d in side.films)
-    period = 1.0 / max(2.0 * ot, 1e-9) / w
-    k = math.floor(math.log2(max(period / 32.0, 0.5)))
-    return float(min(2.0 ** k, MAX_STEP))
+    ot = optical_thickness(side.films, np.linspace(360.0, 830.0, 48))
+    return power_of_two_step(1.0 / max(2.0 * ot, 1e-9) / w / 32.0, 0.5, MAX_STEP)
 
 
 def _bspline_weights(t):

@@ -15,8 +15,12 @@ float64 batches, the table axes, cubic B-splines, the lookup object and the cach
 * :class:`Table`: the float32 ``Texture2f`` a render kernel looks up, with opaque
   scale and offset constants; :class:`TableCache`: built tables shared by key.
 
-The builders on top are :mod:`thinfilm_mi.tabulate.exact` (tables of the exact
-values) and :mod:`thinfilm_mi.tabulate.band` (band-limited values of deep stacks).
+The refinement shared by the builders (budget, first step, convergence order, the
+linear tables' 4-point rule) is :mod:`thinfilm_mi.tabulate.refine`. The builders on
+top are :mod:`thinfilm_mi.tabulate.exact` (tables of the exact values),
+:mod:`thinfilm_mi.tabulate.band` (band-limited values of deep stacks),
+:mod:`thinfilm_mi.tabulate.colour` and :mod:`thinfilm_mi.tabulate.diffuse` (RGB and
+mono tables) and :mod:`thinfilm_mi.tabulate.hemispherical`.
 """
 from __future__ import annotations
 
@@ -72,6 +76,8 @@ def build_work(side: "SideData", points: float) -> float:
     """The cost of ``points`` exact evaluations of ``side`` in film units
     (:data:`POINT_WORK` per point on top of one per film)."""
     return float(points) * (len(side.films) + POINT_WORK)
+
+
 #: Builds evaluate stacks of this many films or more as a loop over the films: its
 #: float64 kernel is compiled once for every depth (the unrolled kernel of 30
 #: films took ~0.9 s to compile, once per depth with an empty kernel cache).

@@ -42,14 +42,22 @@ texture the table is 2-D, over the angle and the thickness scale ``s`` in
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import drjit as dr
 import numpy as np
 
 from thinfilm_mi.colour.cie import colour_differences, colour_weights, normalised_weights
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
-from thinfilm_mi.tabulate.base import u_nodes_cos, u_texel
+from thinfilm_mi.tabulate.base import BuildReport, u_texel
+from thinfilm_mi.tabulate.refine import (
+    Budget,
+    LinearAxis,
+    interleave,
+    midpoints4,
+    power_of_two_step,
+    subdivide,
+)
 
 #: The nodes are dense enough when the 4-point rule predicts the integrals at
 #: the midpoints within this CIEDE2000 (as colours under D65: R, and T, of every
@@ -130,9 +138,8 @@ def first_step(optical_thickness: float) -> float:
     a fringe, get :data:`FIRST_STEP` and the refinement finds the rest."""
     if optical_thickness <= 0:
         return MAX_FIRST_STEP
-    step = SPECTRAL_RANGE[0] ** 2 / (2.0 * optical_thickness) / 16.0
-    k = int(np.floor(np.log2(max(step, FIRST_STEP) / FIRST_STEP)))
-    return float(min(FIRST_STEP * 2 ** k, MAX_FIRST_STEP))
+    return power_of_two_step(SPECTRAL_RANGE[0] ** 2 / (2.0 * optical_thickness) / 16.0,
+                             FIRST_STEP, MAX_FIRST_STEP)
 
 
 @dataclass
@@ -255,42 +262,15 @@ def _evaluate_chunked(evaluate, cos: np.ndarray, scale, wl: np.ndarray) -> np.nd
     return np.concatenate(parts, axis=0)
 
 
-@dataclass
-class Axis:
-    """The angle axis: ``"plain"``, or ``"tir"`` split at the critical angle of the
-    constant real indices ``n0 > n_exit``."""
-    kind: str = "plain"
-    n0: float = 1.0
-    n_exit: float = 1.0
-
-    @property
-    def segments(self) -> int:
-        return 2 if self.kind == "tir" else 1
-
-    def cos(self, nodes: int) -> np.ndarray:
-        """cos θ at the ``nodes`` nodes (``nodes / 2`` per segment of a split axis)."""
-        s = np.arange(nodes, dtype=np.float64)
-        return u_nodes_cos(s, np.float64(self.n0), np.float64(self.n_exit), self.kind, nodes,
-                            ghost=0)
-
-    def midpoints(self, nodes: int) -> np.ndarray:
-        """cos θ halfway (in node coordinates) between the nodes of each segment."""
-        fine = self.cos(self.refined(nodes))
-        m = self.refined(nodes) // self.segments
-        return np.concatenate([fine[i * m + 1:(i + 1) * m:2] for i in range(self.segments)])
-
-    def refined(self, nodes: int) -> int:
-        m = nodes // self.segments
-        return (2 * m - 1) * self.segments
-
-
 class ColourTable:
     """A side's integrated ``R`` [and ``T``] per channel, over the angle (and the
     thickness scale): a float32 ``Texture1f``/``Texture2f`` with linear filtering."""
 
-    def __init__(self, values: np.ndarray, axis: Axis, channels: int, transmission: bool,
-                 scale_max: float | None):
+    def __init__(self, values: np.ndarray, axis: LinearAxis, channels: int, transmission: bool,
+                 scale_max: float | None, report: BuildReport | None = None):
         import mitsuba as mi
+        #: what the build did (:func:`build`)
+        self.report = report
         self.axis = axis
         self.channels = channels
         self.transmission = transmission
@@ -339,42 +319,6 @@ class ColourTable:
         return R, (mi.Spectrum(*res[C:2 * C]) if C > 1 else mi.Spectrum(res[C]))
 
 
-def midpoints4(values: np.ndarray, axis: int, mirror: bool = False) -> np.ndarray:
-    """Values halfway between uniform nodes along ``axis`` by the 4-point Lagrange
-    rule ``(-f0 + 9 f1 + 9 f2 - f3) / 16`` (the Dubuc-Deslauriers interpolatory
-    subdivision, exact for cubics). At the ends: the function continued as an
-    even function about the end node (``mirror``: the plain angle axis, where
-    ``R`` is even in ``w`` at normal and at grazing incidence), else 3-point rules."""
-    if mirror and values.shape[axis] >= 2:
-        f = np.moveaxis(values, axis, 0)
-        ext = np.concatenate([f[1:2], f, f[-2:-1]], axis=0)
-        mid = (-ext[:-3] + 9 * ext[1:-2] + 9 * ext[2:-1] - ext[3:]) / 16
-        return np.moveaxis(mid, 0, axis)
-    f = np.moveaxis(values, axis, 0)
-    n = f.shape[0]
-    if n < 3:
-        mid = 0.5 * (f[:-1] + f[1:])
-    else:
-        mid = np.empty((n - 1,) + f.shape[1:])
-        mid[0] = (3 * f[0] + 6 * f[1] - f[2]) / 8
-        mid[-1] = (3 * f[-1] + 6 * f[-2] - f[-3]) / 8
-        if n > 3:
-            mid[1:-1] = (-f[:-3] + 9 * f[1:-2] + 9 * f[2:-1] - f[3:]) / 16
-    return np.moveaxis(mid, 0, axis)
-
-
-def interleave(coarse: np.ndarray, mid: np.ndarray, axis: int) -> np.ndarray:
-    shape = list(coarse.shape)
-    shape[axis] = coarse.shape[axis] + mid.shape[axis]
-    out = np.empty(shape, coarse.dtype)
-    idx = [slice(None)] * len(shape)
-    idx[axis] = slice(0, None, 2)
-    out[tuple(idx)] = coarse
-    idx[axis] = slice(1, None, 2)
-    out[tuple(idx)] = mid
-    return out
-
-
 def _linear_ok(values: np.ndarray, axis: int, mirror: bool, channels: int) -> bool:
     """Whether linear interpolation between the nodes along ``axis`` is within
     :data:`LINEAR_DE` and :data:`LINEAR_ABS` of the 4-point rule at every midpoint."""
@@ -384,13 +328,17 @@ def _linear_ok(values: np.ndarray, axis: int, mirror: bool, channels: int) -> bo
     return bool(np.all(close_each(lin, mid, channels, 0, LINEAR_DE, LINEAR_ABS)))
 
 
-def _segments(values: np.ndarray, segments: int, axis: int = 1) -> list:
-    m = values.shape[axis] // segments
-    return [np.take(values, np.arange(i * m, (i + 1) * m), axis=axis) for i in range(segments)]
+def _counted(evaluate, report: BuildReport):
+    """``evaluate`` counting its points into ``report["points"]``."""
+    def counting(cos, scale, wl):
+        report["points"] += cos.size
+        return evaluate(cos, scale, wl)
+    return counting
 
 
-def build(sources: list, weights_kind: str, transmission: bool, axis: Axis,
-          scale_max: float | None = None, fixed_scale: float | None = None) -> ColourTable:
+def build(sources: list, weights_kind: str, transmission: bool, axis: LinearAxis,
+          scale_max: float | None = None, fixed_scale: float | None = None,
+          report: BuildReport | None = None) -> ColourTable:
     """The :class:`ColourTable` of one side (see the module docstring): over the
     angle, and the thickness scale in ``[0, scale_max]`` if given (:func:`_build_2d`);
     with ``fixed_scale`` every film's thickness is scaled by it (a constant
@@ -401,58 +349,56 @@ def build(sources: list, weights_kind: str, transmission: bool, axis: Axis,
     rule predicted within the tolerances (:func:`close_each`) is finished, and
     its finer nodes are the rule's; one it mispredicted is split and both
     halves are checked again (a critical angle, the grazing rise of a
-    resonant stack). The exact midpoints are kept."""
+    resonant stack). The exact midpoints are kept.
+
+    What the build did is written into ``report`` (a :class:`BuildReport`, also the
+    table's ``report``): ``points`` (spectral values evaluated), ``rounds``
+    (refinement levels), ``texels``."""
+    report = BuildReport() if report is None else report
+    report.update({"kind": axis.kind, "points": 0, "rounds": 0, "result": "building"})
+    sources = [replace(src, evaluate=_counted(src.evaluate, report)) for src in sources]
     if scale_max is not None:
-        return _build_2d(sources, weights_kind, transmission, axis, scale_max)
+        return _build_2d(sources, weights_kind, transmission, axis, scale_max, report)
     C = 1 if weights_kind == "mono" else 3
     seg = axis.segments
-    mirror = axis.kind == "plain"
     nu = FIRST_NODES * seg
     values = integrate(sources, weights_kind, axis.cos(nu), [fixed_scale])   # (1, nu, kC)
     open_u = np.ones(nu - seg, bool)                    # intervals along the angle
     while open_u.any() and nu // seg < MAX_NODES:
-        mid = np.concatenate([midpoints4(a, 1, mirror) for a in _segments(values, seg)],
-                             axis=1)
+        mid = axis.predicted(values)
         idx = np.flatnonzero(open_u)
         exact = integrate(sources, weights_kind, axis.midpoints(nu)[idx], [fixed_scale])
         bad = idx[~close_each(mid[:, idx], exact, C, axis=1)]
         mid[:, idx] = exact
-        values, nu = _interleave_u(values, mid, seg), axis.refined(nu)
+        values, nu = axis.interleave(values, mid), axis.refined(nu)
+        report["rounds"] += 1
         open_u = np.zeros(nu - seg, bool)
         open_u[2 * bad], open_u[2 * bad + 1] = True, True
-    return _for_lookup(values, axis, C, transmission, None, MAX_NODES * seg * 4)
+    return _for_lookup(values, axis, C, transmission, None, MAX_NODES * seg * 4, report)
 
 
-def _interleave_u(values: np.ndarray, mid: np.ndarray, seg: int) -> np.ndarray:
-    """Nodes and midpoints interleaved along the angle (axis 1), segment by segment."""
-    return np.concatenate([interleave(a, b, 1) for a, b in
-                           zip(_segments(values, seg), _segments(mid, seg))], axis=1)
-
-
-def _for_lookup(values: np.ndarray, axis: Axis, C: int, transmission: bool,
-                scale_max: float | None, max_texels: int) -> ColourTable:
+def _for_lookup(values: np.ndarray, axis: LinearAxis, C: int, transmission: bool,
+                scale_max: float | None, max_texels: int, report: BuildReport) -> ColourTable:
     """The table of ``values`` (scales x angles x channels), with texels added by
     the 4-point rule (along the angle, then the scale) until linear interpolation,
     the lookup, is within :data:`LINEAR_DE` / :data:`LINEAR_ABS` of it, or
     ``max_texels`` would be exceeded."""
-    seg, mirror = axis.segments, axis.kind == "plain"
+    budget = Budget(points=0, texels=max_texels)
     ns, nu = values.shape[0], values.shape[1]
-    while nu * ns * 2 <= max_texels:
-        parts = _segments(values, seg)
-        if all(_linear_ok(a, 1, mirror, C) for a in parts):
+    while budget.allows(texels=nu * ns * 2):
+        if all(_linear_ok(a, 1, axis.mirror, C) for a in axis.split(values)):
             break
-        values = np.concatenate([interleave(a, midpoints4(a, 1, mirror), 1) for a in parts],
-                                axis=1)
-        nu = axis.refined(nu)
-    while scale_max is not None and nu * ns * 2 <= max_texels:
+        values, nu = axis.interleave(values, axis.predicted(values)), axis.refined(nu)
+    while scale_max is not None and budget.allows(texels=nu * ns * 2):
         if _linear_ok(values, 0, False, C):
             break
-        values, ns = interleave(values, midpoints4(values, 0), 0), 2 * ns - 1
-    return ColourTable(values, axis, C, transmission, scale_max)
+        values, ns = subdivide(values, 0), 2 * ns - 1
+    report.update({"result": "table", "texels": values.shape[0] * values.shape[1]})
+    return ColourTable(values, axis, C, transmission, scale_max, report)
 
 
-def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
-              scale_max: float) -> ColourTable:
+def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: LinearAxis,
+              scale_max: float, report: BuildReport) -> ColourTable:
     """:func:`build` over the angle and the thickness scale ``s`` in ``[0,
     scale_max]``, refined cell by cell: every level doubles both axes; a new
     node is predicted by the 4-point rule (along its axis; a cell centre along
@@ -463,7 +409,6 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
     the thickness but little with the angle cost integrals along ``s`` only."""
     C = 1 if weights_kind == "mono" else 3
     seg = axis.segments
-    mirror = axis.kind == "plain"
     nu, ns = FIRST_NODES * seg, FIRST_SCALE_NODES
     S = np.linspace(0.0, scale_max, ns)
     values = integrate(sources, weights_kind, axis.cos(nu), list(S))      # (ns, nu, kC)
@@ -475,8 +420,7 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
         j = np.arange(nu)
         left = np.where(j % m > 0, (j // m) * (m - 1) + j % m - 1, -1)
         right = np.where(j % m < m - 1, (j // m) * (m - 1) + j % m, -1)
-        um = np.concatenate([midpoints4(a, 1, mirror) for a in _segments(values, seg)],
-                            axis=1)                                      # (ns, nu-seg)
+        um = axis.predicted(values)                                      # (ns, nu-seg)
         sm = midpoints4(values, 0)                                      # (ns-1, nu)
         cm = midpoints4(um, 0)                                          # (ns-1, nu-seg)
         need_um = np.zeros(um.shape[:2], bool)
@@ -510,12 +454,13 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Axis,
         node_l = (u_int // (m - 1)) * m + u_int % (m - 1)              # its left node
         failed = (bad_cm | bad_um[:-1] | bad_um[1:] | bad_sm[:, node_l]
                   | bad_sm[:, node_l + 1]) & open_
-        values = interleave(_interleave_u(values, um, seg), _interleave_u(sm, cm, seg), 0)
+        values = interleave(axis.interleave(values, um), axis.interleave(sm, cm), 0)
         nu, ns = axis.refined(nu), 2 * ns - 1
+        report["rounds"] += 1
         S = np.linspace(0.0, scale_max, ns)
         open_ = np.zeros((ns - 1, nu - seg), bool)
         fs, fu = np.nonzero(failed)
         for ds in (0, 1):
             for du in (0, 1):
                 open_[2 * fs + ds, 2 * fu + du] = True
-    return _for_lookup(values, axis, C, transmission, scale_max, MAX_TEXELS_2D)
+    return _for_lookup(values, axis, C, transmission, scale_max, MAX_TEXELS_2D, report)

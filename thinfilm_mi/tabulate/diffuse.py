@@ -45,8 +45,8 @@ import numpy as np
 
 from thinfilm_mi.colour import cie
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
-from thinfilm_mi.tabulate import colour as integrated
-from thinfilm_mi.tabulate.base import grid_coordinate, u_texel
+from thinfilm_mi.tabulate.base import BuildReport, grid_coordinate, u_texel
+from thinfilm_mi.tabulate.refine import Budget, LinearAxis, interleave, linear_error, subdivide
 
 #: Relative error of the Chebyshev interpolation of ``G(k_d, r)`` in ``r``.
 SERIES_TOLERANCE = 1e-5
@@ -69,12 +69,6 @@ LEVEL_ABS = 1e-4
 #: 3e-4 of ``π f`` is ΔE2000 <= 0.1 wherever the colour's Y >= 0.05 (L* varies as
 #: Y^(1/3)); darker values lie towards grazing incidence, where ``cos θ_o`` dims them.
 LINEAR_ABS = 3e-4
-
-
-def _linear_error(values: np.ndarray, axis: int) -> float:
-    f = np.moveaxis(values, axis, 0)
-    mid = np.moveaxis(integrated.midpoints4(values, axis, True), axis, 0)
-    return float(np.max(np.abs(0.5 * (f[:-1] + f[1:]) - mid)))
 
 
 def series_nodes(r_min: float, r_max: float, model: str, kd_max: float = 1.0) -> np.ndarray:
@@ -113,11 +107,6 @@ def lagrange_basis(nodes: np.ndarray, r: np.ndarray) -> np.ndarray:
     return out
 
 
-def _subdivide(values: np.ndarray, axis: int) -> np.ndarray:
-    """Nodes doubled along ``axis`` by the 4-point rule (an angle axis: even ends)."""
-    return integrated.interleave(values, integrated.midpoints4(values, axis, True), axis)
-
-
 class ColourDiffuse:
     """The integrated diffuse term and albedo estimate of one ``thinfilm_diffuse``
     (``factors``: a :class:`DiffuseFactors`).
@@ -136,7 +125,7 @@ class ColourDiffuse:
         self.C = C
         self.fixed = kd is not None
         lo, hi = SPECTRAL_RANGE
-        axis = integrated.Axis()
+        axis = LinearAxis()
         levels = {}
 
         def level_data(level):
@@ -178,14 +167,22 @@ class ColourDiffuse:
             A = ((t * t_hemi[None, :]) @ b.reshape(b.shape[0], -1)).reshape(t.shape[0], K, C)
             return M, A, nodes
 
+        #: what the build did: ``points`` (values of ``t`` evaluated), the wavelength
+        #: ``level``, the angle ``nodes`` and the table's ``texels`` (floats)
+        self.report = BuildReport(kind="plain", points=0, result="table")
+
+        def t_at(cos, wl):
+            self.report["points"] += cos.size * wl.size
+            return factors.t(cos, wl)
+
         level, nu = 0, FIRST_NODES
         cos = axis.cos(nu)
-        t = factors.t(cos, level_data(level)[0])
+        t = t_at(cos, level_data(level)[0])
         M, A, nodes = tables(level, t)
         # wavelengths: halve the step until the table (of the single-scattering
         # term, G = k_d = 1, and of the series at k_d = 1) stops changing
         while level < MAX_LEVEL:
-            t2 = factors.t(cos, level_data(level + 1)[0])
+            t2 = t_at(cos, level_data(level + 1)[0])
             M2, A2, nodes2 = tables(level + 1, t2)
             same = self._close(M, nodes, M2, nodes2)
             level, t, M, A, nodes = level + 1, t2, M2, A2, nodes2
@@ -195,22 +192,24 @@ class ColourDiffuse:
         # new nodes only)
         wl = level_data(level)[0]
         while nu < MAX_NODES:
-            t = integrated.interleave(t, factors.t(axis.midpoints(nu), wl), 0)
+            t = interleave(t, t_at(axis.midpoints(nu), wl), 0)
             M2, A2, nodes2 = tables(level, t)
-            pred = _subdivide(_subdivide(M, 0), 1)
+            pred = subdivide(subdivide(M, 0, True), 1, True)
             same = self._close(pred, nodes, M2, nodes2)
             nu, M, A, nodes = 2 * nu - 1, M2, A2, nodes2
             if same:
                 break
         # texels for the linear lookup (judged on the values at k_d = 1)
-        while nu < 4 * MAX_NODES and (2 * nu - 1) ** 2 * M.shape[2] * C <= MAX_TABLE_FLOATS:
+        budget = Budget(points=0, texels=MAX_TABLE_FLOATS)
+        while nu < 4 * MAX_NODES and budget.allows(texels=(2 * nu - 1) ** 2 * M.shape[2] * C):
             m = self._at_one(M, nodes)
-            if max(_linear_error(m, ax) for ax in (0, 1)) <= LINEAR_ABS:
+            if max(float(np.max(np.abs(linear_error(m, ax, True)))) for ax in (0, 1)) <= LINEAR_ABS:
                 break
-            M, A = _subdivide(_subdivide(M, 0), 1), _subdivide(A, 0)
+            M, A = subdivide(subdivide(M, 0, True), 1, True), subdivide(A, 0, True)
             nu = 2 * nu - 1
         self.nodes = nodes
         self.nu = nu
+        self.report.update(level=level, nodes=nu, texels=M.size + A.size)
         self.values = M                       # (nu, nu, K, C): for tests
         self.albedo_values = A                # (nu, K, C)
         K = nodes.size
@@ -266,7 +265,7 @@ class ColourDiffuse:
         for j, g in enumerate(self._weights(kd)):
             vals = res[j * C:(j + 1) * C]
             out += g * (mi.Spectrum(*vals) if C > 1 else mi.Spectrum(vals[0]))
-        return out   # not clamped: see integrated.ColourTable.lookup
+        return out   # not clamped: see tabulate.colour.ColourTable.lookup
 
     def r_dh_at(self, wavelengths, active=True):
         """``R_dh`` at ``wavelengths`` (``mi.Spectrum``, nm), detached."""

@@ -66,7 +66,6 @@ from thinfilm_mi.tabulate.base import (
     GHOST,
     GRAZING_COS,
     HALF_PI,
-    MAX_BUILD_POINTS,
     MAX_BUILD_WORK,
     MAX_ROUNDS,
     MAX_TEXELS,
@@ -93,6 +92,7 @@ from thinfilm_mi.tabulate.base import (
     v_texel,
     with_ghosts,
 )
+from thinfilm_mi.tabulate.refine import Budget, convergence_factor
 
 
 # -- resolution ----------------------------------------------------------------
@@ -413,8 +413,10 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         stats["result"] = "probe over budget"
         return None
     nu, nv = table_resolution(side, error, wavelengths)
+    budget = Budget(texels=max_texels, point_work=build_work(side, 1))
     pu, pv = _estimate(side, kind, error, max_texels, stats)
-    stats["points"] = stats["probe_points"]
+    budget.spend(stats["probe_points"])
+    stats["points"] = budget.spent
     if pu is None:
         stats["result"] = "rejected by the probe"
         return None
@@ -428,11 +430,10 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         # the nodes (a split axis's ghosts are not evaluated), and the checks
         points = (nu + (0 if split else 2 * g)) * (nv + 2 * g) + nu * nv \
             + len(side.kinks) * (nu // 2)
-        if (nu > MAX_U or nv > MAX_V or nu * nv > max_texels
-                or stats["points"] + points > MAX_BUILD_POINTS
-                or build_work(side, stats["points"] + points) > MAX_BUILD_WORK):
+        if nu > MAX_U or nv > MAX_V or not budget.allows(points, nu * nv):
             return None
-        stats["points"] += points
+        budget.spend(points)
+        stats["points"] = budget.spent
         stats["rounds"] += 1
         m = nu // 2
         su = np.arange(0 if split else -g, nu + (0 if split else g), dtype=np.float64)
@@ -479,27 +480,22 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
             return Table(coeffs, kind, err_u + err_v, nodes.shape[-1])
         # Refine: aim at REFINE_SHARE of the target; an axis already within
         # half of that keeps its nodes and leaves the rest to the other.
-        budget = REFINE_SHARE * error
-        if err_u <= 0.5 * budget:
-            goal = {"u": err_u, "v": budget - err_u}
-        elif err_v <= 0.5 * budget:
-            goal = {"u": budget - err_v, "v": err_v}
+        aim = REFINE_SHARE * error
+        if err_u <= 0.5 * aim:
+            goal = {"u": err_u, "v": aim - err_u}
+        elif err_v <= 0.5 * aim:
+            goal = {"u": aim - err_v, "v": err_v}
         else:
-            goal = {"u": 0.5 * budget, "v": 0.5 * budget}
+            goal = {"u": 0.5 * aim, "v": 0.5 * aim}
         factors = {}
         for axis, n, err in (("u", nu, err_u), ("v", nv, err_v)):
             if err <= goal[axis]:
                 factors[axis] = 1.0
                 continue
-            # Once the fringes are resolved the error falls as h^order; before
-            # that more slowly: use the order seen since the last round.
-            p, last = order, history.get(axis)
-            if last is not None and last[0] != n and last[1] > 0 and err > 0:
-                p = min(max(math.log(last[1] / err) / math.log((n - 1) / (last[0] - 1)), 1.0),
-                        order)
-            factors[axis] = min(3.0, 1.05 * (err / goal[axis]) ** (1.0 / p))
+            factors[axis] = convergence_factor(n, err, goal[axis], history.get(axis), order,
+                                               margin=1.05, cap=3.0)
             history[axis] = (n, err)
-        if nu * nv * factors["u"] * factors["v"] > 4 * max_texels:
+        if not budget.allows(texels=nu * nv * factors["u"] * factors["v"] / 4):
             return None   # hopeless within the budget: do not spend the time
         nu = int(math.ceil((nu - 1) * factors["u"])) + 1
         nv = int(math.ceil((nv - 1) * factors["v"])) + 1
