@@ -231,7 +231,10 @@ class KernelStack:
             and dr.is_jit_v(mitsuba_module().Float)
             and max((len(s.films) for s in self.plan.values()), default=0) >= AUTO_MIN_FILMS)
         self.table_failed = []
-        if not want:
+        if not want or self._differentiating():
+            # A thickness that carries gradients reads every film exactly
+            # (evaluation_side): a table built now would not be read, so an
+            # optimisation loop spends no time in builds.
             return
         for inside, side in self.plan.items():
             if side.films and not (self.tabulate == "auto" and inside in self._gave_up):
@@ -239,8 +242,8 @@ class KernelStack:
                 if side.table is None:
                     self.table_failed.append(inside)
                     # "auto" does not retry after every parameter edit: a failed
-                    # build costs up to ~1 s (tabulate.base.MAX_BUILD_POINTS), a failed
-                    # band-limited one ~2 s more (the same budget).
+                    # build may cost up to the budget (tabulate.base.MAX_BUILD_WORK,
+                    # ~2 s) where the rejection cannot be predicted before the work.
                     self._gave_up.add(inside)
         if self.tabulate is True and self.table_failed:
             import warnings
