@@ -91,8 +91,8 @@ def make_scene(plugin, tabulate, thickness_texture=False):
     bsdf = {"type": plugin, "layers": LAYERS, **PLUGINS[plugin]}
     if plugin != "thinfilm_diffuse":
         bsdf["tabulate"] = tabulate
-        if thickness_texture:
-            bsdf["thickness"] = 1.0
+    if thickness_texture:
+        bsdf["thickness"] = 1.0
     return mi.load_dict({
         "type": "scene",
         "integrator": {"type": "path", "max_depth": 4},
@@ -130,9 +130,9 @@ def _plugin_configs():
             if plugin == "thinfilm_diffuse" and tabulate == "false":
                 continue   # thinfilm_diffuse has no 'tabulate' choice to make here
             out.append((plugin, tabulate, False))
-        if plugin != "thinfilm_diffuse":
-            # a thickness texture (its 'thickness.value' key) forces exact evaluation
-            out.append((plugin, "false", True))
+        # a thickness texture (its 'thickness.value' key) forces exact evaluation
+        # (thinfilm_diffuse: and its table of R_dh over the scale)
+        out.append((plugin, "false", True))
     return out
 
 

@@ -26,7 +26,17 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
    - |string|
    - ``"multiple"`` (default): the paper's model plus the interreflection
      between the base and the coating; ``"single"``: the paper's first-order
-     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10).
+     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10);
+     ``"exact"``: the whole stack, coherent, over a base medium (see below).
+ * - base_ior
+   - |float| or |string|
+   - Model ``"exact"`` only: the real index of the medium between the films and
+     the base (default: ``ext_ior``).
+ * - thickness
+   - |float| or |texture|
+   - Optional scale on every film's thickness at the hit (e.g. a ``bitmap`` with
+     ``raw="true"``); ``R_dh``, ``T_hemi`` are tabulated over its range (read at
+     load). RGB/mono variants accept a constant scale only.
  * - roughness
    - |float| or |texture|
    - Oren–Nayar roughness ``σ`` of the base (radians, the standard deviation of the
@@ -181,7 +191,21 @@ the terms of the colour table of a textured ``reflectance`` (its expansion in ``
 with ``f_b``, ``E``, ``Ē`` per channel; polarized ones depolarize, as for Lambert. While
 ``roughness`` is 0 everywhere without gradients the Lambertian code runs.
 
-**Specular part.** Both models use the paper's ``k_r`` (coating over film
+**model = "exact"**. Every film, absorbing or not, is part of one coherent stack
+between the ambient and a base medium of index ``n_b`` (``base_ior``); the base
+is Lambertian in that medium. Specular part: the stack's exact ``R(θ_i)``.
+Diffuse part: ``f = t(θ_i) t(θ_o) k_d / (π (1 - k_d R_dh))`` with ``t = T n_0/n_b``
+(``T``: the exact transmittance into the base medium; the two factors ``n_0/n_b``
+are ``plastic``'s radiance factor ``1/η²``) and ``R_dh = 2∫R_up μ dμ`` over the
+base medium's directions (``R_up``: the reversed stack lit from the base; total
+reflection beyond its critical angle, frustrated by absorbing films). Assumes
+a smooth, parallel stack, incoherent light in the base and a base that re-diffuses
+all it receives. The albedo ``R + t k_d T_hemi/(1 - k_d R_dh)`` (``T_hemi = 2∫T_up μ
+dμ``) is at most 1 (``R + T <= 1`` for the same stack), 1 for a lossless stack on a
+white base; ``f`` is symmetric. Where film ``N`` is a few nm of metal the paper's
+models treat it as bulk: for ``SiO2 300; Au 4`` their diffuse term is 20-500x darker.
+
+**Specular part.** The paper's models use the paper's ``k_r`` (coating over film
 ``N``; the exact full-stack reflectance when there is no absorbing film ``N``).
 The exact reflectance of *all* films over the base medium is not used with an
 absorbing film ``N``: paired with the first-order ``t`` it can exceed energy
@@ -259,11 +283,8 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.optics.core import film_attenuation
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.colour import (
     attach_gradient,
@@ -271,24 +292,32 @@ from thinfilm_mi.render.colour import (
     prepare_gradients,
 )
 from thinfilm_mi.render.diffuse import (
-    DiffuseFactors,
     absorbs,
     colour_estimate,
-    grid_spectrum,
     reflectance_from_props,
     update_derivative_table,
-    with_derivatives,
+)
+from thinfilm_mi.render.diffuse_exact import (
+    SpectralTerms,
+    coating_transmission,
+    colour_factors,
+    colour_gradients,
+    constant_albedo,
+    diffuse_factors,
+    prob_specular,
+    r_dh_with_derivatives,
+    texture_gradients_refused,
 )
 from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.media import real_index
 from thinfilm_mi.render.orennayar import OrenNayar, coated, coated_integrated, series_term
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
-from thinfilm_mi.render.textures import scalar
-from thinfilm_mi.render.variant import check_variant, opaque_float, spectral_mean
+from thinfilm_mi.render.variant import check_variant, opaque_float
 from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 
 NAME = "thinfilm_diffuse"
-MODELS = ("single", "multiple")
+MODELS = ("single", "multiple", "exact")
 
 
 class ThinFilmDiffuse(mi.BSDF):
@@ -298,12 +327,18 @@ class ThinFilmDiffuse(mi.BSDF):
         self.mode = modes.current()
         model = props.get("model", "multiple")
         if model not in MODELS:
-            raise ThinFilmError(f"{NAME}: 'model' must be 'single' or 'multiple', got {model!r}")
+            raise ThinFilmError(f"{NAME}: 'model' must be 'single', 'multiple' or 'exact', "
+                                f"got {model!r}")
         self.model = model
         films = films_from_props(props, NAME)
         ext = ext_ior_from_props(props)
+        if "base_ior" in props and model != "exact":
+            raise ThinFilmError(f"{NAME}: 'base_ior' is a parameter of model 'exact' only "
+                                f"(model is {model!r})")
+        base = real_index(props.get("base_ior"), "base_ior") if "base_ior" in props else ext
         self.reflectance = reflectance_from_props(props, NAME)
-        options = stack_options_from_props(props, NAME, thickness_texture=False)
+        options = stack_options_from_props(props, NAME)
+        self.texture = options["thickness_texture"]
         self.base = OrenNayar(props, NAME)   # roughness: render/orennayar.py
         check_unqueried(props, NAME)
 
@@ -311,7 +346,11 @@ class ThinFilmDiffuse(mi.BSDF):
         # RGB/mono variants read only k_r from the coating's colour table: the
         # transmission enters through the diffuse table (coated_diffuse)
         sides = {False: not self.mode.integrated}
-        if films and absorbs(films[-1][0]):
+        if model == "exact":
+            # The whole stack, coherent, over the base medium.
+            self.coating = KernelStack(films, ext, base, sides=sides, **options)
+            self.film_n = self.film_n_thickness = None
+        elif films and absorbs(films[-1][0]):
             # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
             self.coating = KernelStack(films[:-1], ext, films[-1][0], sides=sides, **options)
             self.film_n = films[-1][0]
@@ -322,8 +361,10 @@ class ThinFilmDiffuse(mi.BSDF):
             self.film_n = None
             self.film_n_thickness = None
 
-        self.t_hemi = None
-        self.r_dh = None
+        #: spectral variants: R_dh and T_hemi (SpectralTerms)
+        self.terms = None
+        #: model "exact" over a base medium that differs from the ambient: t carries n_0/n_b
+        self.base_ratio = model == "exact" and base is not ext
         #: RGB/mono variants: the diffuse term integrated as a product (coated_diffuse)
         self.colour = None
         self._update_hemispherical()
@@ -336,81 +377,51 @@ class ThinFilmDiffuse(mi.BSDF):
         self.guard = ParameterGuard(self, NAME)
 
     # -- load-time tables ----------------------------------------------------
-    def _constant_albedo(self) -> np.ndarray | None:
-        """The base albedo per colour channel where it does not vary over the
-        surface (the colour tables then integrate the series with it), else ``None``."""
-        if self.reflectance.is_spatially_varying() or self.base.rough:
-            return None
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        return np.array(dr.ravel(self.reflectance.eval(si)), np.float64).reshape(-1)
-
     def _update_hemispherical(self) -> None:
         """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
         in RGB/mono variants the integrated diffuse tables instead. In AD variants
         (model "multiple") also ``R_dh``'s derivatives (:attr:`r_dh_grad`)."""
-        factors = self._diffuse_factors()
+        factors = diffuse_factors(self)
         self.r_dh_grad = None
         self._update_derivatives()
         if self.mode.integrated:
             if factors is not None:
+                factors = colour_factors(factors, self.texture, NAME)
                 self.colour = ColourDiffuse(factors, self.model, colour_channels(),
-                                            self._constant_albedo())
+                                            constant_albedo(self.reflectance, self.base.rough))
                 if self.film_n is not None and dr.is_diff_v(mi.Float):
                     prepare_gradients([self.film_n])
             return
-        if factors is None:
-            t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
-        else:
-            r_dh, t_hemi = factors.hemispherical(GRID)
-        self.t_hemi = grid_spectrum(self.t_hemi, t_hemi)
-        self.r_dh = grid_spectrum(self.r_dh, r_dh)
-
-    def _diffuse_factors(self) -> DiffuseFactors | None:
-        """The coating's spectral factors at the current parameters (``None`` without films)."""
-        if self.no_films:
-            return None
-        thickness = None if self.film_n is None else scalar(self.film_n_thickness)
-        return DiffuseFactors(self.coating, self.film_n, thickness)
+        self.terms = SpectralTerms(factors, self.texture, NAME, self.terms)
 
     def _update_derivatives(self) -> None:
         """``R_dh``'s derivative table, built or dropped
         (:func:`thinfilm_mi.render.diffuse.update_derivative_table`)."""
-        self.r_dh_grad = update_derivative_table(self, self._diffuse_factors(), self.model,
+        self.r_dh_grad = update_derivative_table(self, diffuse_factors(self), self.model,
                                                  self.r_dh_grad)
+        if self.r_dh_grad is not None and self.texture is not None:
+            self.r_dh_grad = None
+            raise ThinFilmError(texture_gradients_refused(NAME, self.model))
 
     # -- kernel helpers ------------------------------------------------------
     def _factors(self, si, cos_theta, active, transmission: bool):
         """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
         and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
         resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
+        k_r = mi.UnpolarizedSpectrum(resp.R)
         if not transmission:
-            return resp.R, None, resp.reflection
-        k_r, k_t = resp.R, resp.T
-        if self.film_n is not None:
-            n0 = self.coating.ambient.eval_real(si, active)
-            k_t = k_t * film_attenuation(n0, cos_theta, self.film_n.eval(si, active),
-                                         self.film_n_thickness, si.wavelengths)
-        return k_r, k_t, resp.reflection
+            return k_r, None, resp.reflection
+        return k_r, coating_transmission(self, si, cos_theta, resp.T, active), resp.reflection
 
     def _series(self, si, kd, active):
         """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
         if self.model == "single":
-            return mi.Spectrum(1.0)
+            return mi.UnpolarizedSpectrum(1.0)
         return dr.rcp(1.0 - kd * self._r_dh(si, active))
 
     def _r_dh(self, si, active):
-        return self._with_derivatives(self.r_dh.eval(si, active), si, si.wavelengths,
+        return r_dh_with_derivatives(self, self.terms.lookup(si, self.coating, active)[0], si, si.wavelengths,
                                       lambda ix: ix.eval(si, active), active)
-
-    def _with_derivatives(self, r_dh, si, wavelengths, index_at, active):
-        """``R_dh`` carrying its derivatives (:func:`thinfilm_mi.render.diffuse.with_derivatives`)."""
-        if self.model == "single" or self.no_films:
-            return r_dh
-        films = list(zip(self.coating.indices, self.coating.thickness))
-        if self.film_n is not None:
-            films.append((self.film_n, self.film_n_thickness))
-        return with_derivatives(self.r_dh_grad, r_dh, films, si, wavelengths, index_at, active,
-                                NAME)
 
     def _diffuse(self, si, kd, cos_i, wo, t_i, series, active):
         """``π f`` towards ``wo``: ``k_d t_i t_o S`` per wavelength (a rough base:
@@ -419,7 +430,7 @@ class ThinFilmDiffuse(mi.BSDF):
         cos_o = mi.Frame3f.cos_theta(wo)
         base = self.base.terms(si, kd, wo, active) if self.base.rough else None
         if self.colour is not None:
-            multiple = self.model == "multiple"
+            multiple = self.model != "single"
             if base is None:
                 value = self.colour.value(cos_i, cos_o, kd, active)
                 g = lambda c, r_dh: self.colour.series(kd[c], r_dh)
@@ -427,13 +438,13 @@ class ThinFilmDiffuse(mi.BSDF):
                 value = coated_integrated(self.colour.node_values(cos_i, cos_o, active), base,
                                           multiple)
                 g = lambda c, r_dh: series_term(base.channel(c), r_dh, multiple)
-            if self._colour_gradients(si, active):
+            if colour_gradients(self, si, active):
                 value = attach_gradient(value, self._colour_estimate(si, cos_i, cos_o, active, g))
             return value
         _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
         if base is not None:
-            r_dh = self._r_dh(si, active) if self.model == "multiple" else None
-            return coated(base, t_i, t_o, r_dh, self.model == "multiple")
+            r_dh = self._r_dh(si, active) if self.model != "single" else None
+            return coated(base, t_i, t_o, r_dh, self.model != "single")
         return kd * t_i * t_o * series
 
     def _bare(self, si, wo, active):
@@ -441,25 +452,11 @@ class ThinFilmDiffuse(mi.BSDF):
         kd = self.reflectance.eval(si, active)
         return self.base.terms(si, kd, wo, active).pi_f if self.base.rough else kd
 
-    def _colour_gradients(self, si, active) -> bool:
-        """RGB/mono AD variants: whether a film thickness or index carries gradients."""
-        n = self.film_n
-        return self.coating.colour_gradients(si, active) or (n is not None and (
-            dr.grad_enabled(self.film_n_thickness) or n.carries_gradients(si, active)))
-
     def _colour_estimate(self, si, cos_i, cos_o, active, g):
         """:func:`~thinfilm_mi.render.diffuse.colour_estimate` of this BSDF."""
         return colour_estimate(self.coating, self.film_n, self.film_n_thickness, self.colour.r_dh_at,
-                               self._with_derivatives, si, cos_i, cos_o, active, g)
-
-    def _prob_specular(self, si, k_r, t_i, kd, series, active, cos_i):
-        spec = spectral_mean(k_r)
-        if self.colour is not None:
-            diff = spectral_mean(self.colour.albedo(cos_i, kd, active))
-        else:
-            diff = spectral_mean(t_i * kd * self.t_hemi.eval(si, active) * series)
-        total = spec + diff
-        return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
+                               lambda *a: r_dh_with_derivatives(self, *a), si, cos_i, cos_o, active, g,
+                               self.base_ratio)
 
     # -- BSDF interface ------------------------------------------------------
     def sample(self, ctx, si, sample1, sample2, active=True):
@@ -492,7 +489,7 @@ class ThinFilmDiffuse(mi.BSDF):
         if has_spec and has_diff:
             # detached: a sampling decision divides the weight as a constant
             # (the weight's gradient is then that of k_r, resp. the diffuse term)
-            prob_spec = dr.detach(self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+            prob_spec = dr.detach(prob_specular(self, si, k_r, t_i, kd, series, active, cos_i))
         else:
             prob_spec = mi.Float(1.0 if has_spec else 0.0)
         sel_spec = active & (sample1 < prob_spec)
@@ -549,7 +546,7 @@ class ThinFilmDiffuse(mi.BSDF):
                 self._diffuse(si, kd, cos_i, wo, t_i, series, active) * dr.inv_pi * cos_o,
                 self.mode.depolarized, ctx, si.wi, wo)
         if need_prob:
-            pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+            pdf = pdf * (1.0 - prob_specular(self, si, k_r, t_i, kd, series, active, cos_i))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
     def eval(self, ctx, si, wo, active=True):
@@ -579,9 +576,9 @@ class ThinFilmDiffuse(mi.BSDF):
             if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
                 dr.make_opaque(self.film_n_thickness)
             colour_albedo = self.colour is not None and self.colour.fixed
-            if self.base.refresh() or changed is None or any(k.startswith("layers.") or (colour_albedo and
-                                                                  k.startswith("reflectance"))
-                                      for k in changed):
+            if self.base.refresh() or changed is None or any(
+                    k.startswith(("layers.", "thickness")) or (colour_albedo and k.startswith("reflectance"))
+                    for k in changed):
                 self._update_hemispherical()
             else:
                 # gradients enabled or disabled on an unchanged value (the guard

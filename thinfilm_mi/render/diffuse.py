@@ -25,6 +25,7 @@ from thinfilm_mi.render.colour import GradientSampler, index_on_wavelengths
 from thinfilm_mi.render.kernel import side_rt
 from thinfilm_mi.render.params import ALBEDO_SLACK
 from thinfilm_mi.render.textures import check_texture_range, mitsuba_module, regular, scalar, uniform
+from thinfilm_mi.tabulate.diffuse_scale import exact_hemispherical, paper_hemispherical
 from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable, hemispherical_factors, r_dh_partials
 
 __all__ = ["DiffuseFactors", "film_gradients", "update_derivative_table", "with_derivatives", "absorbs",
@@ -38,14 +39,28 @@ class DiffuseFactors:
     (R_dh, T_hemi)`` (over ``wl``), for the coating ``coating`` (a
     :class:`~thinfilm_mi.render.kernel.KernelStack`) over the absorbing film ``film_n``
     (a ``SpectralIndex``) of ``film_n_thickness`` nm, or over the base medium
-    (``film_n`` ``None``)."""
+    (``film_n`` ``None``); every thickness times ``scale`` (a ``thickness`` texture's
+    value). :meth:`hemispherical_scales` gives the terms at several scales."""
 
-    def __init__(self, coating, film_n, film_n_thickness: float | None):
+    def __init__(self, coating, film_n, film_n_thickness: float | None, scale: float = 1.0):
         self.coating, self.film_n, self.film_n_thickness = coating, film_n, film_n_thickness
+        self.scale = float(scale)
+
+    def at_scale(self, scale: float) -> "DiffuseFactors":
+        """The same factors with every thickness times ``scale`` (instead of :attr:`scale`)."""
+        return DiffuseFactors(self.coating, self.film_n, self.film_n_thickness, scale)
+
+    def hemispherical_scales(self, wl, scales):
+        """``(R_dh, T_hemi)`` at every thickness scale of ``scales``, each of shape
+        ``(len scales, len wl)``."""
+        n0, coat, n_exit, fn = self.at_scale(1.0)._arguments(wl)
+        if fn is None:   # the coating over the (matched) base medium: the exact terms
+            return exact_hemispherical(n0, coat, n_exit.real, wl, scales)
+        return paper_hemispherical(n0, coat, fn, wl, scales)
 
     def t(self, cos, wl):
 
-        _, T = side_rt(self.coating, False, cos, wl)
+        _, T = side_rt(self.coating, False, cos, wl, self.scale)
         if self.film_n is None:
             return T
         n0 = self.coating.ambient.spectral_values(wl, real=True)
@@ -53,16 +68,18 @@ class DiffuseFactors:
         beta2 = (n0 ** 2)[None, :] * (1.0 - cos ** 2)[:, None]
         q = np.sqrt((n_f ** 2)[None, :] - beta2 + 0j)
         q = np.where(q.imag < 0, -q, q)           # the decaying root
-        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness)
+        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness
+                          * self.scale)
 
     def _arguments(self, wl):
         """:func:`~thinfilm_mi.tabulate.hemispherical.hemispherical_factors`'s arguments at ``wl``."""
 
         c = self.coating
         n0 = c.ambient.spectral_values(wl, real=True)
-        coat = [(ix.spectral_values(wl), scalar(d)) for ix, d in zip(c.indices, c.thickness)]
+        coat = [(ix.spectral_values(wl), scalar(d) * self.scale)
+                for ix, d in zip(c.indices, c.thickness)]
         fn = None if self.film_n is None else (self.film_n.spectral_values(wl),
-                                               self.film_n_thickness)
+                                               self.film_n_thickness * self.scale)
         return n0, coat, c.substrate.spectral_values(wl), fn
 
     def hemispherical(self, wl):
@@ -93,7 +110,7 @@ def update_derivative_table(bsdf, factors, model: str, table):
     missing, kept if it is there, ``None`` when nothing carries gradients (or for
     model "single", or no films). Never needed at scene load, where nothing carries
     gradients: the reverse-mode pass then never runs on Mitsuba's loader threads."""
-    if factors is None or model != "multiple" or not film_gradients(bsdf):
+    if factors is None or model == "single" or not film_gradients(bsdf):
         return None
     return table if table is not None else DerivativeTable(factors.r_dh_partials(GRID))
 
@@ -174,24 +191,29 @@ def grid_spectrum(tex, values):
 
 
 def colour_estimate(coating, film_n, film_n_thickness, r_dh_at, with_derivatives, si, cos_i, cos_o,
-                    active, g):
+                    active, g, base_ratio: bool = False):
     """An unbiased estimate of the integrated diffuse term of a ``thinfilm_diffuse`` (its
     ``coating``, absorbing film ``film_n`` or ``None``, the colour table's ``r_dh_at``) at
     stratified wavelengths (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose
     gradients the table's value takes; ``R_dh`` with its derivatives (``with_derivatives``,
     the plugin's :func:`with_derivatives`); ``g(c, R_dh)``: the base's term of channel ``c``
-    (``G(k_d,c, R_dh)`` for Lambert's)."""
+    (``G(k_d,c, R_dh)`` for Lambert's). ``base_ratio``: ``t`` carries ``n_0/n_b`` (model
+    "exact" over a base medium unlike the ambient); the thickness texture scales every film."""
     mi = mitsuba_module()
     sampler = GradientSampler.get()
     wl = sampler.wavelengths(si)
+    scale = coating.thickness_scale_at(si, active)
+    n0, _ = index_on_wavelengths(coating.ambient, si, wl, active)
 
     def t(cos):
-        _, k_t = coating.at_wavelengths(False, si, cos, active, True, None, wl)
+        _, k_t = coating.at_wavelengths(False, si, cos, active, True, scale, wl)
+        if base_ratio:
+            k_t = k_t * n0 / index_on_wavelengths(coating.substrate, si, wl, active)[0]
         if film_n is None:
             return k_t
-        n0, _ = index_on_wavelengths(coating.ambient, si, wl, active)
+        d = film_n_thickness if scale is None else film_n_thickness * scale
         return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(film_n, si, wl, active)),
-                                      film_n_thickness, wl)
+                                      d, wl)
     product = t(cos_i) * t(cos_o)
     r_dh = with_derivatives(r_dh_at(wl, active), si, wl,
                             lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)

@@ -534,15 +534,19 @@ def side_data(side: _Side, transmission: bool, channel: dict | None = None) -> t
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
 
 
-def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.ndarray):
+def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.ndarray,
+            scale: float = 1.0):
     """Exact float64 ``(R, T)`` of the planned side ``inside`` of ``stack`` at every
     angle ``cos`` and wavelength (shape ``(len cos, len wavelengths)`` each), as
-    the colour tables see it (spectral values of every medium)."""
+    the colour tables see it (spectral values of every medium), every film's
+    thickness times ``scale``."""
     side = stack.plan[inside]
     data = with_absorbing(side_data(side, True))
     wl = np.asarray(wavelengths, np.float64)
     rows = np.tile(np.arange(wl.size), cos.size)
-    out = tabulate_base.evaluate_side(data, np.repeat(cos, wl.size), rows, wl, tabulate_base.side_indices(data, wl))
+    points = np.repeat(cos, wl.size)
+    out = tabulate_base.evaluate_side(data, points, rows, wl, tabulate_base.side_indices(data, wl),
+                                      None if scale == 1.0 else np.full(points.size, float(scale)))
     out = out.reshape(cos.size, wl.size, 2)
     T = np.zeros_like(out[..., 0]) if side.opaque else out[..., 1]
     return out[..., 0], T
