@@ -57,6 +57,7 @@ mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
 from thinfilm_mi.render import kernel as tf_kernel  # noqa: E402
 from thinfilm_mi.tabulate import base as tabulate_base  # noqa: E402
+from thinfilm_mi.tabulate.band_rows import sigma_nu  # noqa: E402
 
 AMBIENT = 1.000277
 ERRORS = (1e-2, 3e-3, 1e-3, 3e-4)
@@ -81,14 +82,14 @@ def band_reference(bsdf, cos64, wl64, n, step=0.002):
     evaluator on a grid of ``step`` nm over ±6 σ_ν, Gaussian-weighted."""
     from thinfilm_mi.render import kernel
     side = kernel.side_data(bsdf.stack.plan[False], False)
-    sig = band_rows.sigma_nu(bsdf.stack.spectral_resolution)
+    sig = sigma_nu(bsdf.stack.spectral_resolution)
     cos, wl = np.broadcast_to(cos64[None, :], wl64.shape).ravel()[:n], wl64.ravel()[:n]
     out = np.empty(n)
     for i in range(n):
         nu0 = 1.0 / wl[i]
         lam = np.arange(1.0 / (nu0 + 6 * sig), 1.0 / (nu0 - 6 * sig), step)
         R = tabulate_base.evaluate_side(side, np.full(lam.size, cos[i]), np.arange(lam.size), lam,
-                             tabulate_base.side_indices(side, lam))[:, 0]
+                                        tabulate_base.side_indices(side, lam))[:, 0]
         g = np.exp(-0.5 * ((1.0 / lam - nu0) / sig) ** 2) / (lam * lam)    # dν = dλ / λ²
         out[i] = float(np.sum(R * g) / np.sum(g))
     return out

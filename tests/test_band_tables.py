@@ -131,7 +131,7 @@ def test_near_zeros_finds_a_narrow_pole():
             assert abs(pos[0] - z0.real) < 1e-6 and abs(dist[0] - abs(z0.imag)) < 1e-6
 
 
-def test_smooth_terms_give_the_exact_reflectance(monkeypatch):
+def test_amplitudes_give_the_exact_reflectance(monkeypatch):
     """The first level's amplitudes (no resonant denominator) give R = |N|^2/|D|^2
     of the float64 Stack to the rounding of the inputs (measured 1.4e-8: the
     kernel's indices and thicknesses are float32 spectra and values; a wrong
@@ -139,8 +139,8 @@ def test_smooth_terms_give_the_exact_reflectance(monkeypatch):
     side = _resonant_side(monkeypatch, films=10)
     wl = np.linspace(400.0, 700.0, 301)
     cos = np.full(wl.size, 0.8)
-    R = band_rows.powers_of(band_rows.smooth_terms(side, cos, np.arange(wl.size), wl,
-                                                         tabulate_base.side_indices(side, wl)), False)[:, 0]
+    terms, _ = band_rows.amplitudes(side, cos, np.arange(wl.size), wl, tabulate_base.side_indices(side, wl))
+    R = band_rows.powers_of(terms, False)[:, 0]
     layers = [(n(np.array([500.0]))[0].real, d) for n, d in side.films]
     ref = tf.Stack(layers=layers, substrate=complex(1.2, 7.0), ambient=1.0).rt(wl, math.acos(0.8)).R
     assert np.max(np.abs(R - ref)) < 1e-7
@@ -245,3 +245,48 @@ def test_band_builds_on_parallel_loader_threads():
         b = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "layers": s})
         np.testing.assert_array_equal(got[j], np.array(b.stack.plan[False].table.texture.tensor()))
     K.TABLE_CACHE.clear()
+
+
+def test_near_zeros_with_exponents_match_the_unscaled_function():
+    """The loop's power-of-two rescaling (samples ``f 2^E``, random exponents per
+    sample) finds the same zeros, bit for bit, as the unscaled samples: the
+    neighbours and the cubic are scaled by exact powers of two."""
+    x = np.arange(60.0)
+    f = (x - (31.3 + 0.02j)) * (x - (12.6 - 0.5j)) * (1.0 + 0.02 * x)
+    E = np.random.default_rng(1).integers(-40, 40, x.size).astype(np.float64)
+    plain = np.stack([f.real, f.imag], axis=-1)[None]
+    scaled = np.stack([np.ldexp(f.real, -E.astype(int)), np.ldexp(f.imag, -E.astype(int))], axis=-1)[None]
+    for a, b in zip(band_rows.near_zeros(plain, 0), band_rows.near_zeros(scaled, 0, E[None])):
+        assert np.array_equal(a, b)
+    assert band_rows.near_zeros(plain, 0)[0].size == 2
+
+
+def test_amplitudes_stay_in_range_at_any_depth(monkeypatch):
+    """1000 films (MAX_FILMS; the amplitudes grow by up to ~2.8 per film, beyond
+    float64's range for their squares from ~340 films without the rescaling, which
+    is active here: exponents of hundreds): R = |N|^2/|D|^2 from the rescaled
+    amplitudes matches the build's exact float64 evaluation (measured 7e-14; a lost
+    exponent or an overflow errs by O(1) or gives NaN)."""
+    captured = {}
+
+    def capture(side, *args, **kwargs):
+        captured["side"] = side
+
+    monkeypatch.setattr(tables, "build_table", capture)
+    d = np.random.default_rng(6).uniform(50.0, 200.0, 1000)
+    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(1000))
+    K.TABLE_CACHE.clear()
+    with pytest.warns(UserWarning):
+        mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "layers": layers,
+                      "ext_ior": 1.0, "tabulate": True, "spectral_resolution": 0.0})
+    K.TABLE_CACHE.clear()
+    side = captured["side"]
+    wl = np.linspace(400.0, 700.0, 301)
+    cos = np.tile([1.0, 0.3], wl.size)
+    rows = np.repeat(np.arange(wl.size), 2)
+    idx = tabulate_base.side_indices(side, wl)
+    terms, E = band_rows.amplitudes(side, cos, rows, wl, idx)
+    assert E.min() > 100.0
+    R = band_rows.powers_of(terms, False)[:, 0]
+    ref = tabulate_base.evaluate_side(side, cos, rows, wl, idx)[:, 0]
+    assert np.all(np.isfinite(R)) and np.max(np.abs(R - ref)) < 1e-10

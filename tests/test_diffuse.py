@@ -311,7 +311,8 @@ def test_traverse_thickness_updates_hemispherical_factors():
     ({"layers": "SiO2"}, r"layers\[0\].*missing thickness"),
     ({"layers": "SiO2 500", "thin_film_ior": 1.4, "thin_film_thickness": 100.0}, r"layers"),
     ({"ext_ior": "Au"}, r"ext_ior"),
-    ({"roughness": 0.1}, r"roughness"),
+    ({"roughness": 2.0}, r"roughness.*2\.0"),          # sigma <= pi/2 (radians)
+    ({"roughness_model": "oren"}, r"roughness_model.*'oren'"),
 ])
 
 

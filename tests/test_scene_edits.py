@@ -45,7 +45,8 @@ PLUGINS = {
 #: Bad values per kind of key (the last dotted parts of the key, relative to the BSDF).
 #: Each is outside the documented range: thicknesses >= 0, indices n in
 #: [1e-3, 1e3] (thinfilm_mi.materials.catalog.MIN_INDEX/MAX_INDEX), k in [0, 1e3], alpha in
-#: (0, 100], factors >= 0, albedo in [0, 1], thickness scale >= 0, all finite.
+#: (0, 100], factors >= 0, albedo in [0, 1], thickness scale >= 0, Oren-Nayar roughness in
+#: [0, pi/2], all finite.
 BAD_SCALARS = {
     "thickness": [NAN, INF, -INF, -1.5],
     "eta.value": [NAN, INF, -INF, 0.0, -1.5, 1e-12, 1e9],
@@ -55,6 +56,7 @@ BAD_SCALARS = {
     "specular_transmittance.value": [NAN, INF, -1.5],
     "reflectance.value": [NAN, INF, -0.5, 1.7],
     "scale.value": [NAN, INF, -1.0],
+    "roughness.value": [NAN, INF, -0.1, 2.0],     # sigma in [0, pi/2] (radians)
 }
 
 
@@ -89,8 +91,8 @@ def make_scene(plugin, tabulate, thickness_texture=False):
     bsdf = {"type": plugin, "layers": LAYERS, **PLUGINS[plugin]}
     if plugin != "thinfilm_diffuse":
         bsdf["tabulate"] = tabulate
-        if thickness_texture:
-            bsdf["thickness"] = 1.0
+    if thickness_texture:
+        bsdf["thickness"] = 1.0
     return mi.load_dict({
         "type": "scene",
         "integrator": {"type": "path", "max_depth": 4},
@@ -128,9 +130,9 @@ def _plugin_configs():
             if plugin == "thinfilm_diffuse" and tabulate == "false":
                 continue   # thinfilm_diffuse has no 'tabulate' choice to make here
             out.append((plugin, tabulate, False))
-        if plugin != "thinfilm_diffuse":
-            # a thickness texture (its 'thickness.value' key) forces exact evaluation
-            out.append((plugin, "false", True))
+        # a thickness texture (its 'thickness.value' key) forces exact evaluation
+        # (thinfilm_diffuse: and its table of R_dh over the scale)
+        out.append((plugin, "false", True))
     return out
 
 

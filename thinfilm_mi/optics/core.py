@@ -67,6 +67,7 @@ __all__ = [
     "stack_amplitudes",
     "stack_rt",
     "stack_rt_loop",
+    "stack_loop_terms",
     "film_attenuation",
     "transmittance_factor_s",
     "transmittance_factor_p",
@@ -375,6 +376,25 @@ def _rescale_factor(D: Cx):
     adds no rounding to the recursion. It is a constant of the ratios (no
     gradient flows through it)."""
     return _inverse_power_of_two(dr.abs(D.re) + dr.abs(D.im))
+
+
+def _smooth_scale(a: Cx, b: Cx, N: Cx, D: Cx, T, mag2):
+    """:func:`stack_loop_terms`' smooth step factor: ``(N, D)`` times ``1 / sqrt(|a|^2
+    + |b|^2)``, ``T`` (``None``: not traced) times ``4 |a|^2 mag2`` (the interface's
+    ``|t|^2`` factor) and its square."""
+    s2 = 1.0 / (a.abs2() + b.abs2())
+    scale = dr.sqrt(s2)
+    return N * scale, D * scale, None if T is None else T * (4.0 * a.abs2() * mag2 * s2)
+
+
+def _exponent_of(scale):
+    """``k`` (a float of the same type) for a power of two ``scale = 2^-k`` of
+    :func:`_rescale_factor` (float64 or float32 arrays), from the exponent bits."""
+    U = dr.uint_array_t(type(scale))
+    bits = dr.reinterpret_array(U, scale)
+    if dr.type_v(scale) == dr.VarType.Float32:
+        return 127.0 - type(scale)(bits >> 23)
+    return 1023.0 - type(scale)(bits >> 52)
 
 
 def _inverse_power_of_two(x):
@@ -713,6 +733,36 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
                                    transmission=transmission, n0_max=n0_max,
                                    film_n_min=film_n_min, film_n_max=film_n_max,
                                    films_max=films_max, label=label)
+    results, fac, grazing = stack_loop_terms(
+        n0, cos0, count, film, n_exit, wavelength, transmission=transmission, n0_max=n0_max,
+        film_n_min=film_n_min, label=label, max_iterations=max_iterations)
+    return _powers(results, fac, grazing)
+
+
+def stack_loop_terms(n0, cos0, count, film, n_exit, wavelength, *, transmission: bool = True,
+                     n0_max: float | None = None, film_n_min: float | None = None,
+                     label: str = "thinfilm_rouard", max_iterations: int | None = None,
+                     exponents: bool = False, smooth: bool = False):
+    """The general loop of :func:`stack_rt_loop` (arguments as there), stopped before
+    the powers: ``(terms, factors, grazing)`` with ``terms[pol] = (N, D, |T|^2)``
+    (``|T|^2`` ``None`` without ``transmission``), ``R = |N|^2 / |D|^2``, ``T =
+    |T|^2 factors[pol] / |D|^2`` (``factors`` ``None`` without ``transmission``).
+
+    **The rescaling policy** (the one of every film loop): after each film ``(N,
+    D, T)`` are multiplied by the power of two nearest ``1 / (|Re D| + |Im D|)``
+    (:func:`_rescale_factor`), exact and free of rounding, so nothing overflows in
+    float32 at any depth. It makes ``N`` and ``D`` jump by factors of two along the
+    wavelength; with ``exponents`` the loop also sums each polarisation's rescaling
+    exponents and ``terms[pol]`` gets a fourth entry ``E`` (float, an integer):
+    ``N 2^E`` and ``D 2^E`` are the amplitudes without the jumps. With ``smooth``
+    each step (the last, onto the ambient, included) first multiplies ``(N, D)`` by
+    ``1 / sqrt(|a_j|^2 + |a_j+1|^2)`` (``|T|^2`` by its square), a smooth function of
+    the wavelength made of the two media's admittances only: ``N 2^E``, ``D 2^E``
+    are then smooth where ``R`` has resonances, with no magnitude growing along the
+    stack (what the band-limited tables' resonance search samples,
+    :func:`thinfilm_mi.tabulate.band_rows.amplitudes`). The power of two is exact,
+    so ``R`` and the ratios of neighbouring samples do not depend on it.
+    """
     cos0, beta2, q0 = incidence(n0, cos0)
     if _is_literal(n0):
         n0_max = n0
@@ -743,35 +793,50 @@ def stack_rt_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: bo
     # traced, without transmission), the admittance of the medium below, and that
     # medium's phase factor (shared by s and p).
     t0 = one if transmission else 1.0
+    # (with exponents, each polarisation's sum of rescaling exponents follows its T)
+    e0 = (zero,) if exponents else ()
     state = (count,
-             *full(Cx(0.0)), *full(Cx(1.0)), t0,
-             *full(Cx(0.0)), *full(Cx(1.0)), t0,
+             *full(Cx(0.0)), *full(Cx(1.0)), t0, *e0,
+             *full(Cx(0.0)), *full(Cx(1.0)), t0, *e0,
              *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
+    k = 6 if exponents else 5     # state entries per polarisation
 
-    def step(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, bsr, bsi, bpr, bpi, Er, Ei):
+    def step(j, *st):
         j = j - 1
         a, E, mag2 = film_terms(j)
         out = []
-        for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
-                                  ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
-            N, D = rouard_step(a[pol], b, Cx(Er, Ei), N, D)
+        for pol, (Nr, Ni, Dr, Di, T, *e) in (("s", st[:k]), ("p", st[k:2 * k])):
+            b = Cx(*st[2 * k:2 * k + 2]) if pol == "s" else Cx(*st[2 * k + 2:2 * k + 4])
+            N, D = rouard_step(a[pol], b, Cx(*st[2 * k + 4:]), Cx(Nr, Ni), Cx(Dr, Di))
+            if smooth:
+                N, D, T = _smooth_scale(a[pol], b, N, D, T if transmission else None, mag2)
             scale = _rescale_factor(D)
-            if transmission:
+            if not transmission:
+                T = 1.0
+            elif smooth:
+                T = T * (scale * scale)
+            else:
                 T = T * (4.0 * a[pol].abs2() * mag2) * (scale * scale)
             out += [N.re * scale, N.im * scale, D.re * scale, D.im * scale, T]
+            if exponents:
+                out.append(e[0] + _exponent_of(scale))
         return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
 
-    (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp,
-     bsr, bsi, bpr, bpi, Er, Ei) = dr.while_loop(state, films_left, loop_body(step),
-                                                 label=label, max_iterations=max_iterations)
+    _, *st = dr.while_loop(state, films_left, loop_body(step), label=label,
+                           max_iterations=max_iterations)
     a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
+    E_top = Cx(*st[2 * k + 4:])
     results = {}
-    for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
-                              ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
-        N, D = rouard_step(a0[pol], b, Cx(Er, Ei), N, D)
-        results[pol] = (N, D, T * 4.0 * a0[pol].abs2())
+    for pol, (Nr, Ni, Dr, Di, T, *e) in (("s", st[:k]), ("p", st[k:2 * k])):
+        b = Cx(*st[2 * k:2 * k + 2]) if pol == "s" else Cx(*st[2 * k + 2:2 * k + 4])
+        N, D = rouard_step(a0[pol], b, E_top, Cx(Nr, Ni), Cx(Dr, Di))
+        if smooth:
+            N, D, T = _smooth_scale(a0[pol], b, N, D, T if transmission else None, 1.0)
+        elif transmission:
+            T = T * 4.0 * a0[pol].abs2()
+        results[pol] = (N, D, T if transmission else None, *e)
     fac = power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
-    return _powers(results, fac, grazing)
+    return results, fac, grazing
 
 
 #: :func:`stack_rt_loop` uses the real-amplitude loop when every film's index is

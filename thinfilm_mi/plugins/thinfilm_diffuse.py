@@ -1,8 +1,8 @@
 r"""
 .. _bsdf-thinfilm_diffuse:
 
-Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
-----------------------------------------------------------------
+Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
+-------------------------------------------------------------
 
 .. pluginparameters::
 
@@ -26,7 +26,25 @@ Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
    - |string|
    - ``"multiple"`` (default): the paper's model plus the interreflection
      between the base and the coating; ``"single"``: the paper's first-order
-     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10).
+     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10);
+     ``"exact"``: the whole stack, coherent, over a base medium (see below).
+ * - base_ior
+   - |float| or |string|
+   - Model ``"exact"`` only: the real index of the medium between the films and
+     the base (default: ``ext_ior``).
+ * - thickness
+   - |float| or |texture|
+   - Optional scale on every film's thickness at the hit (e.g. a ``bitmap`` with
+     ``raw="true"``); ``R_dh``, ``T_hemi`` are tabulated over its range (read at
+     load). RGB/mono variants accept a constant scale only.
+ * - roughness
+   - |float| or |texture|
+   - Oren–Nayar roughness ``σ`` of the base (radians, the standard deviation of the
+     facet slope angles), in [0, π/2] (default: 0, Lambert). |differentiable|.
+ * - roughness_model
+   - |string|
+   - ``"qualitative"`` (default): Oren and Nayar's qualitative formula;
+     ``"eon"``: energy-preserving (OpenPBR's). See **Rough base**.
  * - tabulate
    - |string| or |bool|
    - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
@@ -62,8 +80,8 @@ Thin-film coated Lambertian surface (:monosp:`thinfilm_diffuse`)
      ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
      shows (default: 5000).
 
-A perfectly diffuse (Lambertian) base under a stack of thin films, after
-Hirayama et al. section 2.4. Component 0 is the delta reflection of the
+A diffuse base (Lambertian, or Oren–Nayar with ``roughness``) under a stack of
+thin films, after Hirayama et al. section 2.4. Component 0 is the delta reflection of the
 coating, component 1 the diffuse lobe; the thin films are evaluated at the
 path's wavelengths in the render kernel (float32), for unpolarised light. In
 ``*_spectral_polarized`` variants component 0 is the Mueller matrix of the
@@ -142,7 +160,56 @@ lossless stack ``T_hemi = 1 - R_dh`` and a white base gives exactly 1; for any
 stack it is at most ``k_r + t <= 1``. ``"single"`` is the first term of the
 series, hence never brighter than ``"multiple"``.
 
-**Specular part.** Both models use the paper's ``k_r`` (coating over film
+**Rough base** (``roughness`` ``σ > 0``; ``thinfilm_mi/render/orennayar.py``). The base
+BRDF ``f_b`` is Oren–Nayar's: ``"qualitative"``, with ``μ = cos θ``,
+``A = 1 - 0.5σ²/(σ²+0.33)``, ``B = 0.45σ²/(σ²+0.09)``, ``α = max(θ_i, θ_o)``,
+``β = min(θ_i, θ_o)``::
+
+    f_b = k_d/π · (A + B · max(0, cos(φ_o - φ_i)) · sin α · tan β)
+
+or ``"eon"`` (Portsmouth, Kutz, Hill 2025), Fujii's lobe plus an analytic
+multiple-scattering lobe, with OpenPBR's roughness ``r = B/A`` (0.78 at ``σ = π/2``).
+``E(μ) = ∫ f_b μ_o dω_o`` is its directional albedo and ``Ē = 2∫E μ dμ`` its
+hemispherical one, both in closed form (qualitative: ``k_d (A + B h(μ))``, ``Ē = k_d (A +
+B (2/3 - 64/(45π)))``; EON: ``k_d`` for ``k_d = 1``). The base medium is matched to the
+ambient, so the directions at the base are the outside ones (the ambient
+parametrisation used above) and light crosses the films as for a Lambertian base::
+
+    f = t(θ_i) t(θ_o) · [f_b(ω_i, ω_o) + E(μ_i) E(μ_o) R_dh / (π (1 - Ē R_dh))]
+
+The first term crossed the coating once each way; the second is the series of the
+light the coating sends back. Its assumption (exact for Lambert, where it
+is ``"multiple"`` above) is that the light leaving the base after its first bounce is
+reflected by the coating as if it were cosine-distributed (``R_dh``) and that all light
+sent back reaches the base as diffuse light, which the base re-emits with the exitance
+profile ``E(μ_o)/π`` (by reciprocity, its reflection of uniform light) and re-reflects
+with ``Ē``. ``"single"`` keeps the first term. ``f`` is symmetric in ``ω_i, ω_o``
+(reciprocal). Energy (``benchmarks/orennayar_energy.py``): the qualitative formula loses
+light (a white base at ``σ = π/2`` reflects 0.56 at normal incidence, 0.65 on average) and
+gains up to 0.8 % towards grazing for ``σ < 0.33``; EON reflects all of it. Under lossless
+films the second term's cosine assumption leaves a white EON base's albedo within
+[0.987, 1.011] (most at ``σ = π/2`` and normal incidence, where the base's lobe favours
+the normal and escapes more than ``R_dh`` assumes); under the absorbing films measured
+it stays below 1. Sampling is cosine-weighted (weight ``π f``). RGB/mono variants combine
+the terms of the colour table of a textured ``reflectance`` (its expansion in ``R_dh``)
+with ``f_b``, ``E``, ``Ē`` per channel; polarized ones depolarize, as for Lambert. While
+``roughness`` is 0 everywhere without gradients the Lambertian code runs.
+
+**model = "exact"**. Every film, absorbing or not, is part of one coherent stack
+between the ambient and a base medium of index ``n_b`` (``base_ior``); the base
+is Lambertian in that medium. Specular part: the stack's exact ``R(θ_i)``.
+Diffuse part: ``f = t(θ_i) t(θ_o) k_d / (π (1 - k_d R_dh))`` with ``t = T n_0/n_b``
+(``T``: the exact transmittance into the base medium; the two factors ``n_0/n_b``
+are ``plastic``'s radiance factor ``1/η²``) and ``R_dh = 2∫R_up μ dμ`` over the
+base medium's directions (``R_up``: the reversed stack lit from the base; total
+reflection beyond its critical angle, frustrated by absorbing films). Assumes
+a smooth, parallel stack, incoherent light in the base and a base that re-diffuses
+all it receives. The albedo ``R + t k_d T_hemi/(1 - k_d R_dh)`` (``T_hemi = 2∫T_up μ
+dμ``) is at most 1 (``R + T <= 1`` for the same stack), 1 for a lossless stack on a
+white base; ``f`` is symmetric. Where film ``N`` is a few nm of metal the paper's
+models treat it as bulk: for ``SiO2 300; Au 4`` their diffuse term is 20-500x darker.
+
+**Specular part.** The paper's models use the paper's ``k_r`` (coating over film
 ``N``; the exact full-stack reflectance when there is no absorbing film ``N``).
 The exact reflectance of *all* films over the base medium is not used with an
 absorbing film ``N``: paired with the first-order ``t`` it can exceed energy
@@ -220,75 +287,41 @@ from __future__ import annotations
 
 import drjit as dr
 import mitsuba as mi
-import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.optics.core import Cx, film_attenuation
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.colour import (
-    GradientSampler,
     attach_gradient,
     colour_channels,
-    index_on_wavelengths,
     prepare_gradients,
 )
-from thinfilm_mi.render.diffuse import DiffuseFactors, update_derivative_table, with_derivatives
+from thinfilm_mi.render.diffuse import (
+    absorbs,
+    colour_estimate,
+    reflectance_from_props,
+    update_derivative_table,
+)
+from thinfilm_mi.render.diffuse_exact import (
+    SpectralTerms,
+    coating_transmission,
+    colour_factors,
+    colour_gradients,
+    constant_albedo,
+    diffuse_factors,
+    prob_specular,
+    r_dh_with_derivatives,
+    texture_gradients_refused,
+)
 from thinfilm_mi.render.kernel import KernelStack
-from thinfilm_mi.render.params import ALBEDO_SLACK, ParameterGuard
+from thinfilm_mi.render.media import real_index
+from thinfilm_mi.render.orennayar import OrenNayar, coated, coated_integrated, series_term
+from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
-from thinfilm_mi.render.textures import check_texture_range, regular, scalar, uniform
-from thinfilm_mi.render.variant import check_variant, opaque_float, spectral_mean
+from thinfilm_mi.render.variant import check_variant, opaque_float
 from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 
 NAME = "thinfilm_diffuse"
-MODELS = ("single", "multiple")
-
-
-def _absorbs(index) -> bool:
-    mat = index.material
-    if mat is None:
-        return True
-    if mat.constant is not None:
-        return mat.constant.imag > 0
-    return bool(np.any(mat.index(GRID).imag > 0))
-
-
-def _reflectance_from_props(props):
-    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
-    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
-    ``1 - k_d R_dh`` approach 0)."""
-    if "reflectance" not in props:
-        return uniform(0.5)
-    value = props.get("reflectance")
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        if not (0.0 <= value <= 1.0):
-            raise ThinFilmError(f"{NAME}: 'reflectance' must be in [0, 1] (an albedo), "
-                                f"got {value!r}")
-    try:
-        tex = props.get_texture("reflectance")
-    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-        raise ThinFilmError(f"{NAME}: 'reflectance' must be a number, a spectrum or a texture, "
-                            f"got {value!r} ({e})") from None
-    check_texture_range(tex, f"{NAME}: 'reflectance' (an albedo, energy conservation)", 0.0,
-                        1.0 + ALBEDO_SLACK)
-    return tex
-
-
-def _spectrum(tex, values):
-    """``values`` on the 1 nm grid as a ``regular`` spectrum, updating ``tex`` in place
-    when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
-    ``regular`` spectrum refuses a zero integral). In scalar variants a new one is
-    made (their ``mi.Float`` holds one number, not the values)."""
-    values = np.asarray(values, dtype=np.float64)
-    if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
-        return uniform(0.0)
-    params = mi.traverse(tex) if tex is not None and dr.is_jit_v(mi.Float) else None
-    if params is not None and "values" in params:
-        params["values"] = mi.Float(values.astype(np.float32))
-        params.update()
-        return tex
-    return regular(values, GRID[0], GRID[-1])
+MODELS = ("single", "multiple", "exact")
 
 
 class ThinFilmDiffuse(mi.BSDF):
@@ -298,19 +331,30 @@ class ThinFilmDiffuse(mi.BSDF):
         self.mode = modes.current()
         model = props.get("model", "multiple")
         if model not in MODELS:
-            raise ThinFilmError(f"{NAME}: 'model' must be 'single' or 'multiple', got {model!r}")
+            raise ThinFilmError(f"{NAME}: 'model' must be 'single', 'multiple' or 'exact', "
+                                f"got {model!r}")
         self.model = model
         films = films_from_props(props, NAME)
         ext = ext_ior_from_props(props)
-        self.reflectance = _reflectance_from_props(props)
-        options = stack_options_from_props(props, NAME, thickness_texture=False)
+        if "base_ior" in props and model != "exact":
+            raise ThinFilmError(f"{NAME}: 'base_ior' is a parameter of model 'exact' only "
+                                f"(model is {model!r})")
+        base = real_index(props.get("base_ior"), "base_ior") if "base_ior" in props else ext
+        self.reflectance = reflectance_from_props(props, NAME)
+        options = stack_options_from_props(props, NAME)
+        self.texture = options["thickness_texture"]
+        self.base = OrenNayar(props, NAME)   # roughness: render/orennayar.py
         check_unqueried(props, NAME)
 
         self.no_films = len(films) == 0
         # RGB/mono variants read only k_r from the coating's colour table: the
         # transmission enters through the diffuse table (coated_diffuse)
         sides = {False: not self.mode.integrated}
-        if films and _absorbs(films[-1][0]):
+        if model == "exact":
+            # The whole stack, coherent, over the base medium.
+            self.coating = KernelStack(films, ext, base, sides=sides, **options)
+            self.film_n = self.film_n_thickness = None
+        elif films and absorbs(films[-1][0]):
             # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
             self.coating = KernelStack(films[:-1], ext, films[-1][0], sides=sides, **options)
             self.film_n = films[-1][0]
@@ -321,8 +365,10 @@ class ThinFilmDiffuse(mi.BSDF):
             self.film_n = None
             self.film_n_thickness = None
 
-        self.t_hemi = None
-        self.r_dh = None
+        #: spectral variants: R_dh and T_hemi (SpectralTerms)
+        self.terms = None
+        #: model "exact" over a base medium that differs from the ambient: t carries n_0/n_b
+        self.base_ratio = model == "exact" and base is not ext
         #: RGB/mono variants: the diffuse term integrated as a product (coated_diffuse)
         self.colour = None
         self._update_hemispherical()
@@ -335,134 +381,92 @@ class ThinFilmDiffuse(mi.BSDF):
         self.guard = ParameterGuard(self, NAME)
 
     # -- load-time tables ----------------------------------------------------
-    def _constant_albedo(self) -> np.ndarray | None:
-        """The base albedo per colour channel where it does not vary over the
-        surface (the colour tables then integrate the series with it), else ``None``."""
-        if self.reflectance.is_spatially_varying():
-            return None
-        si = dr.zeros(mi.SurfaceInteraction3f)
-        return np.array(dr.ravel(self.reflectance.eval(si)), np.float64).reshape(-1)
-
     def _update_hemispherical(self) -> None:
         """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
         in RGB/mono variants the integrated diffuse tables instead. In AD variants
         (model "multiple") also ``R_dh``'s derivatives (:attr:`r_dh_grad`)."""
-        factors = self._diffuse_factors()
+        factors = diffuse_factors(self)
         self.r_dh_grad = None
         self._update_derivatives()
         if self.mode.integrated:
             if factors is not None:
+                factors = colour_factors(factors, self.texture, NAME)
                 self.colour = ColourDiffuse(factors, self.model, colour_channels(),
-                                            self._constant_albedo())
+                                            constant_albedo(self.reflectance, self.base.rough))
                 if self.film_n is not None and dr.is_diff_v(mi.Float):
                     prepare_gradients([self.film_n])
             return
-        if factors is None:
-            t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
-        else:
-            r_dh, t_hemi = factors.hemispherical(GRID)
-        self.t_hemi = _spectrum(self.t_hemi, t_hemi)
-        self.r_dh = _spectrum(self.r_dh, r_dh)
-
-    def _diffuse_factors(self) -> DiffuseFactors | None:
-        """The coating's spectral factors at the current parameters (``None`` without films)."""
-        if self.no_films:
-            return None
-        thickness = None if self.film_n is None else scalar(self.film_n_thickness)
-        return DiffuseFactors(self.coating, self.film_n, thickness)
+        self.terms = SpectralTerms(factors, self.texture, NAME, self.terms)
 
     def _update_derivatives(self) -> None:
         """``R_dh``'s derivative table, built or dropped
         (:func:`thinfilm_mi.render.diffuse.update_derivative_table`)."""
-        self.r_dh_grad = update_derivative_table(self, self._diffuse_factors(), self.model,
+        self.r_dh_grad = update_derivative_table(self, diffuse_factors(self), self.model,
                                                  self.r_dh_grad)
+        if self.r_dh_grad is not None and self.texture is not None:
+            self.r_dh_grad = None
+            raise ThinFilmError(texture_gradients_refused(NAME, self.model))
 
     # -- kernel helpers ------------------------------------------------------
     def _factors(self, si, cos_theta, active, transmission: bool):
         """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
         and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
         resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
+        k_r = mi.UnpolarizedSpectrum(resp.R)
         if not transmission:
-            return resp.R, None, resp.reflection
-        k_r, k_t = resp.R, resp.T
-        if self.film_n is not None:
-            n0 = self.coating.ambient.eval_real(si, active)
-            k_t = k_t * film_attenuation(n0, cos_theta, self.film_n.eval(si, active),
-                                         self.film_n_thickness, si.wavelengths)
-        return k_r, k_t, resp.reflection
+            return k_r, None, resp.reflection
+        return k_r, coating_transmission(self, si, cos_theta, resp.T, active), resp.reflection
 
     def _series(self, si, kd, active):
         """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
         if self.model == "single":
-            return mi.Spectrum(1.0)
-        r_dh = self._with_derivatives(self.r_dh.eval(si, active), si, si.wavelengths,
+            return mi.UnpolarizedSpectrum(1.0)
+        return dr.rcp(1.0 - kd * self._r_dh(si, active))
+
+    def _r_dh(self, si, active):
+        return r_dh_with_derivatives(self, self.terms.lookup(si, self.coating, active)[0], si, si.wavelengths,
                                       lambda ix: ix.eval(si, active), active)
-        return dr.rcp(1.0 - kd * r_dh)
 
-    def _with_derivatives(self, r_dh, si, wavelengths, index_at, active):
-        """``R_dh`` carrying its derivatives (:func:`thinfilm_mi.render.diffuse.with_derivatives`)."""
-        if self.model == "single" or self.no_films:
-            return r_dh
-        films = list(zip(self.coating.indices, self.coating.thickness))
-        if self.film_n is not None:
-            films.append((self.film_n, self.film_n_thickness))
-        return with_derivatives(self.r_dh_grad, r_dh, films, si, wavelengths, index_at, active,
-                                NAME)
-
-    def _diffuse(self, si, kd, cos_i, cos_o, t_i, series, active):
-        """``π f`` at ``cos_o``: ``k_d t_i t_o S`` per wavelength, or its integral
-        over wavelengths in RGB/mono variants."""
+    def _diffuse(self, si, kd, cos_i, wo, t_i, series, active):
+        """``π f`` towards ``wo``: ``k_d t_i t_o S`` per wavelength (a rough base:
+        :func:`~thinfilm_mi.render.orennayar.coated`), or its integral over wavelengths
+        in RGB/mono variants."""
+        cos_o = mi.Frame3f.cos_theta(wo)
+        base = self.base.terms(si, kd, wo, active) if self.base.rough else None
         if self.colour is not None:
-            value = self.colour.value(cos_i, cos_o, kd, active)
-            if self._colour_gradients(si, active):
-                value = attach_gradient(value, self._colour_estimate(si, kd, cos_i, cos_o,
-                                                                     active))
+            multiple = self.model != "single"
+            if base is None:
+                value = self.colour.value(cos_i, cos_o, kd, active)
+                g = lambda c, r_dh: self.colour.series(kd[c], r_dh)
+            else:
+                value = coated_integrated(self.colour.node_values(cos_i, cos_o, active), base,
+                                          multiple)
+                g = lambda c, r_dh: series_term(base.channel(c), r_dh, multiple)
+            if colour_gradients(self, si, active):
+                value = attach_gradient(value, self._colour_estimate(si, cos_i, cos_o, active, g))
             return value
         _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
+        if base is not None:
+            r_dh = self._r_dh(si, active) if self.model != "single" else None
+            return coated(base, t_i, t_o, r_dh, self.model != "single")
         return kd * t_i * t_o * series
 
-    def _colour_gradients(self, si, active) -> bool:
-        """RGB/mono AD variants: whether a film thickness or index carries gradients."""
-        n = self.film_n
-        return self.coating.colour_gradients(si, active) or (n is not None and (
-            dr.grad_enabled(self.film_n_thickness) or n.carries_gradients(si, active)))
+    def _bare(self, si, wo, active):
+        """``π f`` without films: ``k_d`` (exactly Mitsuba's ``diffuse``) or the rough base's."""
+        kd = self.reflectance.eval(si, active)
+        return self.base.terms(si, kd, wo, active).pi_f if self.base.rough else kd
 
-    def _colour_estimate(self, si, kd, cos_i, cos_o, active):
-        """An unbiased estimate of the integrated diffuse term at stratified wavelengths
-        (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose gradients the
-        table's value takes; ``R_dh`` with its derivatives (:meth:`_with_derivatives`)."""
-        sampler = GradientSampler.get()
-        wl = sampler.wavelengths(si)
-
-        def t(cos):
-            _, k_t = self.coating.at_wavelengths(False, si, cos, active, True, None, wl)
-            if self.film_n is None:
-                return k_t
-            n0, _ = index_on_wavelengths(self.coating.ambient, si, wl, active)
-            return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(self.film_n, si, wl,
-                                                                          active)),
-                                          self.film_n_thickness, wl)
-        product = t(cos_i) * t(cos_o)
-        r_dh = self._with_derivatives(
-            self.colour.r_dh_at(wl, active), si, wl,
-            lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)
-        channels = [sampler.estimate(wl, product * self.colour.series(kd[c], r_dh))[c]
-                    for c in range(dr.size_v(mi.Spectrum))]
-        return mi.Spectrum(*channels)
-
-    def _prob_specular(self, si, k_r, t_i, kd, series, active, cos_i):
-        spec = spectral_mean(k_r)
-        if self.colour is not None:
-            diff = spectral_mean(self.colour.albedo(cos_i, kd, active))
-        else:
-            diff = spectral_mean(t_i * kd * self.t_hemi.eval(si, active) * series)
-        total = spec + diff
-        return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
+    def _colour_estimate(self, si, cos_i, cos_o, active, g):
+        """:func:`~thinfilm_mi.render.diffuse.colour_estimate` of this BSDF."""
+        return colour_estimate(self.coating, self.film_n, self.film_n_thickness, self.colour.r_dh_at,
+                               lambda *a: r_dh_with_derivatives(self, *a), si, cos_i, cos_o, active, g,
+                               self.base_ratio)
 
     # -- BSDF interface ------------------------------------------------------
     def sample(self, ctx, si, sample1, sample2, active=True):
         has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
         has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        self.base.check_lambertian()
         bs = dr.zeros(mi.BSDFSample3f)
         cos_i = mi.Frame3f.cos_theta(si.wi)
         active = mi.Bool(active) & (cos_i > 0)
@@ -475,7 +479,7 @@ class ThinFilmDiffuse(mi.BSDF):
             bs.eta = 1.0
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
             bs.sampled_component = mi.UInt32(1)
-            value = self.mode.value(self.reflectance.eval(si, active), self.mode.depolarized,
+            value = self.mode.value(self._bare(si, bs.wo, active), self.mode.depolarized,
                                     ctx, si.wi, bs.wo)
             return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
 
@@ -489,7 +493,7 @@ class ThinFilmDiffuse(mi.BSDF):
         if has_spec and has_diff:
             # detached: a sampling decision divides the weight as a constant
             # (the weight's gradient is then that of k_r, resp. the diffuse term)
-            prob_spec = dr.detach(self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+            prob_spec = dr.detach(prob_specular(self, si, k_r, t_i, kd, series, active, cos_i))
         else:
             prob_spec = mi.Float(1.0 if has_spec else 0.0)
         sel_spec = active & (sample1 < prob_spec)
@@ -508,9 +512,8 @@ class ThinFilmDiffuse(mi.BSDF):
         if has_spec:
             weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
         if has_diff:
-            cos_o = mi.Frame3f.cos_theta(wo_diff)
             # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
-            w_diff = (self._diffuse(si, kd, cos_i, cos_o, t_i, series, sel_diff)
+            w_diff = (self._diffuse(si, kd, cos_i, wo_diff, t_i, series, sel_diff)
                       / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0))
             weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
         # the film's reflection is polarized, the light through the base depolarized
@@ -523,13 +526,14 @@ class ThinFilmDiffuse(mi.BSDF):
         has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
         if not has_diff:
             return mi.Spectrum(0.0), mi.Float(0.0)
+        self.base.check_lambertian()
         cos_i = mi.Frame3f.cos_theta(si.wi)
         cos_o = mi.Frame3f.cos_theta(wo)
         active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0)
         pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo) if want_pdf else mi.Float(0.0)
 
         if self.no_films:  # exactly Mitsuba's diffuse
-            value = (self.reflectance.eval(si, active) * dr.inv_pi * cos_o) if want_value \
+            value = (self._bare(si, wo, active) * dr.inv_pi * cos_o) if want_value \
                 else mi.UnpolarizedSpectrum(0.0)
             value = self.mode.value(value, self.mode.depolarized, ctx, si.wi, wo)
             return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
@@ -543,10 +547,10 @@ class ThinFilmDiffuse(mi.BSDF):
             k_r, t_i, _ = self._factors(si, cos_i, active, transmission=spectral)
         if want_value:
             value = self.mode.value(
-                self._diffuse(si, kd, cos_i, cos_o, t_i, series, active) * dr.inv_pi * cos_o,
+                self._diffuse(si, kd, cos_i, wo, t_i, series, active) * dr.inv_pi * cos_o,
                 self.mode.depolarized, ctx, si.wi, wo)
         if need_prob:
-            pdf = pdf * (1.0 - self._prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+            pdf = pdf * (1.0 - prob_specular(self, si, k_r, t_i, kd, series, active, cos_i))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
 
     def eval(self, ctx, si, wo, active=True):
@@ -566,6 +570,7 @@ class ThinFilmDiffuse(mi.BSDF):
                          mi.ParamFlags.Differentiable)
             self.film_n.traverse(callback, f"layers.{i}.")
         callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
+        self.base.traverse(callback)
 
     def parameters_changed(self, keys):
         def refresh(changed):
@@ -575,9 +580,9 @@ class ThinFilmDiffuse(mi.BSDF):
             if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
                 dr.make_opaque(self.film_n_thickness)
             colour_albedo = self.colour is not None and self.colour.fixed
-            if changed is None or any(k.startswith("layers.") or (colour_albedo and
-                                                                  k.startswith("reflectance"))
-                                      for k in changed):
+            if self.base.refresh() or changed is None or any(
+                    k.startswith(("layers.", "thickness")) or (colour_albedo and k.startswith("reflectance"))
+                    for k in changed):
                 self._update_hemispherical()
             else:
                 # gradients enabled or disabled on an unchanged value (the guard
@@ -591,5 +596,5 @@ class ThinFilmDiffuse(mi.BSDF):
             d = self.film_n_thickness
             d = float(dr.ravel(d)[0]) if dr.is_array_v(d) else d
             layers = f"{layers} over absorbing film {self.film_n.label} {d:g} nm"
-        return (f"ThinFilmDiffuse[\n  model = {self.model},\n  layers = {layers},\n"
+        return (f"ThinFilmDiffuse[\n  model = {self.model},\n{self.base.describe()}  layers = {layers},\n"
                 f"  ext_ior = {self.coating.ambient.label}\n]")

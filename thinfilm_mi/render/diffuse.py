@@ -7,6 +7,9 @@
 * :func:`update_derivative_table`, :func:`with_derivatives`: ``R_dh`` carrying its
   derivatives with respect to the films' thicknesses and indices (model "multiple"
   in AD variants), from a table built when a film parameter carries gradients.
+* :func:`colour_estimate`: the estimate whose gradients an RGB/mono diffuse term takes.
+* :func:`absorbs`, :func:`reflectance_from_props`, :func:`grid_spectrum`: the plugin's
+  reading of its films and albedo, and its spectra on the 1 nm grid.
 """
 from __future__ import annotations
 
@@ -17,9 +20,17 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
+from thinfilm_mi.optics.core import Cx, film_attenuation
+from thinfilm_mi.render.colour import GradientSampler, index_on_wavelengths
 from thinfilm_mi.render.kernel import side_rt
-from thinfilm_mi.render.textures import mitsuba_module, scalar
+from thinfilm_mi.render.params import ALBEDO_SLACK
+from thinfilm_mi.render.textures import check_texture_range, mitsuba_module, regular, scalar, uniform
+from thinfilm_mi.tabulate.diffuse_scale import exact_hemispherical, paper_hemispherical
 from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable, hemispherical_factors, r_dh_partials
+
+__all__ = ["DiffuseFactors", "film_gradients", "update_derivative_table", "with_derivatives", "absorbs",
+           "colour_estimate",
+           "reflectance_from_props", "grid_spectrum"]
 
 
 class DiffuseFactors:
@@ -28,14 +39,28 @@ class DiffuseFactors:
     (R_dh, T_hemi)`` (over ``wl``), for the coating ``coating`` (a
     :class:`~thinfilm_mi.render.kernel.KernelStack`) over the absorbing film ``film_n``
     (a ``SpectralIndex``) of ``film_n_thickness`` nm, or over the base medium
-    (``film_n`` ``None``)."""
+    (``film_n`` ``None``); every thickness times ``scale`` (a ``thickness`` texture's
+    value). :meth:`hemispherical_scales` gives the terms at several scales."""
 
-    def __init__(self, coating, film_n, film_n_thickness: float | None):
+    def __init__(self, coating, film_n, film_n_thickness: float | None, scale: float = 1.0):
         self.coating, self.film_n, self.film_n_thickness = coating, film_n, film_n_thickness
+        self.scale = float(scale)
+
+    def at_scale(self, scale: float) -> "DiffuseFactors":
+        """The same factors with every thickness times ``scale`` (instead of :attr:`scale`)."""
+        return DiffuseFactors(self.coating, self.film_n, self.film_n_thickness, scale)
+
+    def hemispherical_scales(self, wl, scales):
+        """``(R_dh, T_hemi)`` at every thickness scale of ``scales``, each of shape
+        ``(len scales, len wl)``."""
+        n0, coat, n_exit, fn = self.at_scale(1.0)._arguments(wl)
+        if fn is None:   # the coating over the (matched) base medium: the exact terms
+            return exact_hemispherical(n0, coat, n_exit.real, wl, scales)
+        return paper_hemispherical(n0, coat, fn, wl, scales)
 
     def t(self, cos, wl):
 
-        _, T = side_rt(self.coating, False, cos, wl)
+        _, T = side_rt(self.coating, False, cos, wl, self.scale)
         if self.film_n is None:
             return T
         n0 = self.coating.ambient.spectral_values(wl, real=True)
@@ -43,16 +68,18 @@ class DiffuseFactors:
         beta2 = (n0 ** 2)[None, :] * (1.0 - cos ** 2)[:, None]
         q = np.sqrt((n_f ** 2)[None, :] - beta2 + 0j)
         q = np.where(q.imag < 0, -q, q)           # the decaying root
-        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness)
+        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness
+                          * self.scale)
 
     def _arguments(self, wl):
         """:func:`~thinfilm_mi.tabulate.hemispherical.hemispherical_factors`'s arguments at ``wl``."""
 
         c = self.coating
         n0 = c.ambient.spectral_values(wl, real=True)
-        coat = [(ix.spectral_values(wl), scalar(d)) for ix, d in zip(c.indices, c.thickness)]
+        coat = [(ix.spectral_values(wl), scalar(d) * self.scale)
+                for ix, d in zip(c.indices, c.thickness)]
         fn = None if self.film_n is None else (self.film_n.spectral_values(wl),
-                                               self.film_n_thickness)
+                                               self.film_n_thickness * self.scale)
         return n0, coat, c.substrate.spectral_values(wl), fn
 
     def hemispherical(self, wl):
@@ -83,7 +110,7 @@ def update_derivative_table(bsdf, factors, model: str, table):
     missing, kept if it is there, ``None`` when nothing carries gradients (or for
     model "single", or no films). Never needed at scene load, where nothing carries
     gradients: the reverse-mode pass then never runs on Mitsuba's loader threads."""
-    if factors is None or model != "multiple" or not film_gradients(bsdf):
+    if factors is None or model == "single" or not film_gradients(bsdf):
         return None
     return table if table is not None else DerivativeTable(factors.r_dh_partials(GRID))
 
@@ -112,3 +139,83 @@ def with_derivatives(table, r_dh, films, si, wavelengths, index_at, active, plug
             "was not built: call params.update() after enabling gradients "
             "(dr.enable_grad(params[key]); params.update()), as mi.ad optimisers do")
     return r_dh + table.tangent(wavelengths, carriers, active)
+
+
+def absorbs(index) -> bool:
+    """Whether a film's index (a ``SpectralIndex``) has ``k > 0`` somewhere in 360-830 nm
+    (an index without a material: assumed to)."""
+    mat = index.material
+    if mat is None:
+        return True
+    if mat.constant is not None:
+        return mat.constant.imag > 0
+    return bool(np.any(mat.index(GRID).imag > 0))
+
+
+def reflectance_from_props(props, plugin: str):
+    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
+    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
+    ``1 - k_d R_dh`` approach 0)."""
+    if "reflectance" not in props:
+        return uniform(0.5)
+    value = props.get("reflectance")
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        if not (0.0 <= value <= 1.0):
+            raise ThinFilmError(f"{plugin}: 'reflectance' must be in [0, 1] (an albedo), "
+                                f"got {value!r}")
+    try:
+        tex = props.get_texture("reflectance")
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{plugin}: 'reflectance' must be a number, a spectrum or a texture, "
+                            f"got {value!r} ({e})") from None
+    check_texture_range(tex, f"{plugin}: 'reflectance' (an albedo, energy conservation)", 0.0,
+                        1.0 + ALBEDO_SLACK)
+    return tex
+
+
+def grid_spectrum(tex, values):
+    """``values`` on the 1 nm grid as a ``regular`` spectrum, updating ``tex`` in place
+    when it already is one (a ``uniform`` 0 when all values vanish: Mitsuba's
+    ``regular`` spectrum refuses a zero integral). In scalar variants a new one is
+    made (their ``mi.Float`` holds one number, not the values)."""
+    mi = mitsuba_module()
+    values = np.asarray(values, dtype=np.float64)
+    if not np.any(values.astype(np.float32) > 0):  # Mitsuba stores float32
+        return uniform(0.0)
+    params = mi.traverse(tex) if tex is not None and dr.is_jit_v(mi.Float) else None
+    if params is not None and "values" in params:
+        params["values"] = mi.Float(values.astype(np.float32))
+        params.update()
+        return tex
+    return regular(values, GRID[0], GRID[-1])
+
+
+def colour_estimate(coating, film_n, film_n_thickness, r_dh_at, with_derivatives, si, cos_i, cos_o,
+                    active, g, base_ratio: bool = False):
+    """An unbiased estimate of the integrated diffuse term of a ``thinfilm_diffuse`` (its
+    ``coating``, absorbing film ``film_n`` or ``None``, the colour table's ``r_dh_at``) at
+    stratified wavelengths (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose
+    gradients the table's value takes; ``R_dh`` with its derivatives (``with_derivatives``,
+    the plugin's :func:`with_derivatives`); ``g(c, R_dh)``: the base's term of channel ``c``
+    (``G(k_d,c, R_dh)`` for Lambert's). ``base_ratio``: ``t`` carries ``n_0/n_b`` (model
+    "exact" over a base medium unlike the ambient); the thickness texture scales every film."""
+    mi = mitsuba_module()
+    sampler = GradientSampler.get()
+    wl = sampler.wavelengths(si)
+    scale = coating.thickness_scale_at(si, active)
+    n0, _ = index_on_wavelengths(coating.ambient, si, wl, active)
+
+    def t(cos):
+        _, k_t = coating.at_wavelengths(False, si, cos, active, True, scale, wl)
+        if base_ratio:
+            k_t = k_t * n0 / index_on_wavelengths(coating.substrate, si, wl, active)[0]
+        if film_n is None:
+            return k_t
+        d = film_n_thickness if scale is None else film_n_thickness * scale
+        return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(film_n, si, wl, active)),
+                                      d, wl)
+    product = t(cos_i) * t(cos_o)
+    r_dh = with_derivatives(r_dh_at(wl, active), si, wl,
+                            lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)
+    channels = [sampler.estimate(wl, product * g(c, r_dh))[c] for c in range(dr.size_v(mi.Spectrum))]
+    return mi.Spectrum(*channels)

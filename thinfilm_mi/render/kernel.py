@@ -236,7 +236,10 @@ class KernelStack:
             and dr.is_jit_v(mitsuba_module().Float)
             and max((len(s.films) for s in self.plan.values()), default=0) >= min_films)
         self.table_failed = []
-        if not want:
+        if not want or self._differentiating():
+            # A thickness that carries gradients reads every film exactly
+            # (evaluation_side): a table built now would not be read, so an
+            # optimisation loop spends no time in builds.
             return
         for inside, side in self.plan.items():
             if side.films and not (self.tabulate == "auto" and inside in self._gave_up):
@@ -244,8 +247,8 @@ class KernelStack:
                 if side.table is None:
                     self.table_failed.append(inside)
                     # "auto" does not retry after every parameter edit: a failed
-                    # build costs up to ~1 s (tabulate.base.MAX_BUILD_POINTS), a failed
-                    # band-limited one ~2 s more (the same budget).
+                    # build may cost up to the budget (tabulate.base.MAX_BUILD_WORK,
+                    # ~2 s) where the rejection cannot be predicted before the work.
                     self._gave_up.add(inside)
         if self.tabulate is True and self.table_failed:
             import warnings
@@ -545,15 +548,19 @@ def side_data(side: _Side, transmission: bool, channel: dict | None = None,
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
 
 
-def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.ndarray):
+def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.ndarray,
+            scale: float = 1.0):
     """Exact float64 ``(R, T)`` of the planned side ``inside`` of ``stack`` at every
     angle ``cos`` and wavelength (shape ``(len cos, len wavelengths)`` each), as
-    the colour tables see it (spectral values of every medium)."""
+    the colour tables see it (spectral values of every medium), every film's
+    thickness times ``scale``."""
     side = stack.plan[inside]
     data = with_absorbing(side_data(side, True))
     wl = np.asarray(wavelengths, np.float64)
     rows = np.tile(np.arange(wl.size), cos.size)
-    out = tabulate_base.evaluate_side(data, np.repeat(cos, wl.size), rows, wl, tabulate_base.side_indices(data, wl))
+    points = np.repeat(cos, wl.size)
+    out = tabulate_base.evaluate_side(data, points, rows, wl, tabulate_base.side_indices(data, wl),
+                                      None if scale == 1.0 else np.full(points.size, float(scale)))
     out = out.reshape(cos.size, wl.size, 2)
     T = np.zeros_like(out[..., 0]) if side.opaque else out[..., 1]
     return out[..., 0], T

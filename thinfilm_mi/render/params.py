@@ -20,6 +20,7 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
+from thinfilm_mi.render.orennayar import MAX_ROUGHNESS
 from thinfilm_mi.render.textures import mitsuba_module, texture_range
 
 #: Largest microfacet roughness accepted (``alpha``, ``alpha_u``, ``alpha_v``):
@@ -41,6 +42,7 @@ RULES = [
     (r"^(layers\.\d+\.)?eta\.", MIN_INDEX, False, MAX_INDEX, "a refractive index n", False),
     (r"^(layers\.\d+\.)?k\.", 0.0, False, MAX_INDEX, "an extinction coefficient k", False),
     (r"^alpha(_u|_v)?\.", 0.0, True, MAX_ALPHA, "a roughness", True),
+    (r"^roughness\.", 0.0, False, MAX_ROUGHNESS, "an Oren-Nayar roughness σ (radians)", True),
     (r"^specular_(reflectance|transmittance)\.", 0.0, False, math.inf, "a factor", False),
     (r"^reflectance\.", 0.0, False, 1.0 + ALBEDO_SLACK, "an albedo", False),
     (r"^thickness\.", 0.0, False, math.inf, "a thickness scale", True),

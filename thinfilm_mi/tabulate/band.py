@@ -25,7 +25,7 @@ angle axis), the exact ``R`` (float64) is integrated by adaptive Simpson along
 weights, ``I_b = ∫ R(ν) B((ν - ν_b) / w) dν``:
 
 * the first level samples the amplitudes ``N``, ``D`` of the recursion
-  (``R = |N|²/|D|²``, :func:`smooth_terms`) 32 times per interference fringe
+  (``R = |N|²/|D|²``, :func:`band_rows.amplitudes`) 32 times per interference fringe
   of the whole stack (:func:`first_step`); ``N`` and ``D`` are smooth where
   ``R`` has resonances, so every resonance shows as a zero of ``D`` near the
   real axis, found on the cubic through four samples (:func:`near_zeros`),
@@ -76,6 +76,7 @@ from thinfilm_mi.tabulate.base import (
     Table,
     bspline_coefficients,
     bspline_midpoints,
+    build_work,
     side_indices,
     tir_kind,
     with_ghosts,
@@ -99,11 +100,12 @@ FIRST_NU = 65
 FIRST_ORDER = 3.5
 #: Rounds after the first (each sized from the last's error).
 MAX_ROUNDS = 4
-#: Exact evaluations a band-limited build may spend (~2 s on two cores; the
-#: 30-film benchmark stack needs 1.6e6).
-
-
-
+#: A build's expected exact evaluations over a lower bound of its first round's
+#: (its rows' first-level samples): the adaptive panels and the later rounds
+#: (measured 7.4 for the 10-film and 14 for the 30-film benchmark stack). A
+#: build whose expected total exceeds :data:`~thinfilm_mi.tabulate.base.MAX_BUILD_WORK`
+#: is not started (milliseconds instead of seconds for 100-1000 films).
+EXPECTED_TOTAL = 14.0
 
 
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
@@ -126,20 +128,6 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     return table
 
 
-
-
-
-
-
-
-
-
-
-
-
-
-
-
 def _axis(kind: str, nu: int):
     """Row coordinates of a table with ``nu`` angle nodes: ``(nodes, mids)``; a
     ``"band"`` axis's nodes include its ghosts (evaluated), a split axis's do not,
@@ -157,8 +145,10 @@ def _axis(kind: str, nu: int):
 def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
                      max_texels: int, resolution: float, report: BuildReport | None = None) -> Table | None:
     """A verified table of ``R_σ`` (see the module), or ``None`` if the colour
-    check fails or the target needs more than ``max_texels`` texels or
-    :data:`MAX_BUILD_POINTS` exact evaluations. Writes its account into ``report``.
+    check fails or the target needs more than ``max_texels`` texels,
+    :data:`MAX_BUILD_POINTS` exact evaluations or :data:`MAX_BUILD_WORK` (the
+    expected total, :data:`EXPECTED_TOTAL`, checked before any evaluation; then
+    each round's before it runs). Writes its account into ``report``.
 
     Rounds: the rows of the angle nodes (a plain axis's ghosts included) and of
     their midpoints are computed (each row: every bin, so the v nodes and their
@@ -183,7 +173,12 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     spacing = getattr(side.quantity, "v_spacing", V_SPACING)
     rows = Rows(side, kind, resolution, spacing)
     nu = 2 * FIRST_NU if split else FIRST_NU
-    budget = Budget(texels=max_texels)
+    budget = Budget(texels=max_texels, point_work=build_work(side, 1))
+    first = EXPECTED_TOTAL * sum(len(x) for x in _axis(kind, nu)) * ((rows.nb - 1) / rows.step + 1)
+    stats["expected_work"] = build_work(side, first)
+    if not budget.allows(first):
+        stats["result"] = "over budget (expected)"
+        return None
     last, per_row = None, 0.0
     for _ in range(MAX_ROUNDS + 1):
         nv = rows.nv

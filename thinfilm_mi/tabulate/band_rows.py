@@ -3,7 +3,7 @@ exact ``R`` (and ``T``) integrated by adaptive Simpson along the wavenumber into
 B-spline bins of a fraction of the Gaussian's width, with the resonances of the
 stack found as zeros of its smooth denominator ``D`` and the panels graded around
 them (:class:`Rows`), the smooth amplitudes ``N``, ``D`` from which ``R = |N|²/|D|²``
-is sampled (:func:`smooth_terms`), and the Gaussian's width (:func:`sigma_nu`).
+is sampled (:func:`amplitudes`), and the Gaussian's width (:func:`sigma_nu`).
 """
 from __future__ import annotations
 
@@ -218,7 +218,7 @@ class Rows:
         ``(rows, P, C)``), ``cos`` there, and the resonances panels must resolve
         (:class:`_Resonances`).
 
-        The amplitudes ``N``, ``D`` of :func:`smooth_terms` (``R = |N|²/|D|²``)
+        The amplitudes ``N``, ``D`` of :func:`amplitudes` (``R = |N|²/|D|²``)
         are smooth where ``R`` has resonances: a resonance is a zero of ``D_s``
         or ``D_p`` just off the real axis, found on the cubic through the
         samples (:func:`near_zeros`) even where it is far narrower than the
@@ -228,22 +228,23 @@ class Rows:
         its shape."""
         R, P, C = xs.size, nu_pts.size, self.channels
         rows_of = np.repeat(np.arange(R), P)
-        if not _smooth_applies(self.side):
+        if not _samples_amplitudes(self.side):
             f, cos = self._exact(xs, rows_of, np.tile(nu_pts, R))
             return f.reshape(R, P, C), cos.reshape(R, P), _Resonances.none()
         wl = 1.0 / nu_pts
         idx = side_indices(self.side, wl)
         cos = self._cos(xs, rows_of, idx, np.tile(np.arange(P), R)).reshape(R, P)
         q, tr = self.quantity, self.side.transmission
-        terms = (q.smooth_terms if q else smooth_terms)(
+        terms, exps = (q.smooth_terms if q else amplitudes)(
             self.side, np.ascontiguousarray(cos).ravel(), np.tile(np.arange(P), R), wl, idx)
         self.points += cos.size
-        terms = terms.reshape(R, P, -1)
+        terms, exps = terms.reshape(R, P, -1), exps.reshape(R, P, 2)
         f = q.values(terms, tr) if q else powers_of(terms, tr)
         f = np.where((cos <= 0.0)[..., None], q.grazing(tr) if q else np.array([1.0, 0.0][:C]), f)
         # zeros of D_s and D_p within RESOLVE_DISTANCE sample steps of the axis
         # (positions and distances in bins)
-        r, pos, d = (np.concatenate(v) for v in zip(*(near_zeros(terms, k) for k in (2, 6))))
+        r, pos, d = (np.concatenate(v) for v in zip(*(near_zeros(terms, k, exps[..., e])
+                                                      for k, e in ((2, 0), (6, 1)))))
         return f, cos, _Resonances(r, self.step * pos,
                                    np.maximum(self.step * d, MIN_PANEL), self.nb)
 
@@ -425,33 +426,27 @@ class Rows:
         return worst
 
 
-#: :func:`smooth_terms` runs without the render kernels' power-of-two
-#: rescaling (it would make the amplitudes jump along λ): |N|, |D| grow by at
-#: most ~2.8 per film, within float64 to ~600 films. Deeper stacks, and sides
-#: with incoherent films (whose evaluator has no such amplitudes), are sampled
-#: without the resonance search.
-MAX_SMOOTH_FILMS = 250
+def _samples_amplitudes(side: SideData) -> bool:
+    """Whether the first level samples the amplitudes (:func:`amplitudes`): every
+    coherent side with films (sides with incoherent films, whose evaluator has no
+    such amplitudes, are sampled without the resonance search)."""
+    return 0 < len(side.films) == len(side.fringe_films)
 
 
-def _smooth_applies(side: SideData) -> bool:
-    return (0 < len(side.films) <= MAX_SMOOTH_FILMS
-            and len(side.fringe_films) == len(side.films))
-
-
-def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
-                  indices) -> np.ndarray:
+def amplitudes(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
+               indices) -> tuple[np.ndarray, np.ndarray]:
     """The stack's projective amplitudes at points ``(cos0[i], wl[rows[i]])``:
-    shape ``(points, C)`` with channels ``Re, Im`` of ``N_s, D_s, N_p, D_p``
-    and, with transmission, ``|T_s|^2 f_s, |T_p|^2 f_p`` (``R = |N|^2 /
-    |D|^2``, ``T = |T|^2 f / |D|^2``, :func:`optics.rouard_recursion`).
+    ``(terms, exponents)``, ``terms`` of shape ``(points, C)`` with channels
+    ``Re, Im`` of ``N_s, D_s, N_p, D_p`` and, with transmission, ``|T_s|^2 f_s,
+    |T_p|^2 f_p`` (``R = |N|^2 / |D|^2``, ``T = |T|^2 f / |D|^2``), and
+    ``exponents`` of shape ``(points, 2)`` (s, p): ``N 2^E``, ``D 2^E`` are smooth
+    functions of λ without the resonant denominator ``1 / D``, so a few nodes per
+    fringe interpolate them where ``R`` itself would need hundreds.
 
-    The Rouard recursion in float64 as a Dr.Jit loop over the films, with the
-    step of :func:`optics.rouard_step` (no division), scaled after each film
-    by ``1 / sqrt(|a_j|^2 + |a_j+1|^2)``, a smooth function of the wavelength
-    (the render kernels' power-of-two rescaling is not): every channel is then
-    an analytic function of λ without the resonant denominator ``1 / D``, and
-    a few nodes per fringe interpolate it where ``R`` itself would need
-    hundreds."""
+    The films' loop of the render kernels in float64
+    (:func:`thinfilm_mi.optics.core.stack_loop_terms` with ``smooth``: its
+    power-of-two rescaling keeps every depth within range, and the exponents it
+    sums undo it), the films gathered per point's row."""
     from drjit.llvm import Float64, UInt32
 
     from thinfilm_mi.optics import core as op
@@ -466,77 +461,37 @@ def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndar
         return dr.gather(Float64, float64_array(values), at)
 
     real = not any(np.any(n.imag) for n in film_n)
-    n0_max = float(np.max(n0))
-    cos, beta2, q0 = op.incidence(per_row(n0), float64_array(cos0))
-    n0v = per_row(n0)
-    wlv = per_row(wl)
-    beta = dr.sqrt(beta2)
-    zero = 0.0 * cos
-    exit_cx = Cx(per_row(n_exit.real), per_row(n_exit.imag) if np.any(n_exit.imag) else 0.0)
-    n_ex, q_ex, a_ex = op.exit_admittances(exit_cx, beta2, n0_max * n0_max)
     re = np.concatenate([n.real for n in film_n])
     buf_re = float64_array(re)
     buf_im = None if real else float64_array(np.concatenate([n.imag for n in film_n]))
     thick = float64_array(np.array([d for _, d in side.films], np.float64))
     width = dr.opaque(UInt32, len(wl))
-    n2_min = float(re.min()) ** 2 if real else None
-    inv_wl = 1.0 / wlv
-    transmission = side.transmission
 
     def film(j):
         i = j * width + at
         m = Cx(dr.gather(Float64, buf_re, i), 0.0 if real else dr.gather(Float64, buf_im, i))
-        d = dr.gather(Float64, thick, j)
-        q = op.guard_zero_q(m, op.normal_index_bounded(m, beta2, n0_max * n0_max, n2_min), beta, zero)
-        E = op.phase_factor(q, d * inv_wl, True)
-        mag2 = 1.0 if real else dr.exp((-4.0 * math.pi) * (q.im * d * inv_wl))
-        inv_m2 = 1.0 / (m.re * m.re) if real else op.cinv(m.square())
-        return {"s": q, "p": op.cmul(q, Cx.of(inv_m2))}, E, mag2
+        return m, dr.gather(Float64, thick, j)
 
-    def full(z):
-        return (zero + z.re, zero + z.im)
-
-    def step(a, b, E_b, N, D, T, mag2):
-        N, D = op.rouard_step(a, b, E_b, N, D)
-        s2 = 1.0 / (a.abs2() + b.abs2())
-        scale = dr.sqrt(s2)
-        return N * scale, D * scale, T * (4.0 * a.abs2() * mag2 * s2)
-
-    state = (dr.opaque(UInt32, len(film_n), len(rows)),
-             *full(Cx(0.0)), *full(Cx(1.0)), zero + 1.0,
-             *full(Cx(0.0)), *full(Cx(1.0)), zero + 1.0,
-             *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
-
-    def body(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, bsr, bsi, bpr, bpi, Er, Ei):
-        j = j - 1
-        a, E, mag2 = film(j)
-        out = []
-        for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
-                                  ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
-            N, D, T = step(a[pol], b, Cx(Er, Ei), N, D, T, mag2)
-            out += [N.re, N.im, D.re, D.im, T]
-        return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
-
-    (_, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, bsr, bsi, bpr, bpi, Er, Ei) = \
-        dr.while_loop(state, op.films_left, op.loop_body(body), label="thinfilm_band")
-    a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0v * n0v)), 0.0)}
+    exit_cx = Cx(per_row(n_exit.real), per_row(n_exit.imag) if np.any(n_exit.imag) else 0.0)
+    terms, fac, grazing = op.stack_loop_terms(
+        per_row(n0), float64_array(cos0), dr.opaque(UInt32, len(film_n), len(rows)), film,
+        exit_cx, per_row(wl), transmission=side.transmission, n0_max=float(np.max(n0)),
+        film_n_min=float(re.min()) if real else None, label="thinfilm_band", exponents=True,
+        smooth=True)
     out = []
-    ts = []
-    for pol, (N, D, T, b) in (("s", (Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, Cx(bsr, bsi))),
-                              ("p", (Cx(Npr, Npi), Cx(Dpr, Dpi), Tp, Cx(bpr, bpi)))):
-        N, D, T = step(a0[pol], b, Cx(Er, Ei), N, D, T, 1.0)
+    for pol in ("s", "p"):
+        N, D, _, _ = terms[pol]
         out += [N.re, N.im, D.re, D.im]
-        ts.append(T)
-    if transmission:
-        grazing = cos <= 0.0
-        fac = op.power_factors(n0v, q0, n_ex, q_ex, grazing, 1.0)
-        out += [dr.select(grazing, 0.0, ts[0] * fac["s"]), dr.select(grazing, 0.0, ts[1] * fac["p"])]
-    dr.eval(*out)
-    return np.stack([np.array(v, dtype=np.float64) for v in out], axis=-1)
+    if side.transmission:
+        out += [dr.select(grazing, 0.0, terms[pol][2] * fac[pol]) for pol in ("s", "p")]
+    exps = [terms["s"][3], terms["p"][3]]
+    dr.eval(*out, *exps)
+    return (np.stack([np.array(v, dtype=np.float64) for v in out], axis=-1),
+            np.stack([np.array(v, dtype=np.float64) for v in exps], axis=-1))
 
 
 def powers_of(terms: np.ndarray, transmission: bool) -> np.ndarray:
-    """``R`` [, ``T``] (last axis) from :func:`smooth_terms` channels (any leading shape)."""
+    """``R`` [, ``T``] (last axis) from :func:`amplitudes` channels (any leading shape)."""
     Ns = terms[..., 0] ** 2 + terms[..., 1] ** 2
     Ds = terms[..., 2] ** 2 + terms[..., 3] ** 2
     Np = terms[..., 4] ** 2 + terms[..., 5] ** 2
@@ -551,7 +506,7 @@ def powers_of(terms: np.ndarray, transmission: bool) -> np.ndarray:
     return np.stack([R, T], axis=-1)
 
 
-def near_zeros(samples: np.ndarray, channel: int) -> tuple:
+def near_zeros(samples: np.ndarray, channel: int, exponents: np.ndarray | None = None) -> tuple:
     """Zeros of the complex function ``samples[..., channel] + i samples[...,
     channel + 1]`` (shape ``(rows, n, K)``, smooth on the samples' scale) near the
     real axis: ``(row, position, distance)`` arrays, position a sample
@@ -561,14 +516,25 @@ def near_zeros(samples: np.ndarray, channel: int) -> tuple:
     A zero at ``x_p + i d`` makes ``|f|²`` a bowl ``∝ (x - x_p)² + d²`` along the
     axis, so only the samples where ``|f|²`` has a local minimum are examined:
     the cubic through the four samples around it is solved by Newton's method
-    (8 steps from the minimum)."""
+    (8 steps from the minimum). With ``exponents`` (shape ``(rows, n)``) the
+    function is ``f 2^exponents`` (:func:`amplitudes`): neighbours are compared,
+    and the cubic fitted, in units of ``2^`` the middle sample's exponent (exact
+    powers of two, so the result does not depend on the exponents' split)."""
     f = samples[..., channel] + 1j * samples[..., channel + 1]
     a2 = f.real * f.real + f.imag * f.imag
     n = a2.shape[1]
-    low = (a2[:, 1:n - 2] <= a2[:, 0:n - 3]) & (a2[:, 1:n - 2] < a2[:, 2:n - 1])
+    before, here, after = a2[:, 0:n - 3], a2[:, 1:n - 2], a2[:, 2:n - 1]
+    if exponents is not None:     # neighbours in units of 2^(the sample's exponent): exact
+        e = exponents[:, 1:n - 2]
+        before = before * np.exp2(2.0 * (exponents[:, 0:n - 3] - e))
+        after = after * np.exp2(2.0 * (exponents[:, 2:n - 1] - e))
+    low = (here <= before) & (here < after)
     r, i = np.nonzero(low)
     i = i + 1                                   # the minimum's sample, 1 .. n - 3
     f0, f1, f2, f3 = f[r, i - 1], f[r, i], f[r, i + 1], f[r, i + 2]
+    if exponents is not None:     # the window in units of 2^(its minimum's exponent)
+        e = exponents[r, i]
+        f0, f2, f3 = (fk * np.exp2(exponents[r, i + k] - e) for fk, k in ((f0, -1), (f2, 1), (f3, 2)))
     # the cubic through (-1.5, f0), (-0.5, f1), (0.5, f2), (1.5, f3)
     b0 = (-f0 + 9.0 * (f1 + f2) - f3) / 16.0
     b1 = (f0 - 27.0 * f1 + 27.0 * f2 - f3) / 24.0

@@ -59,6 +59,25 @@ GRAZING_COS = 0.02
 #: inside glass, or the high-Q cavity modes of a deep random stack on a metal)
 #: is evaluated exactly. (fig8b's table lit from inside glass needs ~2e5.)
 MAX_BUILD_POINTS = 3_000_000   # one budget for every build, exact (~1 s) or band-limited (~2 s)
+#: An exact evaluation's cost grows with the films (the recursion visits each):
+#: :func:`build_work` weighs a point by its films plus this share of its own
+#: (indices, angle, Fresnel terms, numpy bookkeeping).
+POINT_WORK = 4
+#: :func:`build_work` a build may spend, decided before the work where it can be
+#: predicted (the exact probe, the band-limited build's first round and its
+#: expected total; then before every round): ~2 s on two cores (the 30-film
+#: benchmark stack's band-limited table, 1.6e6 points of 34 film units, took
+#: 0.7-1.3 s). Deeper stacks are evaluated exactly at once instead of spending
+#: seconds on a table the budget then rejects.
+MAX_BUILD_WORK = 100_000_000
+
+
+def build_work(side: "SideData", points: float) -> float:
+    """The cost of ``points`` exact evaluations of ``side`` in film units
+    (:data:`POINT_WORK` per point on top of one per film)."""
+    return float(points) * (len(side.films) + POINT_WORK)
+
+
 #: Builds evaluate stacks of this many films or more as a loop over the films: its
 #: float64 kernel is compiled once for every depth (the unrolled kernel of 30
 #: films took ~0.9 s to compile, once per depth with an empty kernel cache).

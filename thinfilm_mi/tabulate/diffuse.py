@@ -237,7 +237,7 @@ class ColourDiffuse:
     def _at_one(self, M, nodes):
         """``π f`` at ``k_d = 1`` (the series) and the single term (the ``ℓ_j`` sum
         to 1), shape ``(nu, nu, 2 C)``; with a fixed ``k_d``: ``M`` (twice)."""
-        g = np.ones(1) if self.fixed else _g(1.0, nodes, self.model)
+        g = np.ones(1) if self.fixed else np.broadcast_to(_g(1.0, nodes, self.model), nodes.shape)
         return np.concatenate([np.einsum("iojc,j->ioc", M, g), M.sum(axis=2)], axis=-1)
 
     def _close(self, M, nodes, M2, nodes2) -> bool:
@@ -283,6 +283,18 @@ class ColourDiffuse:
         import mitsuba as mi
         res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
         return self._combine(res, kd)
+
+    def node_values(self, cos_i, cos_o, active=True):
+        """``[(r_j, M_j)]``: the nodes ``r_j`` of ``R_dh`` (opaque ``mi.Float``) and the
+        table's ``M_jc = ∫ ŵ_c t(θ_i) t(θ_o) ℓ_j(R_dh) dλ`` (``mi.Spectrum``) of a table
+        built without a fixed albedo, for a base other than Lambert's
+        (:func:`thinfilm_mi.render.orennayar.coated_integrated`)."""
+        import mitsuba as mi
+        assert not self.fixed, "node_values needs a table built without a fixed albedo"
+        res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
+        C = self.C
+        return [(r, mi.Spectrum(*res[j * C:(j + 1) * C]) if C > 1 else mi.Spectrum(res[j * C]))
+                for j, r in enumerate(self._r)]
 
     def albedo(self, cos_i, kd, active=True):
         """``∫ f cos θ_o dω_o``: the diffuse lobe's albedo for light from ``cos_i``."""

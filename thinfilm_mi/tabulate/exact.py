@@ -66,6 +66,7 @@ from thinfilm_mi.tabulate.base import (
     GHOST,
     GRAZING_COS,
     HALF_PI,
+    MAX_BUILD_WORK,
     MAX_ROUNDS,
     MAX_TEXELS,
     MAX_U,
@@ -82,6 +83,7 @@ from thinfilm_mi.tabulate.base import (
     bspline_at,
     bspline_coefficients,
     bspline_midpoints,
+    build_work,
     evaluate_side,
     side_indices,
     tir_kind,
@@ -182,6 +184,14 @@ PROBE_HOT_LINES = 4
 PROBE_SHARE = 0.4
 #: Nodes of the reference axis on which the probe's columns and rows are placed.
 _REF = 1001
+#: Exact evaluations of a probe (measured 5.6e4 on a plain axis, its lines with
+#: their ghosts; more where a line is probed again finer).
+PROBE_POINTS = 60_000
+#: The probe runs only where :data:`PROBE_POINTS` cost at most this
+#: (:func:`~thinfilm_mi.tabulate.base.build_work`): ~0.2 s on two cores, ~160
+#: films. A deeper stack is not probed (no exact table resolves its fringes: its
+#: optical thickness is tens of microns); its band-limited build decides alone.
+MAX_PROBE_WORK = MAX_BUILD_WORK // 10
 
 
 def line_levels(f: np.ndarray, ok: np.ndarray, intervals: int, min_nodes: int,
@@ -368,9 +378,10 @@ def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: d
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
                 max_texels: int = MAX_TEXELS, report: BuildReport | None = None) -> Table | None:
     """Build and verify a table of the exact values of one side, or ``None`` if
-    the target cannot be met within ``max_texels`` texels and
-    :data:`MAX_BUILD_POINTS` evaluations (or the exit medium's critical angle
-    depends on λ). (Band-limited tables, for stacks this rejects:
+    the target cannot be met within ``max_texels`` texels,
+    :data:`MAX_BUILD_POINTS` evaluations and :data:`MAX_BUILD_WORK` (or the exit
+    medium's critical angle depends on λ; or the probe alone would cost more than
+    :data:`MAX_PROBE_WORK`: then nothing is evaluated). (Band-limited tables, for stacks this rejects:
     :func:`thinfilm_mi.tabulate.band.build_table`.)
 
     The table holds the coefficients of the interpolating cubic B-spline, on a
@@ -398,8 +409,11 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     split = kind == "tir"
     side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)
                       + (bool(np.any(np.asarray(side.n_exit(wavelengths)).imag)),))
+    if build_work(side, PROBE_POINTS) > MAX_PROBE_WORK:
+        stats["result"] = "probe over budget"
+        return None
     nu, nv = table_resolution(side, error, wavelengths)
-    budget = Budget(texels=max_texels)
+    budget = Budget(texels=max_texels, point_work=build_work(side, 1))
     pu, pv = _estimate(side, kind, error, max_texels, stats)
     budget.spend(stats["probe_points"])
     stats["points"] = budget.spent

@@ -22,7 +22,7 @@ The quantity provides:
   :func:`~thinfilm_mi.optics.mueller.mueller_rt_loop` (deep stacks, a loop);
 * for the band-limited build's first level, the smooth projective amplitudes
   (:meth:`MuellerQuantity.smooth_terms`, ``N, D`` of s and p at the channels where
-  the powers' :func:`~thinfilm_mi.tabulate.band_rows.smooth_terms` has them, so
+  the powers' :func:`~thinfilm_mi.tabulate.band_rows.amplitudes` has them, so
   the resonance search is the same) and the channels from them
   (:meth:`MuellerQuantity.values`).
 """
@@ -66,14 +66,18 @@ AUTO_MIN_FILMS = 40
 #: :data:`thinfilm_mi.render.kernel.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
 #: band-limited tables of the benchmark's 10- and 30-film stacks).
 AUTO_MAX_FLOATS = 1 << 21
+#: :meth:`MuellerQuantity.smooth_terms` rescales the amplitudes by smooth factors
+#: only (``|N|``, ``|D|`` grow by at most ~2.8 per film: within float64 to ~600
+#: films); deeper sides are divided by ``|Re D| + |Im D|`` after every film instead.
+MAX_SMOOTH_FILMS = 250
 
 
-def _smooth_loop(n0, cos0, count, film, n_exit, wl, transmission, **hints):
-    """The amplitudes of :func:`~thinfilm_mi.optics.mueller.amplitude_loop` with the
-    smooth rescaling, as the real channels of :meth:`MuellerQuantity.smooth_terms`."""
+def _terms_loop(n0, cos0, count, film, n_exit, wl, transmission, smooth: bool, **hints):
+    """The amplitudes of :func:`~thinfilm_mi.optics.mueller.amplitude_loop` as the
+    real channels of :meth:`MuellerQuantity.smooth_terms`."""
     amps = amplitude_loop(n0, cos0, count, film, n_exit, wl, transmission=transmission,
                           n0_max=hints.get("n0_max"), film_n_min=hints.get("film_n_min"),
-                          smooth=True, label="thinfilm_mueller_band")
+                          smooth=smooth, label="thinfilm_mueller_band")
     zero = 0.0 * cos0 * wl
     out = []
     for pol in ("s", "p"):
@@ -89,10 +93,20 @@ def _smooth_loop(n0, cos0, count, film, n_exit, wl, transmission, **hints):
     return tuple(zero + v for v in out)
 
 
-def _smooth_unrolled(n0, cos0, films, n_exit, wl, transmission):
-    """:func:`_smooth_loop` traced film by film (a Python loop: few films)."""
-    return _smooth_loop(n0, cos0, len(films), lambda j: films[j], n_exit, wl, transmission,
-                        n0_max=None)
+def _smooth_loop(n0, cos0, count, film, n_exit, wl, transmission, **hints):
+    return _terms_loop(n0, cos0, count, film, n_exit, wl, transmission, True, **hints)
+
+
+def _normalised_loop(n0, cos0, count, film, n_exit, wl, transmission, **hints):
+    return _terms_loop(n0, cos0, count, film, n_exit, wl, transmission, False, **hints)
+
+
+def _unrolled(loop):
+    """``loop`` traced film by film (a Python loop: few films), with the signature of
+    :attr:`SideData.rt`."""
+    def rt(n0, cos0, films, n_exit, wl, transmission):
+        return loop(n0, cos0, len(films), lambda j: films[j], n_exit, wl, transmission)
+    return rt
 
 
 class MuellerQuantity:
@@ -137,14 +151,21 @@ class MuellerQuantity:
 
     @staticmethod
     def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
-                     indices) -> np.ndarray:
-        """The smooth projective amplitudes at points ``(cos0[i], wl[rows[i]])``:
-        ``Re, Im`` of ``N_s, D_s, N_p, D_p`` (channels 0-7, as
-        :func:`~thinfilm_mi.tabulate.band_rows.smooth_terms`) and, with
-        transmission, of ``T_s, T_p`` and the power factors ``w_s, w_p``
-        (``r = N / D``, ``t = T / D``)."""
-        terms = dataclasses.replace(side, rt=_smooth_unrolled, rt_loop=_smooth_loop)
-        return evaluate_side(terms, cos0, rows, wl, indices)
+                     indices) -> tuple[np.ndarray, np.ndarray]:
+        """The smooth projective amplitudes at points ``(cos0[i], wl[rows[i]])``, as
+        :func:`~thinfilm_mi.tabulate.band_rows.amplitudes` gives them: ``(terms,
+        exponents)``, ``terms`` with ``Re, Im`` of ``N_s, D_s, N_p, D_p`` (channels
+        0-7) and, with transmission, of ``T_s, T_p`` and the power factors ``w_s,
+        w_p`` (``r = N / D``, ``t = T / D``); the exponents are 0 (the smooth
+        rescaling alone keeps them in range). Beyond :data:`MAX_SMOOTH_FILMS` films
+        the amplitudes are divided by ``|Re D| + |Im D|`` after every film instead: exact
+        values, but ``D`` has no zeros left, so such sides are sampled without the
+        resonance search."""
+        smooth = len(side.films) <= MAX_SMOOTH_FILMS
+        loop = _smooth_loop if smooth else _normalised_loop
+        terms = dataclasses.replace(side, rt=_unrolled(loop), rt_loop=loop)
+        values = evaluate_side(terms, cos0, rows, wl, indices)
+        return values, np.zeros(values.shape[:-1] + (2,))
 
     @staticmethod
     def values(terms: np.ndarray, transmission: bool) -> np.ndarray:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from thinfilm_mi.tabulate.base import MAX_BUILD_POINTS, MAX_TEXELS, u_nodes_cos
+from thinfilm_mi.tabulate.base import MAX_BUILD_POINTS, MAX_BUILD_WORK, MAX_TEXELS, u_nodes_cos
 
 __all__ = ["Budget", "LinearAxis", "convergence_factor", "interleave", "linear_error", "midpoints4",
            "optical_thickness", "power_of_two_step", "subdivide"]
@@ -39,14 +39,19 @@ __all__ = ["Budget", "LinearAxis", "convergence_factor", "interleave", "linear_e
 class Budget:
     """What one build may spend: ``points`` exact evaluations in all (probe, nodes
     and checks of every round) and tables of at most ``texels`` texels (or, for
-    the linear tables, floats). ``spent`` counts the evaluations so far."""
+    the linear tables, floats). ``spent`` counts the evaluations so far. With a
+    ``point_work`` (a point's cost in film units, :func:`base.build_work`), the
+    evaluations' work must also stay within ``work``."""
     points: int = MAX_BUILD_POINTS
     texels: int = MAX_TEXELS
     spent: int = 0
+    point_work: float = 0.0
+    work: float = MAX_BUILD_WORK
 
     def allows(self, points: float = 0, texels: float = 0) -> bool:
         """Whether a round of ``points`` more evaluations giving ``texels`` texels fits."""
-        return self.spent + points <= self.points and texels <= self.texels
+        total = self.spent + points
+        return total <= self.points and texels <= self.texels and total * self.point_work <= self.work
 
     def spend(self, points: int) -> None:
         self.spent += int(points)

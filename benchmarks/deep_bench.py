@@ -1,0 +1,166 @@
+"""Deep stacks (issue 32): load time at every depth, steady render against Mitsuba's
+``conductor``, the exact evaluation's cost per film, and the share of a gradient
+descent spent in table builds.
+
+    python benchmarks/deep_bench.py [--rounds 3] [--only loads|steady|descent]
+
+Stacks: the Al stacks of render_bench.py (2.3/1.46 films, 50-200 nm from
+``default_rng(6)``), default settings (``tabulate="auto"``, ``spectral_resolution``
+1 nm), variant llvm_ad_spectral.
+
+1. Loads: ``mi.load_dict`` of the BSDF in a fresh process per load (empty table
+   cache; the build kernels compiled by a first load of a 2-film stack), --rounds
+   round-robin rounds over 10, 30, 100, 300, 1000 films, medians; what the build did.
+2. Steady: the sphere scene of render_bench.py, 128x128, 16 spp; ``conductor`` and
+   100, 300, 1000 films; one warm-up render each, then --rounds round-robin rounds,
+   medians; the exact evaluation's cost per film from the slope between 100 and
+   1000 films.
+3. Descent: 50 steps of gradient descent on the first film's thickness of the
+   30-film stack (32x32, 1 spp, ``prb``-free ``path`` integrator, a fixed target
+   image); total time and time spent in ``KernelStack._plan_tables``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+
+DEPTHS = (10, 30, 100, 300, 1000)
+
+
+def layers(L: int) -> str:
+    d = np.random.default_rng(6).uniform(50.0, 200.0, L)
+    return "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(L))
+
+
+def bsdf(L: int) -> dict:
+    return {"type": "thinfilm_conductor", "material": "Al", "layers": layers(L)}
+
+
+def load_child(L: int) -> dict:
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_spectral")
+    import thinfilm_mi  # noqa: F401
+    mi.load_dict(bsdf(2))                 # the build kernels
+    t = time.perf_counter()
+    b = mi.load_dict(bsdf(L))
+    dt = time.perf_counter() - t
+    rep = b.stack.plan[False].build_report or {}
+    return {"load": dt, "result": rep.get("result"), "points": rep.get("points"),
+            "exact": (rep.get("exact_attempt") or {}).get("result")}
+
+
+def loads(rounds: int) -> None:
+    res = {L: [] for L in DEPTHS}
+    for _ in range(rounds):
+        for L in DEPTHS:
+            out = subprocess.run([sys.executable, __file__, "--child", str(L)], capture_output=True,
+                                 text=True, check=True).stdout
+            res[L].append(json.loads(out.strip().splitlines()[-1]))
+    print("\n### Loads at default settings (fresh process each)\n")
+    print("| films | load (s), median | band-limited build | exact attempt | exact evaluations |")
+    print("|---:|---:|---|---|---:|")
+    for L in DEPTHS:
+        r = res[L]
+        print(f"| {L} | {statistics.median(x['load'] for x in r):.2f} | {r[0]['result']} | "
+              f"{r[0]['exact']} | {r[0]['points']} |")
+
+
+def steady(rounds: int) -> None:
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_spectral")
+    import render_bench as rb
+
+    import thinfilm_mi  # noqa: F401
+    configs = ["conductor", 100, 300, 1000]
+    scenes = {}
+    for c in configs:
+        s = rb.scene_dict("conductor", 128, 16)
+        if c != "conductor":
+            s["sphere"]["bsdf"] = bsdf(c)
+        scenes[c] = mi.load_dict(s)
+        mi.render(scenes[c], seed=0).numpy()
+    times = {c: [] for c in configs}
+    for r in range(rounds):
+        for c in configs:
+            t = time.perf_counter()
+            mi.render(scenes[c], seed=r + 1).numpy()
+            times[c].append(time.perf_counter() - t)
+    med = {c: statistics.median(v) for c, v in times.items()}
+    print("\n### Steady render, 128x128, 16 spp (medians)\n")
+    print("| config | mode | time (s) | / conductor |")
+    print("|---|---|---:|---:|")
+    for c in configs:
+        mode = "-" if c == "conductor" else scenes[c].shapes()[0].bsdf().stack.mode()
+        print(f"| {c} | {mode} | {med[c]:.3f} | {med[c] / med['conductor']:.2f} |")
+    per_film = (med[1000] - med[100]) / 900
+    print(f"\nExact evaluation: {1e3 * per_film:.2f} ms per film per render "
+          f"({1e9 * per_film / (128 * 128 * 16):.2f} ns per film per sample).")
+
+
+def descent() -> None:
+    import drjit as dr
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_spectral")
+    import render_bench as rb
+
+    import thinfilm_mi  # noqa: F401
+    from thinfilm_mi.render import kernel as K
+    spent = [0.0]
+    plan = K.KernelStack._plan_tables
+
+    def timed(self):
+        t = time.perf_counter()
+        plan(self)
+        spent[0] += time.perf_counter() - t
+    K.KernelStack._plan_tables = timed
+    s = rb.scene_dict("conductor", 32, 1)
+    s["sphere"]["bsdf"] = bsdf(30)
+    scene = mi.load_dict(s)
+    target = mi.render(scene, seed=0)
+    params = mi.traverse(scene)
+    key = "sphere.bsdf.layers.0.thickness"
+    opt = mi.ad.Adam(lr=2.0)
+    opt[key] = mi.Float(params[key][0] + 20.0)
+    params.update(opt)
+    spent[0] = 0.0
+    t = time.perf_counter()
+    for i in range(50):
+        img = mi.render(scene, params, seed=i + 1)
+        loss = dr.mean(dr.square(img - target), axis=None)
+        dr.backward(loss)
+        opt.step()
+        params.update(opt)
+    total = time.perf_counter() - t
+    print("\n### Gradient descent, 30 films, 50 steps (32x32, 1 spp)\n")
+    print(f"total {total:.2f} s, in table planning/builds {spent[0]:.3f} s "
+          f"({100 * spent[0] / total:.1f} %)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--only", choices=("loads", "steady", "descent"))
+    ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
+    a = ap.parse_args()
+    if a.child:
+        print(json.dumps(load_child(a.child)))
+        return
+    if a.only in (None, "loads"):
+        loads(a.rounds)
+    if a.only in (None, "steady"):
+        steady(a.rounds)
+    if a.only in (None, "descent"):
+        descent()
+
+
+if __name__ == "__main__":
+    main()

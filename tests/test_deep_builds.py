@@ -1,0 +1,91 @@
+"""Deep stacks and edits under the build budget (issue 32).
+
+* A stack whose table cannot repay its build is evaluated exactly at once: the
+  budget (``tabulate.base.MAX_BUILD_WORK``) is decided before the work, so a
+  100-film stack spends no exact evaluation on a band-limited table, a 300-film one
+  none on the exact probe either.
+* A thickness that carries gradients reads every film exactly, so planning builds
+  no table for it (an optimisation loop spends no time in builds).
+* The image does not depend on when or how a table arrived: built at load or taken
+  from the cache, the same seed gives the same image, bit for bit (1 spp, box filter).
+"""
+from __future__ import annotations
+
+import drjit as dr
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import thinfilm_mi  # noqa: F401  (registers the plugins)
+from thinfilm_mi.render import kernel as K
+
+
+@pytest.fixture(autouse=True)
+def _variant():
+    mi.set_variant("llvm_ad_spectral")
+    import thinfilm_mi  # noqa: F401,F811
+    yield
+
+
+def _layers(films: int) -> str:
+    d = np.random.default_rng(6).uniform(50.0, 200.0, films)
+    return "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(films))
+
+
+def _bsdf(films: int) -> dict:
+    return {"type": "thinfilm_conductor", "material": "Al", "layers": _layers(films)}
+
+
+@pytest.mark.parametrize("films, probe", [(100, "rejected by the probe"), (300, "probe over budget")])
+def test_deep_stacks_are_rejected_before_the_work(films, probe):
+    K.TABLE_CACHE.clear()
+    bsdf = mi.load_dict(_bsdf(films))
+    report = bsdf.stack.plan[False].build_report
+    assert bsdf.stack.mode() == "exact"
+    assert report["result"] == "over budget (expected)" and report["points"] == 0
+    assert report["exact_attempt"]["result"] == probe
+    # the probe's 5.6e4 points of 104 film units are within its budget; 300 films' are not
+    assert report["exact_attempt"]["points"] == (0 if films == 300 else report["exact_attempt"]["probe_points"])
+
+
+def _scene(films: int) -> dict:
+    return {
+        "type": "scene",
+        "integrator": {"type": "path", "max_depth": 3},
+        "sensor": {"type": "perspective", "fov": 35,
+                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0],
+                                                              up=[0, 1, 0]),
+                   "sampler": {"type": "independent", "sample_count": 1},
+                   "film": {"type": "hdrfilm", "width": 24, "height": 24, "rfilter": {"type": "box"}}},
+        "emitter": {"type": "constant"},
+        "ball": {"type": "sphere", "bsdf": _bsdf(films)},
+    }
+
+
+def _render(scene) -> np.ndarray:
+    return np.array(mi.render(scene, seed=3))
+
+
+def test_gradients_build_no_table_and_the_image_does_not_depend_on_the_build():
+    K.TABLE_CACHE.clear()
+    scene = mi.load_dict(_scene(10))
+    bsdf = scene.shapes()[0].bsdf()
+    assert bsdf.stack.mode() == "table"          # built at load
+    first = _render(scene)
+    params = mi.traverse(scene)
+    key = "ball.bsdf.layers.0.thickness"
+    value = mi.Float(params[key])
+    # an edit while gradients are enabled: no build, the films are read exactly
+    dr.enable_grad(params[key])
+    params.update()
+    assert bsdf.stack.mode() == "exact" and bsdf.stack.plan[False].build_report is None
+    # gradients off again: the table comes back from the cache, and with it the image
+    params[key] = mi.Float(value)
+    params.update()
+    assert bsdf.stack.plan[False].build_report["result"] == "from the cache"
+    assert np.array_equal(_render(scene), first)
+    # a fresh build (empty cache) at a new load gives the same image too
+    K.TABLE_CACHE.clear()
+    again = mi.load_dict(_scene(10))
+    assert again.shapes()[0].bsdf().stack.plan[False].build_report["result"] == "table"
+    assert np.array_equal(_render(again), first)

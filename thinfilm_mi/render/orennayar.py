@@ -1,0 +1,213 @@
+"""The Oren–Nayar base of ``thinfilm_diffuse`` (its ``roughness``; no plugin classes here).
+
+Two base BRDFs of albedo ``ρ`` (``reflectance``) and roughness ``σ`` (radians, the
+standard deviation of the facet slope angles; :data:`MAX_ROUGHNESS` at most), with
+``A = 1 - 0.5 σ²/(σ² + 0.33)``, ``B = 0.45 σ²/(σ² + 0.09)``, ``μ = cos θ`` and
+``s = sin θ_i sin θ_o cos(φ_o - φ_i)`` (``wi.x wo.x + wi.y wo.y``, no trigonometry):
+
+* ``"qualitative"``: the seed's formula (Oren and Nayar 1994, their qualitative model),
+  ``f = ρ/π (A + B max(0, cos φ) sin α tan β)``, written as
+  ``ρ/π (A + B max(0, s)/max(μ_i, μ_o))`` (``sin α tan β = sin θ_i sin θ_o / cos β``).
+  Its directional albedo is ``E(μ) = ρ (A + B h(μ))`` with
+  ``π h(μ) = S (θ - S μ) + (2/3) S μ (1 + S + S²)/(1 + S)``, ``S = sin θ``
+  (:func:`qualitative_h`; the second term is ``(2/3) tan θ (1 - S³)`` without its
+  ``0·∞`` at grazing), and its hemispherical albedo ``Ē = ρ (A + B H)``,
+  ``H = 2∫h μ dμ = 2/3 - 64/(45π)`` (:data:`H_AVG`).
+* ``"eon"``: the energy-preserving Oren–Nayar model (Portsmouth, Kutz and Hill,
+  "EON: A practical energy-preserving rough diffuse BRDF", JCGT 14(1), 2025; OpenPBR's
+  ``base_diffuse_roughness``): Fujii's single-scattering lobe
+  ``f_ss = ρ/π A_F (1 + r s/t)`` (``s/t = s/max(μ_i, μ_o)`` for ``s > 0``, ``s``
+  otherwise; ``A_F = 1/(1 + c_1 r)``, ``c_1 = 1/2 - 2/(3π)``) plus the analytic
+  multiple-scattering lobe ``f_ms = ρ_ms/π (1 - E_F(μ_i))(1 - E_F(μ_o))/(1 - Ē_F)``
+  with ``E_F(μ) = A_F (1 + r (h(μ) - 2S/(3π)))``, ``Ē_F = A_F (1 + c_2 r)``,
+  ``c_2 = 2/3 - 28/(15π)``, ``ρ_ms = ρ² Ē_F/(1 - ρ (1 - Ē_F))``. A white base
+  reflects everything at every angle. Its roughness ``r`` (OpenPBR's, in [0, 1]) is
+  taken from ``σ`` as ``r = B/A``, the ratio that makes its lobe for ``cos φ > 0`` the
+  qualitative model's: ``r`` grows from 0 to 0.777 at ``σ = π/2`` (OpenPBR's ``r``
+  above that is out of reach).
+
+:class:`OrenNayar` reads and validates the parameters and gives, per hit, the base's
+:class:`BaseTerms`; :func:`coated` and :func:`coated_integrated` put them under the
+films (the model is written in the plugin's doc block).
+"""
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import drjit as dr
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render.textures import check_texture_range, mitsuba_module, texture_range, uniform
+
+__all__ = ["ROUGHNESS_MODELS", "MAX_ROUGHNESS", "H_AVG", "C1_FON", "C2_FON", "BaseTerms", "OrenNayar",
+           "coefficients", "qualitative_h", "coated", "coated_integrated", "series_term"]
+
+#: The base models (``roughness_model``); the first is the default.
+ROUGHNESS_MODELS = ("qualitative", "eon")
+#: Largest ``roughness`` accepted (radians): a slope angle's standard deviation beyond
+#: 90° means nothing, and larger values are most likely degrees given by mistake.
+MAX_ROUGHNESS = math.pi / 2
+#: ``2∫h(μ) μ dμ``: the hemispherical mean of the qualitative model's ``B`` term.
+H_AVG = 2.0 / 3.0 - 64.0 / (45.0 * math.pi)
+#: The EON paper's constants.
+C1_FON = 0.5 - 2.0 / (3.0 * math.pi)
+C2_FON = 2.0 / 3.0 - 28.0 / (15.0 * math.pi)
+
+
+class BaseTerms(NamedTuple):
+    """The base at one hit, per wavelength or channel: ``pi_f = π f_b(ω_i, ω_o)``,
+    ``e_i``, ``e_o``: its directional albedos ``E(μ_i)``, ``E(μ_o)``, and ``e_avg``:
+    its hemispherical albedo ``Ē = 2∫E μ dμ`` (all include ``ρ``)."""
+    pi_f: object
+    e_i: object
+    e_o: object
+    e_avg: object
+
+    def channel(self, c: int) -> BaseTerms:
+        """The terms of colour channel ``c``."""
+        return BaseTerms(*(x[c] for x in self))
+
+
+def coefficients(sigma):
+    """The qualitative model's ``A`` and ``B`` at ``σ`` (radians)."""
+    s2 = sigma * sigma
+    return 1.0 - 0.5 * s2 / (s2 + 0.33), 0.45 * s2 / (s2 + 0.09)
+
+
+def _sin(mu):
+    return dr.safe_sqrt((1.0 - mu) * (1.0 + mu))
+
+
+def qualitative_h(mu):
+    """``h(μ)``: the directional albedo of the qualitative model's ``B`` term
+    (``(1/π) ∫ max(0, cos φ) sin α tan β μ_o dω_o``), 0 at normal incidence, 1/2 at
+    grazing."""
+    S = _sin(mu)
+    return (S * (dr.acos(dr.clip(mu, -1.0, 1.0)) - S * mu)
+            + (2.0 / 3.0) * S * mu * (1.0 + S + S * S) / (1.0 + S)) * dr.inv_pi
+
+
+def _fon_albedo(mu, r, a_f):
+    """``E_F(μ)``: the directional albedo of Fujii's lobe at a white base."""
+    return a_f * (1.0 + r * (qualitative_h(mu) - (2.0 / (3.0 * math.pi)) * _sin(mu)))
+
+
+class OrenNayar:
+    """``roughness`` (a texture, radians) and ``roughness_model`` of a ``thinfilm_diffuse``.
+
+    :attr:`rough` says whether the kernel needs the rough base: ``False`` while the
+    roughness is 0 everywhere and carries no gradients, so that the plugin then runs
+    its Lambertian code unchanged (bit-identical results). :meth:`refresh` recomputes
+    it after an edit."""
+
+    def __init__(self, props, plugin: str):
+        self.plugin = plugin
+        model = props.get("roughness_model", ROUGHNESS_MODELS[0])
+        if model not in ROUGHNESS_MODELS:
+            raise ThinFilmError(f"{plugin}: 'roughness_model' must be one of "
+                                f"{', '.join(map(repr, ROUGHNESS_MODELS))}, got {model!r}")
+        self.model = model
+        self.texture = self._texture(props)
+        self.rough = False
+        self.refresh()
+
+    def _texture(self, props):
+        plugin = self.plugin
+        value = props.get("roughness", 0.0)
+        want = f"a number in [0, {MAX_ROUGHNESS:.6g}] (radians) or a texture"
+        if isinstance(value, (bool, str)):
+            raise ThinFilmError(f"{plugin}: 'roughness' must be {want}, got {value!r}")
+        if isinstance(value, (int, float)):
+            if not math.isfinite(value) or not 0.0 <= value <= MAX_ROUGHNESS:
+                raise ThinFilmError(f"{plugin}: 'roughness' (σ, radians) must be finite and in "
+                                    f"[0, {MAX_ROUGHNESS:.6g}], got {value!r}")
+            return uniform(float(value))
+        try:
+            tex = props.get_texture("roughness")
+        except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+            raise ThinFilmError(f"{plugin}: 'roughness' must be {want}, got {value!r} ({e})") from None
+        check_texture_range(tex, f"{plugin}: 'roughness' (σ, radians)", 0.0, MAX_ROUGHNESS, mono=True)
+        return tex
+
+    def _carries_gradients(self) -> bool:
+        mi = mitsuba_module()
+        if not dr.is_diff_v(mi.Float):
+            return False
+        params = mi.traverse(self.texture)
+        return any(dr.is_diff_v(params[k]) and dr.grad_enabled(params[k]) for k in params.keys())
+
+    def refresh(self) -> bool:
+        """Recompute :attr:`rough` from the texture's values and AD state; whether it changed."""
+        rng = texture_range(self.texture, mono=True)
+        rough = rng is None or rng[1] != 0.0 or self._carries_gradients()
+        changed, self.rough = rough != self.rough, rough
+        return changed
+
+    def check_lambertian(self) -> None:
+        """Refuse a render that differentiates a zero roughness whose gradients were
+        enabled without ``params.update()`` (the kernel would take the Lambertian code)."""
+        if not self.rough and self._carries_gradients():
+            raise ThinFilmError(f"{self.plugin}: 'roughness' carries gradients, but the BSDF was not "
+                                "updated: call params.update() after enabling gradients")
+
+    def traverse(self, callback) -> None:
+        callback.put("roughness", self.texture, mitsuba_module().ParamFlags.Differentiable)
+
+    def describe(self) -> str:
+        return f"  roughness = {self.texture},\n  roughness_model = {self.model},\n"
+
+    def terms(self, si, kd, wo, active) -> BaseTerms:
+        """:class:`BaseTerms` at ``si`` for light towards ``wo`` (local frame, upper
+        hemisphere) and base albedo ``kd``."""
+        wi = si.wi
+        mu_i, mu_o = wi.z, wo.z
+        sigma = self.texture.eval_1(si, active)
+        a, b = coefficients(sigma)
+        s = wi.x * wo.x + wi.y * wo.y
+        t = dr.maximum(dr.maximum(mu_i, mu_o), 1e-20)
+        if self.model == "qualitative":
+            pi_f = kd * (a + b * dr.maximum(s, 0.0) / t)
+            return BaseTerms(pi_f, kd * (a + b * qualitative_h(mu_i)),
+                             kd * (a + b * qualitative_h(mu_o)), kd * (a + b * H_AVG))
+        r = b / a
+        a_f = dr.rcp(1.0 + C1_FON * r)
+        e_fi, e_fo = _fon_albedo(mu_i, r, a_f), _fon_albedo(mu_o, r, a_f)
+        e_favg = a_f * (1.0 + C2_FON * r)
+        rho_ms = kd * kd * e_favg / (1.0 - kd * (1.0 - e_favg))
+        ms = (dr.maximum(1.0 - e_fi, 0.0) * dr.maximum(1.0 - e_fo, 0.0)
+              / dr.maximum(1.0 - e_favg, 1e-20))
+        pi_f = kd * a_f * (1.0 + r * dr.select(s > 0, s / t, s)) + rho_ms * ms
+        return BaseTerms(pi_f, kd * e_fi + rho_ms * (1.0 - e_fi), kd * e_fo + rho_ms * (1.0 - e_fo),
+                         kd * e_favg + rho_ms * (1.0 - e_favg))
+
+
+def series_term(terms: BaseTerms, r_dh, multiple: bool):
+    """``π f / (t_i t_o)`` of the coated rough base at ``R_dh``:
+    ``π f_b + E_i E_o R_dh/(1 - Ē R_dh)`` ("multiple"), ``π f_b`` ("single")."""
+    if not multiple:
+        return terms.pi_f
+    return terms.pi_f + terms.e_i * terms.e_o * r_dh * dr.rcp(1.0 - terms.e_avg * r_dh)
+
+
+def coated(terms: BaseTerms, t_i, t_o, r_dh, multiple: bool):
+    """``π f`` per wavelength: ``t(θ_i) t(θ_o)`` times :func:`series_term`."""
+    return t_i * t_o * series_term(terms, r_dh, multiple)
+
+
+def coated_integrated(node_values, terms: BaseTerms, multiple: bool):
+    """``π f`` per colour channel from the integrated diffuse table's terms
+    ``node_values = [(r_j, M_j)]`` (a table built without a fixed albedo,
+    :meth:`thinfilm_mi.tabulate.diffuse.ColourDiffuse.node_values`; the Lagrange basis
+    sums to 1): ``π f_b Σ M_j + E_i E_o Σ r_j/(1 - Ē r_j) M_j``, the integral of
+    :func:`coated` against colour matching."""
+    mi = mitsuba_module()
+    single = mi.Spectrum(0.0)
+    rest = mi.Spectrum(0.0)
+    for r, m in node_values:
+        single += m
+        if multiple:
+            rest += r * dr.rcp(1.0 - terms.e_avg * r) * m
+    if not multiple:
+        return terms.pi_f * single
+    return terms.pi_f * single + terms.e_i * terms.e_o * rest
