@@ -24,12 +24,10 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
    - Exterior index, real (default: 1.000277, air).
  * - model
    - |string|
-   - ``"exact"`` (default): the whole stack, coherent, over a base medium (see
-     below); ``"single"``: the paper's first-order model exactly as published
-     (Hirayama et al., sec. 2.4, eq. 8-10; the paper's figures);
-     ``"multiple"``: the paper's model plus the interreflection between the base
-     and the coating. The default follows the measurements of
-     ``benchmarks/diffuse_models.py`` (**Which model** below).
+   - ``"exact"`` (default; see **Which model**): the whole stack, coherent, over a
+     base medium; ``"single"``: the paper's first-order model as published (Hirayama
+     et al., sec. 2.4, eq. 8-10; its figures); ``"multiple"``: the paper's model plus
+     the interreflection between the base and the coating.
  * - base_ior
    - |float| or |string|
    - Model ``"exact"`` only: the real index of the medium between the films and
@@ -206,16 +204,10 @@ all it receives. The albedo ``R + t k_d T_hemi/(1 - k_d R_dh)`` (``T_hemi = 2∫
 dμ``) is at most 1 (``R + T <= 1`` for the same stack), 1 for a lossless stack on a
 white base; ``f`` is symmetric. Where film ``N`` is a few nm of metal the paper's
 models treat it as bulk: for ``SiO2 300; Au 4`` their diffuse term is 20-500x darker.
-
-**Which model** (``benchmarks/diffuse_models.py``). Over ``SiO2 300; Au 4`` in air the
-diffuse albedo at normal incidence of a white base is 0.61 / 0.74 / 0.86 / 0.90
-("exact", equal to tmm's) at 450 / 550 / 650 / 680 nm, against 0.22 / 0.042 / 0.0029 /
-0.0015 ("single") and 0.29 / 0.076 / 0.0062 / 0.0031 ("multiple"): the paper's models
-blacken a white object under a few nm of metal. On the shipped Fig. 9a, 9b and 10
-scenes (2-5 nm of metal, 20-50 nm of Si) the paper's images differ from the exact ones
-by 13-27 % of the exact image's mean per pixel (3-10x the 64 spp noise). Hence
-``"exact"`` is the default; the paper's models stay selectable, and the Fig. 9 and
-Fig. 10 scenes name ``"single"``, the model their figures were rendered with.
+**Which model** (``benchmarks/diffuse_models.py``): under ``SiO2 300; Au 4`` a white base's
+diffuse albedo at normal incidence is 0.61-0.90 over 450-680 nm ("exact", = tmm's), 0.22-0.0015
+("single"); the Fig. 9/10 scenes differ by 13-27 % per pixel (3-10x the noise). Hence the
+default; the Fig. 9/10 scenes name ``"single"``, their figures' model.
 
 **Specular part.** The paper's models use the paper's ``k_r`` (coating over film
 ``N``; the exact full-stack reflectance when there is no absorbing film ``N``).
