@@ -24,10 +24,10 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
    - Exterior index, real (default: 1.000277, air).
  * - model
    - |string|
-   - ``"multiple"`` (default): the paper's model plus the interreflection
-     between the base and the coating; ``"single"``: the paper's first-order
-     model exactly as published (Hirayama et al., sec. 2.4, eq. 8-10);
-     ``"exact"``: the whole stack, coherent, over a base medium (see below).
+   - ``"exact"`` (default; see **Which model**): the whole stack, coherent, over a
+     base medium; ``"single"``: the paper's first-order model as published (Hirayama
+     et al., sec. 2.4, eq. 8-10; its figures); ``"multiple"``: the paper's model plus
+     the interreflection between the base and the coating.
  * - base_ior
    - |float| or |string|
    - Model ``"exact"`` only: the real index of the medium between the films and
@@ -107,7 +107,7 @@ If the innermost film does not absorb (or there are no films), there is no film
 ``N``: the coating is the whole stack, its exit medium is the base medium
 (index ``ext_ior``, see below), ``k_a = 1``, and ``k_r``, ``t = k_t`` are the
 exact composite reflectance and transmittance of all films. With no films
-``k_r = 0`` and ``t = 1``, and both models *are* Mitsuba's ``diffuse``
+``k_r = 0`` and ``t = 1``, and every model *is* Mitsuba's ``diffuse``
 (the kernel takes that path without any stack work: bit-identical results).
 
 **model = "single"** (eq. 8-10). With ``ω_i`` the viewing direction (the
@@ -135,7 +135,7 @@ radiating into a medium matched to the ambient (index ``ext_ior``), for which
 the factor is exactly 1 — which is also what makes the film-free case equal to
 ``diffuse``. The resulting ``f`` is symmetric in ``ω_i, ω_o`` (reciprocal).
 
-**model = "multiple"** (default) keeps the same ``k_r`` and ``t`` and adds the
+**model = "multiple"** keeps the same ``k_r`` and ``t`` and adds the
 light that the coating reflects back onto the base, summed as a geometric
 series as Mitsuba's ``plastic`` does for a bare interface::
 
@@ -195,7 +195,7 @@ the terms of the colour table of a textured ``reflectance`` (its expansion in ``
 with ``f_b``, ``E``, ``Ē`` per channel; polarized ones depolarize, as for Lambert. While
 ``roughness`` is 0 everywhere without gradients the Lambertian code runs.
 
-**model = "exact"**. Every film, absorbing or not, is part of one coherent stack
+**model = "exact"** (default). Every film, absorbing or not, is part of one coherent stack
 between the ambient and a base medium of index ``n_b`` (``base_ior``); the base
 is Lambertian in that medium. Specular part: the stack's exact ``R(θ_i)``.
 Diffuse part: ``f = t(θ_i) t(θ_o) k_d / (π (1 - k_d R_dh))`` with ``t = T n_0/n_b``
@@ -208,6 +208,10 @@ all it receives. The albedo ``R + t k_d T_hemi/(1 - k_d R_dh)`` (``T_hemi = 2∫
 dμ``) is at most 1 (``R + T <= 1`` for the same stack), 1 for a lossless stack on a
 white base; ``f`` is symmetric. Where film ``N`` is a few nm of metal the paper's
 models treat it as bulk: for ``SiO2 300; Au 4`` their diffuse term is 20-500x darker.
+**Which model** (``benchmarks/diffuse_models.py``): under ``SiO2 300; Au 4`` a white base's
+diffuse albedo at normal incidence is 0.61-0.90 over 450-680 nm ("exact", = tmm's), 0.22-0.0015
+("single"); the Fig. 9/10 scenes differ by 13-27 % per pixel (3-10x the noise). Hence the
+default; the Fig. 9/10 scenes name ``"single"``, their figures' model.
 
 **Specular part.** The paper's models use the paper's ``k_r`` (coating over film
 ``N``; the exact full-stack reflectance when there is no absorbing film ``N``).
@@ -329,7 +333,7 @@ class ThinFilmDiffuse(mi.BSDF):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
         self.mode = modes.current()
-        model = props.get("model", "multiple")
+        model = props.get("model", "exact")
         if model not in MODELS:
             raise ThinFilmError(f"{NAME}: 'model' must be 'single', 'multiple' or 'exact', "
                                 f"got {model!r}")
