@@ -59,9 +59,14 @@ def irregular(wavelengths, values):
 
 
 def regular(values, lo: float = GRID[0], hi: float = GRID[-1]):
-    """A ``regular`` spectrum: ``values`` equally spaced over ``[lo, hi]`` nm."""
+    """A ``regular`` spectrum: ``values`` equally spaced over ``[lo, hi]`` nm, rounded to
+    float32 first, as Mitsuba stores them. (Nine digits of a float64 value parse to the
+    float32 next to it only most of the time; written from the float32 value they are that
+    value, so a spectrum built here and one updated through ``mi.traverse`` with the same
+    values hold the same floats.)"""
     return new_object("regular", wavelength_min=float(lo), wavelength_max=float(hi),
-                      values=", ".join(f"{v:.9g}" for v in values))
+                      values=", ".join(f"{v:.9g}" for v in np.asarray(values, np.float64)
+                                       .astype(np.float32)))
 
 
 def texture_on_grid(tex, wavelengths: np.ndarray = GRID) -> np.ndarray:
