@@ -105,19 +105,27 @@ LUMINANCE = np.array([0.212671, 0.715160, 0.072169])
 
 
 def _bitmap(tex):
-    """``(texels, raw)`` of a ``bitmap`` texture (texels as stored: H x W x C,
-    float32), or ``None`` for any other texture."""
+    """``(texels, raw)`` of a ``bitmap`` texture (H x W x C, float32, the values its
+    lookups return: an 8- or 16-bit image, which Mitsuba keeps as integers, divided by
+    its largest code and, unless ``raw``, taken from sRGB to linear), or ``None`` for
+    any other texture."""
     if not tex.class_name().startswith("BitmapTextureImpl"):
         return None
     try:
         data = mitsuba_module().traverse(tex)["data"]
     except Exception:  # noqa: BLE001 - not the bitmap we know
         return None
-    arr = np.asarray(np.array(data), dtype=np.float32)
-    if arr.ndim != 3:
+    stored = np.array(data)
+    if stored.ndim != 3:
         return None
-    raw = re.search(r"\braw = (\d)", str(tex))
-    return arr, (None if raw is None else raw.group(1) == "1")
+    found = re.search(r"\braw = (\d)", str(tex))
+    raw = None if found is None else found.group(1) == "1"
+    arr = np.asarray(stored, dtype=np.float32)
+    if np.issubdtype(stored.dtype, np.integer):
+        arr = arr / np.float32(np.iinfo(stored.dtype).max)
+        if not raw:
+            arr = np.where(arr <= 0.04045, arr / 12.92, ((arr + 0.055) / 1.055) ** 2.4).astype(np.float32)
+    return arr, raw
 
 
 def _texel_range(tex, mono: bool):
