@@ -300,8 +300,9 @@ from thinfilm_mi.render.diffuse import (
 from thinfilm_mi.render.diffuse_exact import (
     SpectralTerms,
     coating_transmission,
-    colour_factors,
+    colour_diffuse,
     colour_gradients,
+    colour_scale,
     constant_albedo,
     diffuse_factors,
     prob_specular,
@@ -314,7 +315,6 @@ from thinfilm_mi.render.orennayar import OrenNayar, coated, coated_integrated, s
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
 from thinfilm_mi.render.variant import check_variant, opaque_float
-from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple", "exact")
@@ -386,9 +386,8 @@ class ThinFilmDiffuse(mi.BSDF):
         self._update_derivatives()
         if self.mode.integrated:
             if factors is not None:
-                factors = colour_factors(factors, self.texture, NAME)
-                self.colour = ColourDiffuse(factors, self.model, colour_channels(),
-                                            constant_albedo(self.reflectance, self.base.rough))
+                self.colour = colour_diffuse(factors, self.texture, self.model, colour_channels(),
+                                             constant_albedo(self.reflectance, self.base.rough), NAME)
                 if self.film_n is not None and dr.is_diff_v(mi.Float):
                     prepare_gradients([self.film_n])
             return
@@ -431,11 +430,12 @@ class ThinFilmDiffuse(mi.BSDF):
         base = self.base.terms(si, kd, wo, active) if self.base.rough else None
         if self.colour is not None:
             multiple = self.model != "single"
+            scale = colour_scale(self, si, active)
             if base is None:
-                value = self.colour.value(cos_i, cos_o, kd, active)
+                value = self.colour.value(cos_i, cos_o, kd, active, scale)
                 g = lambda c, r_dh: self.colour.series(kd[c], r_dh)
             else:
-                value = coated_integrated(self.colour.node_values(cos_i, cos_o, active), base,
+                value = coated_integrated(self.colour.node_values(cos_i, cos_o, active, scale), base,
                                           multiple)
                 g = lambda c, r_dh: series_term(base.channel(c), r_dh, multiple)
             if colour_gradients(self, si, active):
