@@ -35,8 +35,8 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
  * - thickness
    - |float| or |texture|
    - Optional scale on every film's thickness at the hit (e.g. a ``bitmap`` with
-     ``raw="true"``); ``R_dh``, ``T_hemi`` are tabulated over its range (read at
-     load). RGB/mono variants accept a constant scale only.
+     ``raw="true"``); ``R_dh``, ``T_hemi`` (RGB/mono: the integrated diffuse term)
+     are tabulated over its range, read at load.
  * - roughness
    - |float| or |texture|
    - Oren–Nayar roughness ``σ`` of the base (radians, the standard deviation of the
@@ -238,7 +238,10 @@ estimate of the same integrals at stratified wavelengths per hit (the value stay
 the table's), ``R_dh`` with its derivatives at those wavelengths as below. The
 gradient with respect to a constant ``reflectance`` treats the series as constant
 (exact for "single") unless a film parameter carries gradients too (then it is the
-estimate's); through a texture it is exact.
+estimate's); through a texture it is exact. Under a ``thickness`` texture that varies
+over the surface the table is 3-D, over ``(θ_i, θ_o, s)`` for ``s`` in the texture's
+range, cubic over nodes uniform in ``s`` (in ``sqrt(s)`` from 0), within 3e-3 of ``π f`` at every
+midpoint of its scale nodes (``thinfilm_mi/tabulate/diffuse_texture.py``; at most 128 MiB, else refused).
 
 **Gradients.** Film thicknesses and indices (``layers.N.thickness``,
 ``layers.N.eta``/``k``): in spectral variants exact, per wavelength, for both

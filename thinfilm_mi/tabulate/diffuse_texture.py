@@ -11,25 +11,29 @@ function of ``s`` as well::
 
 (one basis function for a constant ``reflectance``, as there), and the albedo estimate
 ``A_jc(θ_i, s)``. :class:`ScaledColourDiffuse` tabulates ``M`` over ``(s, θ_i, θ_o)``
-and ``A`` over ``(s, θ_i)`` for ``s`` in ``[0, s_max]`` (``s_max``: the texture's
-largest value, read at load), both read with linear interpolation:
+and ``A`` over ``(s, θ_i)`` for ``s`` in the texture's range ``[s_min, s_max]`` (read
+at load; a texture edit rebuilds the table):
 
-* The wavelength step and the angle nodes are those that
-  :class:`ColourDiffuse` chooses at ``s_max``, where the films are thickest and their
-  fringes narrowest (then checked: the angle axis is subdivided further while linear
-  interpolation at any scale node is off by more than :data:`~thinfilm_mi.tabulate.diffuse.LINEAR_ABS`).
-* The scale nodes are uniform in ``u = sqrt(s / s_max)`` (a thin metal film's terms
-  curve most near ``s = 0``), starting from :data:`FIRST_SCALE_NODES` and doubled
-  until the exact tables at every new midpoint are within
-  :data:`~thinfilm_mi.tabulate.diffuse.LINEAR_ABS` (of ``π f`` and its albedo at
-  ``k_d = 1``) of the linear interpolation between their neighbours; the table keeps
-  the midpoints.
+* The wavelength step and the exact angle nodes are those that :class:`ColourDiffuse`
+  chooses at ``s_max``, where the films are thickest and their fringes narrowest.
+  Texels are then added along both angles by the 4-point rule while linear
+  interpolation at any scale node is off by more than
+  :data:`~thinfilm_mi.tabulate.diffuse.LINEAR_ABS` and the budget allows (as
+  :class:`ColourDiffuse` does).
+* The scale nodes are uniform in ``u = sqrt(s / s_max)`` where the range starts at 0 (a
+  thin metal film's terms curve most near ``s = 0``), else in ``s``, from :data:`FIRST_SCALE_NODES`,
+  doubled until the lookup's interpolation over them (cubic, :func:`cubic_stencil`:
+  four slices per lookup) predicts the exact tables at every midpoint within
+  :data:`SCALE_ABS` (of ``π f`` and its albedo at ``k_d = 1``). Linear interpolation
+  would need about four times the nodes (measured: 129 cubic nodes are within 6.8e-4
+  for ``SiO2 500; Au 4`` over ``s`` in [0, 1.5], linear ones 4.2e-3).
 * The Chebyshev nodes ``r_j`` are shared by every scale: they span the range of
-  ``R_dh`` over all scale nodes (widened by :data:`RANGE_MARGIN`; where a new scale
-  node's ``R_dh`` leaves it, the nodes are recomputed with the wider range and every
-  slice rebuilt).
-* Memory is bounded: the tables may hold :data:`MAX_SCALED_FLOATS` floats; a
-  texture whose range needs more is refused (naming ``thickness`` and its maximum).
+  ``R_dh`` over the first scale nodes (widened by :data:`RANGE_MARGIN`; where a new
+  scale node's ``R_dh`` leaves it, the nodes are recomputed over the wider range and
+  every slice rebuilt).
+* Memory is bounded: the tables may hold :data:`MAX_SCALED_FLOATS` floats; a texture
+  whose range needs more scale nodes is refused (a ``ThinFilmError`` naming
+  ``thickness`` and its maximum), before the work where the first grid already exceeds it.
 """
 from __future__ import annotations
 
@@ -42,8 +46,8 @@ from thinfilm_mi.tabulate.colour import TOLERANCE_ABS_2D
 from thinfilm_mi.tabulate.diffuse import LINEAR_ABS, ColourDiffuse, integrate, level_weights, series_nodes
 from thinfilm_mi.tabulate.refine import Budget, LinearAxis, interleave, linear_error, subdivide
 
-__all__ = ["ScaledColourDiffuse", "cubic_stencil", "cubic_midpoints", "FIRST_SCALE_NODES", "MAX_SCALE_NODES",
-           "MAX_SCALED_FLOATS", "RANGE_MARGIN", "SCALE_ABS"]
+__all__ = ["ScaledColourDiffuse", "cubic_stencil", "cubic_weights", "cubic_midpoints", "FIRST_SCALE_NODES",
+           "MAX_SCALE_NODES", "MAX_SCALED_FLOATS", "RANGE_MARGIN", "SCALE_ABS"]
 
 #: Scale nodes of the first grid (uniform in ``sqrt(s / s_max)``), and the most.
 FIRST_SCALE_NODES = 5
@@ -62,11 +66,11 @@ RANGE_MARGIN = 0.05
 
 class ScaledColourDiffuse(ColourDiffuse):
     """:class:`~thinfilm_mi.tabulate.diffuse.ColourDiffuse` over the thickness scale
-    ``s`` in ``[0, s_max]`` (module docstring): ``factors`` (a
+    ``s`` in ``[s_min, s_max]`` (module docstring): ``factors`` (a
     :class:`~thinfilm_mi.render.diffuse.DiffuseFactors` at scale 1, whose
     ``at_scale(s)`` and ``hemispherical_scales`` give the terms at ``s``), ``model``,
     ``channels`` and ``kd`` as there. ``plugin`` names the BSDF in errors. The lookups
-    take the hit's ``scale``."""
+    take the hit's ``scale`` (clamped to the range)."""
 
     def __init__(self, factors, model: str, channels: str, kd: np.ndarray | None, s_max: float,
                  plugin: str = "thinfilm_diffuse", s_min: float = 0.0):
@@ -75,8 +79,12 @@ class ScaledColourDiffuse(ColourDiffuse):
         s_lo = min(max(float(s_min), 0.0), s_max)
         span = s_max - s_lo
 
+        #: nodes uniform in sqrt(s / s_max) from s = 0 (thin metal films curve most
+        #: there), else uniform in s
+        self.sqrt = s_lo == 0.0
+
         def at(u):      # the scales of the nodes u
-            return s_lo + span * u ** 2
+            return s_lo + span * (u ** 2 if self.sqrt else u)
         top = ColourDiffuse(factors.at_scale(s_max), model, channels, kd)
         self.model, self.C, self.fixed, self.scaled = model, top.C, top.fixed, True
         level = top.level
@@ -186,8 +194,12 @@ class ScaledColourDiffuse(ColourDiffuse):
         import mitsuba as mi
         if self.ns == 1:
             return [(mi.Float(0.0), mi.Float(1.0))]
-        x = dr.safe_sqrt(dr.clip((scale - self._s_lo) * self._inv_s, 0.0, 1.0)) * (self.ns - 1)
-        b, w = cubic_stencil(x, self.ns, dr)
+        x = (scale - self._s_lo) * self._inv_s
+        # clamped to the range in value, not in gradient (the cubic continues beyond it)
+        x = x + (dr.clip(dr.detach(x), 0.0, 1.0) - dr.detach(x))
+        x = (dr.safe_sqrt(x) if self.sqrt else x) * (self.ns - 1)
+        b, w = cubic_stencil(dr.detach(x), self.ns, dr)
+        w = cubic_weights(x - b)
         return [(b + m, w[m]) for m in range(4)]
 
     def _rows(self, cos_i, k):
@@ -229,9 +241,13 @@ def cubic_stencil(x, n: int, ops=np):
     ``b = clip(floor(x) - 1, 0, n - 4)`` (centred inside, one-sided in the end intervals).
     ``ops``: ``np`` or ``drjit`` (``b`` then a float)."""
     b = ops.clip(ops.floor(x) - 1.0, 0.0, float(n - 4))
-    p = x - b
+    return b, cubic_weights(x - b)
+
+
+def cubic_weights(p):
+    """The Lagrange weights of the nodes 0, 1, 2, 3 at ``p``."""
     p1, p2, p3 = p - 1.0, p - 2.0, p - 3.0
-    return b, [-p1 * p2 * p3 * (1.0 / 6.0), p * p2 * p3 * 0.5, -p * p1 * p3 * 0.5, p * p1 * p2 * (1.0 / 6.0)]
+    return [-p1 * p2 * p3 * (1.0 / 6.0), p * p2 * p3 * 0.5, -p * p1 * p3 * 0.5, p * p1 * p2 * (1.0 / 6.0)]
 
 
 def cubic_midpoints(values: np.ndarray) -> np.ndarray:
