@@ -4,7 +4,8 @@ over the surface (``thinfilm_mi/tabulate/diffuse_texture.py``).
 Reference: the same BSDF with a constant thickness scale ``s``, whose diffuse table is
 the 2-D one of ``tabulate/diffuse.py`` built at ``s`` (itself checked against the
 spectral integral in ``tests/test_rgb.py``). At a texel of scale ``s`` the table over
-the scale must give the same value within its tolerances (see each test).
+the scale must give the same value within its tolerances (see each test). The module
+fixture restores the suite's default variant (``llvm_ad_spectral``).
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-mi.set_variant("llvm_ad_rgb")
+mi.set_variant("llvm_ad_spectral")
 
 import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
@@ -24,6 +25,13 @@ from thinfilm_mi.tabulate.diffuse import LEVEL_ABS, LINEAR_ABS  # noqa: E402
 from thinfilm_mi.tabulate.diffuse_texture import SCALE_ABS, cubic_midpoints, cubic_stencil  # noqa: E402
 
 LAYERS = "SiO2 120; Au 3"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def rgb_variant():
+    mi.set_variant("llvm_ad_rgb")
+    yield
+    mi.set_variant("llvm_ad_spectral")
 #: texel values of the thickness bitmap (2 x 2, nearest filtering): scales between the
 #: table's nodes as well as at its ends
 TEXELS = np.array([[0.6, 0.75], [1.0, 0.87]], np.float32)
@@ -66,6 +74,7 @@ def test_bitmap_equals_constant_scale(variant, model, reflectance, extra):
                 "reflectance": reflectance, **extra}
         textured = mi.load_dict({**base, "thickness": bitmap()})
         assert textured.colour.scaled
+        assert textured.colour.report["angle_error"] <= LINEAR_ABS     # (the tolerance below)
         wi, wo = directions()
         n = dr.width(wi)
         worst = 0.0

@@ -240,7 +240,7 @@ gradient with respect to a constant ``reflectance`` treats the series as constan
 (exact for "single") unless a film parameter carries gradients too (then it is the
 estimate's); through a texture it is exact. Under a ``thickness`` texture that varies
 over the surface the table is 3-D, over ``(θ_i, θ_o, s)`` for ``s`` in the texture's
-range, cubic over nodes uniform in ``s`` (in ``sqrt(s)`` from 0), within 3e-3 of ``π f`` at every
+range, cubic over nodes uniform in ``sqrt(s)``, within 3e-3 of ``π f`` at every
 midpoint of its scale nodes (``thinfilm_mi/tabulate/diffuse_texture.py``; at most 128 MiB, else refused).
 
 **Gradients.** Film thicknesses and indices (``layers.N.thickness``,

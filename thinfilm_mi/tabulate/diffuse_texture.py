@@ -18,10 +18,10 @@ at load; a texture edit rebuilds the table):
   chooses at ``s_max``, where the films are thickest and their fringes narrowest.
   Texels are then added along both angles by the 4-point rule while linear
   interpolation at any scale node is off by more than
-  :data:`~thinfilm_mi.tabulate.diffuse.LINEAR_ABS` and the budget allows (as
-  :class:`ColourDiffuse` does).
-* The scale nodes are uniform in ``u = sqrt(s / s_max)`` where the range starts at 0 (a
-  thin metal film's terms curve most near ``s = 0``), else in ``s``, from :data:`FIRST_SCALE_NODES`,
+  :data:`~thinfilm_mi.tabulate.diffuse.LINEAR_ABS` and :data:`MAX_ANGLE_FLOATS` allows (as
+  :class:`ColourDiffuse` does within its budget).
+* The scale nodes are uniform in ``sqrt(s / s_max)`` over the range (a thin metal
+  film's terms curve most near ``s = 0``), from :data:`FIRST_SCALE_NODES`,
   doubled until the lookup's interpolation over them (cubic, :func:`cubic_stencil`:
   four slices per lookup) predicts the exact tables at every midpoint within
   :data:`SCALE_ABS` (of ``π f`` and its albedo at ``k_d = 1``). Linear interpolation
@@ -47,7 +47,7 @@ from thinfilm_mi.tabulate.diffuse import LINEAR_ABS, ColourDiffuse, integrate, l
 from thinfilm_mi.tabulate.refine import Budget, LinearAxis, interleave, linear_error, subdivide
 
 __all__ = ["ScaledColourDiffuse", "cubic_stencil", "cubic_weights", "cubic_midpoints", "FIRST_SCALE_NODES",
-           "MAX_SCALE_NODES", "MAX_SCALED_FLOATS", "RANGE_MARGIN", "SCALE_ABS"]
+           "MAX_SCALE_NODES", "MAX_SCALED_FLOATS", "MAX_ANGLE_FLOATS", "RANGE_MARGIN", "SCALE_ABS"]
 
 #: Scale nodes of the first grid (uniform in ``sqrt(s / s_max)``), and the most.
 FIRST_SCALE_NODES = 5
@@ -59,6 +59,10 @@ MAX_SCALE_NODES = 257
 SCALE_ABS = TOLERANCE_ABS_2D
 #: Most floats in the 3-D table and its albedo table (128 MiB of float32).
 MAX_SCALED_FLOATS = 1 << 25
+#: Most floats once texels are added along the angles (32 MiB): the 4-point rule's
+#: texels make linear lookups finer than the exact nodes (~3e-4 at 129 nodes), but
+#: fourfold in a 3-D table; the build's ``angle_error`` says what the lookup kept.
+MAX_ANGLE_FLOATS = 1 << 23
 #: The range of ``R_dh`` spanned by the Chebyshev nodes is widened by this fraction
 #: of its width (plus 1e-3) on each side, so that scale nodes added later rarely leave it.
 RANGE_MARGIN = 0.05
@@ -79,12 +83,11 @@ class ScaledColourDiffuse(ColourDiffuse):
         s_lo = min(max(float(s_min), 0.0), s_max)
         span = s_max - s_lo
 
-        #: nodes uniform in sqrt(s / s_max) from s = 0 (thin metal films curve most
-        #: there), else uniform in s
-        self.sqrt = s_lo == 0.0
+        # nodes uniform in sqrt(s / s_max) (thin metal films curve most near s = 0)
+        q_lo = float(np.sqrt(s_lo / s_max)) if s_max > 0 else 0.0
 
-        def at(u):      # the scales of the nodes u
-            return s_lo + span * (u ** 2 if self.sqrt else u)
+        def at(u):      # the scales of the nodes u in [0, 1]
+            return s_max * (q_lo + (1.0 - q_lo) * u) ** 2
         top = ColourDiffuse(factors.at_scale(s_max), model, channels, kd)
         self.model, self.C, self.fixed, self.scaled = model, top.C, top.fixed, True
         level = top.level
@@ -151,8 +154,7 @@ class ScaledColourDiffuse(ColourDiffuse):
             m = self.at_one(M, state["nodes"] if not self.fixed else np.zeros(1))
             err = max(float(np.max(np.abs(linear_error(m, ax, True)))) for ax in (1, 2))
             report["angle_error"] = err
-            if err <= LINEAR_ABS or not budget.allows(
-                    texels=u.size * (2 * nu - 1) * (2 * nu) * M.shape[3] * self.C):
+            if err <= LINEAR_ABS or u.size * (2 * nu - 1) * (2 * nu) * M.shape[3] * self.C > MAX_ANGLE_FLOATS:
                 break     # (as ColourDiffuse: the texels the budget allows)
             M, A = subdivide(subdivide(M, 1, True), 2, True), subdivide(A, 1, True)
             nu = 2 * nu - 1
@@ -181,8 +183,9 @@ class ScaledColourDiffuse(ColourDiffuse):
         self._nu = constant(nu)
         self._inv_u = constant(1.0 / nu)
         self._r = [constant(float(r)) for r in nodes]
-        self._s_lo = constant(s_lo)
-        self._inv_s = constant(1.0 / span if span > 0 else 0.0)
+        self._q_lo = constant(q_lo)
+        self._inv_s = constant(1.0 / s_max if s_max > 0 else 0.0)
+        self._inv_q = constant(1.0 / (1.0 - q_lo) if span > 0 else 0.0)
         #: R_dh at s_max on the 1 nm grid (:meth:`r_dh_at`): read by the gradient estimate of
         #: model "single" only, where it drops out (the other models refuse film-parameter
         #: gradients together with a texture)
@@ -194,10 +197,9 @@ class ScaledColourDiffuse(ColourDiffuse):
         import mitsuba as mi
         if self.ns == 1:
             return [(mi.Float(0.0), mi.Float(1.0))]
-        x = (scale - self._s_lo) * self._inv_s
+        x = (dr.safe_sqrt(scale * self._inv_s) - self._q_lo) * self._inv_q
         # clamped to the range in value, not in gradient (the cubic continues beyond it)
-        x = x + (dr.clip(dr.detach(x), 0.0, 1.0) - dr.detach(x))
-        x = (dr.safe_sqrt(x) if self.sqrt else x) * (self.ns - 1)
+        x = (x + (dr.clip(dr.detach(x), 0.0, 1.0) - dr.detach(x))) * (self.ns - 1)
         b, w = cubic_stencil(dr.detach(x), self.ns, dr)
         w = cubic_weights(x - b)
         return [(b + m, w[m]) for m in range(4)]
