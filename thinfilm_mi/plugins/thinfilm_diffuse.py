@@ -238,10 +238,10 @@ estimate of the same integrals at stratified wavelengths per hit (the value stay
 the table's), ``R_dh`` with its derivatives at those wavelengths as below. The
 gradient with respect to a constant ``reflectance`` treats the series as constant
 (exact for "single") unless a film parameter carries gradients too (then it is the
-estimate's); through a texture it is exact. Under a ``thickness`` texture that varies
-over the surface the table is 3-D, over ``(θ_i, θ_o, s)`` for ``s`` in the texture's
-range, cubic over nodes uniform in ``sqrt(s)``, within 3e-3 of ``π f`` at every
-midpoint of its scale nodes (``thinfilm_mi/tabulate/diffuse_texture.py``; at most 128 MiB, else refused).
+estimate's); through a texture it is exact. Under a ``thickness`` texture varying over
+the surface the table is 3-D, over ``(θ_i, θ_o, s)``, ``s`` in the texture's range, cubic
+over nodes uniform in ``sqrt(s)``, within 3e-3 of ``π f`` at their midpoints (at most 128
+MiB, else refused; ``tabulate/diffuse_texture.py``); the texture's gradient is the table's.
 
 **Gradients.** Film thicknesses and indices (``layers.N.thickness``,
 ``layers.N.eta``/``k``): in spectral variants exact, per wavelength, for both
