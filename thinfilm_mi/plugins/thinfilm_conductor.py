@@ -46,6 +46,10 @@ Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
      within 2^19 texels, a table that still fits the cache, by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact).
+     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
+     components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
+     within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
+     cheap exact) within 2^21 floats.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
@@ -73,7 +77,8 @@ index). The reflectance is the exact composite reflectance of the multilayer
 (Rouard's recursion, Hirayama et al. eq. 1-5), evaluated at the path's
 wavelengths in the render kernel, for unpolarised light in ``*_spectral``
 variants. In ``*_spectral_polarized`` variants it returns the Mueller matrix of
-the stack's exact complex amplitudes ``r_s``, ``r_p`` (never a table), rotated
+the stack's complex amplitudes ``r_s``, ``r_p`` (exact, or its components read
+from a table, see ``tabulate``), rotated
 into Mitsuba's Stokes bases as Mitsuba's ``conductor`` does; with no films it
 equals ``conductor``'s matrix.
 
@@ -99,8 +104,8 @@ as differentiable, opaque parameters: changing them does not recompile the
 render kernel (a table is rebuilt, ~10-30 ms, and its shape is a kernel input
 too). In exact mode the films are evaluated by a loop inside the kernel (from
 one film on when every film has a real index above ``ext_ior``'s, from 4 films
-otherwise), so the kernel and its compile time do not grow with the number of
-films.
+otherwise and in polarized variants), so the kernel and its compile time do not
+grow with the number of films.
 
 .. tabs::
     .. code-tab:: xml

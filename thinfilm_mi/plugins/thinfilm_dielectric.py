@@ -41,6 +41,10 @@ Thin-film coated smooth dielectric (:monosp:`thinfilm_dielectric`)
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
      within 2^19 texels, a table that still fits the cache, by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact).
+     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
+     components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
+     within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
+     cheap exact) within 2^21 floats.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
@@ -81,8 +85,9 @@ mean index over 360-830 nm (a path has one direction for all its wavelengths)
 while ``R`` and ``T`` use the exact index at each wavelength.
 
 In ``*_spectral_polarized`` variants the weights are Mueller matrices of the
-stack's exact complex amplitudes (``r_s, r_p`` and ``t_s, t_p`` with the
-``n cos θ`` power factor), from the side the ray arrives on, rotated into
+stack's complex amplitudes (``r_s, r_p`` and ``t_s, t_p`` with the
+``n cos θ`` power factor; exact, or their components read from a table, see
+``tabulate``), from the side the ray arrives on, rotated into
 Mitsuba's Stokes bases as Mitsuba's ``dielectric`` does (the transmission
 matrix is the same from both sides by reciprocity); lobe choice and radiance
 scaling are as above, with ``R`` and ``T`` the matrices' ``M00``. With no films

@@ -55,6 +55,10 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
      within 2^19 texels, a table that still fits the cache, by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact).
+     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
+     components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
+     within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
+     cheap exact) within 2^21 floats.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
@@ -81,7 +85,7 @@ thin films, after Hirayama et al. section 2.4. Component 0 is the delta reflecti
 coating, component 1 the diffuse lobe; the thin films are evaluated at the
 path's wavelengths in the render kernel (float32), for unpolarised light. In
 ``*_spectral_polarized`` variants component 0 is the Mueller matrix of the
-coating's exact amplitudes (rotated as Mitsuba's ``conductor`` does) and
+coating's amplitudes (exact or tabulated, see ``tabulate``; rotated as Mitsuba's ``conductor`` does) and
 component 1 is Mitsuba's ``depolarizer`` of the value below, as ``diffuse``.
 
 **The two parts of the stack.** With films ``1..N`` (outside in) and an

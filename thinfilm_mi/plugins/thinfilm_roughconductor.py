@@ -57,6 +57,10 @@ Thin-film coated rough conductor (:monosp:`thinfilm_roughconductor`)
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
      within 2^19 texels, a table that still fits the cache, by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact).
+     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
+     components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
+     within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
+     cheap exact) within 2^21 floats.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
@@ -92,8 +96,8 @@ are Mitsuba's ``MicrofacetDistribution``; ``R`` is the thin-film recursion
 (Hirayama et al. eq. 1-5) for unpolarised light, evaluated at the path's
 wavelengths in the render kernel. The layer parameters appear in
 ``mi.traverse`` as for ``thinfilm_conductor``. In ``*_spectral_polarized``
-variants ``R`` becomes the Mueller matrix of the stack's exact amplitudes at the
-microfacet, rotated about ``m`` as Mitsuba's ``roughconductor`` does (with no
+variants ``R`` becomes the Mueller matrix of the stack's amplitudes (exact or
+tabulated, see ``tabulate``) at the microfacet, rotated about ``m`` as Mitsuba's ``roughconductor`` does (with no
 films: its matrix).
 
 In RGB and mono variants (``*_rgb``, ``*_mono``; polarized ones are refused) each

@@ -56,6 +56,10 @@ Thin-film coated rough dielectric (:monosp:`thinfilm_roughdielectric`)
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
      within 2^19 texels, a table that still fits the cache, by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact).
+     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
+     components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
+     within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
+     cheap exact) within 2^21 floats.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
@@ -95,7 +99,7 @@ radiance) and ``pdf()`` includes the same ``P``. Refraction directions use the
 mean real indices over 360-830 nm, as in ``thinfilm_dielectric``.
 
 In ``*_spectral_polarized`` variants ``R`` and ``T`` become the Mueller matrices
-of the stack's exact amplitudes at the microfacet, rotated about ``m`` as
+of the stack's amplitudes (exact or tabulated, see ``tabulate``) at the microfacet, rotated about ``m`` as
 Mitsuba's ``roughconductor`` rotates its reflection. Unlike Mitsuba's
 ``roughdielectric``, which depolarizes, this plugin keeps the polarization.
 

@@ -1,10 +1,14 @@
-"""Exact polarised response of a :class:`~thinfilm_mi.render.kernel.KernelStack` at a hit.
+"""Polarised response of a :class:`~thinfilm_mi.render.kernel.KernelStack` at a hit.
 
-Polarized variants need the stack's complex amplitudes ``r_s, r_p, t_s, t_p``,
-not only its powers: the tables (:mod:`thinfilm_mi.tabulate.exact`) and the film loops
-(:func:`optics.stack_rt_loop`) hold powers only, so here every side is
-evaluated exactly with :func:`optics.stack_amplitudes` (films unrolled) at
-``si.wavelengths``, after the same skips as the unpolarised path (films of zero
+Polarized variants need the stack's Mueller matrices, not only its powers. A side
+planned with a table (:mod:`thinfilm_mi.tabulate.mueller`: ``tabulate`` true, or
+``"auto"`` from :data:`~thinfilm_mi.tabulate.mueller.AUTO_MIN_FILMS` films) reads its
+Mueller components from it (:func:`table_response`); otherwise it is evaluated
+exactly from the complex amplitudes ``r_s, r_p, t_s, t_p`` at ``si.wavelengths``
+(:func:`optics.stack_amplitudes`, films unrolled; from
+:data:`~thinfilm_mi.optics.unpolarised.LOOP_MIN_FILMS` films a loop over the films'
+buffers, :func:`optics.mueller.loop_amplitudes`, so that the kernel does not grow
+with the depth), after the same skips as the unpolarised path (films of zero
 thickness dropped, nothing below an optically opaque film).
 
 The result is what a Mueller matrix needs, in Mitsuba's convention (see the
@@ -17,9 +21,12 @@ conjugates of ours):
 * a :class:`Shape` per lobe: the Mueller matrix in the s/p frame divided by its
   ``M00``, so that ``M = R * shape`` (:mod:`thinfilm_mi.render.modes` rotates it).
 
-Films thicker than ``coherence_thickness`` are evaluated coherently here (an
-incoherent average has no amplitude): polarized renders of such stacks show
-their fine fringes where the unpolarised ones average them.
+Films thicker than ``coherence_thickness`` are averaged incoherently by the tables
+(:mod:`thinfilm_mi.optics.incoherent_mueller`: the parts' Mueller matrices add as
+intensities do). The exact path (no table: ``tabulate`` false, fewer films, a
+``thickness`` texture, gradients) evaluates them coherently (an incoherent average
+has no amplitude): there polarized renders of such stacks show their fine fringes
+where the unpolarised ones average them.
 """
 from __future__ import annotations
 
@@ -29,6 +36,7 @@ from typing import Any
 import drjit as dr
 
 from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
+from thinfilm_mi.optics.mueller import loop_amplitudes
 from thinfilm_mi.optics.unpolarised import unpolarised_powers
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
@@ -99,17 +107,76 @@ class Polarised:
                          self.reflection.select(mask, other.reflection), t)
 
 
+def physical(P, B, c_re, c_im, limit):
+    """Tabulated Mueller components ``(P, B, C)`` (a lobe's power and the ``B``, ``C`` of
+    :mod:`thinfilm_mi.optics.mueller`) made physical.
+
+    Every average of Jones-Mueller matrices of this form has ``P >= sqrt(B² +
+    |C|²)``: its components lie in a second-order (Lorentz) cone, the condition
+    under which no Stokes vector gains polarization. A cubic lookup may overshoot
+    between nodes, so the point is projected onto the cone (closed form: unchanged
+    inside, 0 in the polar cone, else ``((P + |x|)/2) (1, x/|x|)`` with ``x = (B, C)``).
+    The exact components lie in the cone and a projection onto a convex set is
+    non-expansive, so the result is at least as close to them as the lookup (in the
+    Euclidean norm of the four components: within twice the largest channel's
+    error). Then the whole point is scaled so that ``P <= limit`` (``1``, or ``1 - R``
+    for transmission), as the powers' tables clamp ``R`` and ``T``."""
+    n = dr.sqrt(B * B + c_re * c_re + c_im * c_im)
+    outside = n > P
+    t = dr.select(outside, dr.maximum(0.5 * (P + n), 0.0), P)
+    k = dr.select(outside, t * dr.rcp(dr.select(n > 0, n, 1.0)), 1.0)
+    over = dr.select(t > limit, dr.maximum(limit, 0.0) * dr.rcp(dr.select(t > 0, t, 1.0)), 1.0)
+    k = k * over
+    return t * over, B * k, c_re * k, c_im * k
+
+
+def table_shape(P, B, c_re, c_im) -> Shape:
+    """The :class:`Shape` of physical components (:func:`physical`); ``P = 0`` gives
+    the depolarizer's shape."""
+    inv = dr.select(P > 0, dr.rcp(dr.select(P > 0, P, 1.0)), 0.0)
+    return Shape(B * inv, 1.0, c_re * inv, c_im * inv)
+
+
+def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised:
+    """The :class:`Polarised` response of a planned ``side`` from its Mueller table
+    (channels of :mod:`thinfilm_mi.optics.mueller`), each lobe made physical
+    (:func:`physical`)."""
+    mi = mitsuba_module()
+    table = side.table
+    n0 = side.n0.eval_real(si, active)
+    n_exit = side.exit.eval_real(si, active) if table.kind == "tir" else None
+    ch = table.lookup_channels(cos_theta, n0, n_exit, si.wavelengths, active)
+    if table.channels == 8:
+        R, *refl = physical(ch[0], *ch[2:5], 1.0)
+        T, *trans = physical(ch[1], *ch[5:8], 1.0 - R)
+    else:
+        R, *refl = physical(ch[0], *ch[1:4], 1.0)
+    r_shape = table_shape(R, *refl)
+    if not transmission:
+        return Polarised(R, None, r_shape, None)
+    if side.opaque:
+        return Polarised(R, mi.UnpolarizedSpectrum(0.0), r_shape, depolarizing_shape())
+    return Polarised(R, T, r_shape, table_shape(T, *trans))
+
+
 def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
           thickness_scale) -> Polarised:
     mi = mitsuba_module()
-    side = stack.evaluation_side(inside, transmission)
+    side = stack.evaluation_side(inside, transmission, stack.index_gradients(si, active))
+    if side.table is not None and thickness_scale is None and (
+            not transmission or side.opaque or side.table.channels == 8):
+        return table_response(side, si, cos_theta, active, transmission)
     n0 = side.n0.eval_real(si, active)
     exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
         else side.exit.eval(si, active)
-    films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
-             for ix, d, _ in side.films]
     want_t = transmission and not side.opaque
-    a = stack_amplitudes(n0, cos_theta, films, exit_, si.wavelengths, transmission=want_t)
+    if side.loop is not None:   # deep stacks: a loop over the films' buffers
+        a = side.loop.rt(n0, cos_theta, exit_, si.wavelengths, want_t, thickness_scale,
+                         evaluator=loop_amplitudes)
+    else:
+        films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
+                 for ix, d, _ in side.films]
+        a = stack_amplitudes(n0, cos_theta, films, exit_, si.wavelengths, transmission=want_t)
     r_shape = jones_shape(a.rs, a.rp)
     if not transmission:
         return Polarised(unpolarised_powers(a, False), None, r_shape, None)

@@ -42,6 +42,7 @@ from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on
 from thinfilm_mi.render.variant import opaque_float
 from thinfilm_mi.tabulate import band as _band_tables
 from thinfilm_mi.tabulate import base as tabulate_base
+from thinfilm_mi.tabulate.mueller import MUELLER
 
 #: Default coherence thickness (nm): thicker films are averaged incoherently.
 DEFAULT_COHERENCE_THICKNESS = 5000.0
@@ -203,33 +204,37 @@ class KernelStack:
             if dr.is_diff_v(mitsuba_module().Float):
                 prepare_gradients([self.ambient, self.substrate] + list(self.indices))
             return
-        if mitsuba_module().is_polarized:
-            # Polarized variants evaluate the amplitudes exactly (thinfilm_mi.render.amplitudes);
-            # tables and film loops hold powers only: none is built.
-            return
-        self._plan_tables()
+        # Polarized variants read tables of the Mueller components
+        # (thinfilm_mi.tabulate.mueller) or evaluate the complex amplitudes
+        # (thinfilm_mi.render.amplitudes; their film loop has no real-amplitude form)
+        polarized = mitsuba_module().is_polarized
+        quantity = MUELLER if polarized else None
+        self._plan_tables(quantity)
+        reflection_channels = quantity.channels(False) if quantity else 1
         if dr.is_jit_v(mitsuba_module().Float):
             for side in self.plan.values():
                 # A side whose table serves the calls its plan is for (R, and T
                 # where the plan asks for it) does not evaluate its films: no
                 # buffers for it (other calls fall back to the unrolled films).
-                served = side.table is not None and (side.table.channels > 1 or side.opaque
-                                                     or not side.transmission)
+                served = side.table is not None and (side.table.channels > reflection_channels
+                                                     or side.opaque or not side.transmission)
                 if (not served and len(side.films) >= min(LOOP_MIN_FILMS, REAL_LOOP_MIN_FILMS)
                         and not any(side.incoherent)
                         and all(ix.knots is not None for ix, _, _ in side.films)):
                     loop = LoopFilms(side.films, side.n0)
-                    if len(side.films) >= (REAL_LOOP_MIN_FILMS if loop.real_steps
+                    if len(side.films) >= (REAL_LOOP_MIN_FILMS if loop.real_steps and not polarized
                                            else LOOP_MIN_FILMS):
                         side.loop = loop
 
-    def _plan_tables(self) -> None:
+    def _plan_tables(self, quantity=None) -> None:
         # "auto" tabulates in vectorised variants only: in scalar variants every
         # call is Python anyway and the load-time build would dominate.
+        # ``quantity``: what the tables hold (None: the powers; tabulate.mueller.MUELLER)
+        min_films = quantity.auto_min_films if quantity else AUTO_MIN_FILMS
         want = self.tabulate is True or (
             self.tabulate == "auto" and self.thickness_texture is None
             and dr.is_jit_v(mitsuba_module().Float)
-            and max((len(s.films) for s in self.plan.values()), default=0) >= AUTO_MIN_FILMS)
+            and max((len(s.films) for s in self.plan.values()), default=0) >= min_films)
         self.table_failed = []
         if not want or self._differentiating():
             # A thickness that carries gradients reads every film exactly
@@ -238,7 +243,7 @@ class KernelStack:
             return
         for inside, side in self.plan.items():
             if side.films and not (self.tabulate == "auto" and inside in self._gave_up):
-                side.table = _tables_cache(self, side)
+                side.table = _tables_cache(self, side, quantity)
                 if side.table is None:
                     self.table_failed.append(inside)
                     # "auto" does not retry after every parameter edit: a failed
@@ -299,7 +304,7 @@ class KernelStack:
         films = [(ix, d, False) for ix, d in zip(self.indices, self.thickness)]
         return self._side(inside, transmission, films, [False] * len(films))
 
-    def _index_gradients(self, si, active=True) -> bool:
+    def index_gradients(self, si, active=True) -> bool:
         """Whether an index of this stack (ambient, films, substrate) carries
         gradients at the hit (AD variants; decided when the kernel is traced: one
         texture evaluation per medium, dropped unless used)."""
@@ -326,7 +331,7 @@ class KernelStack:
         # RGB/mono variants come here only for a side without films (no phase):
         # any wavelength will do for the Fresnel terms
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
-        side = self.evaluation_side(inside, transmission, self._index_gradients(si, active))
+        side = self.evaluation_side(inside, transmission, self.index_gradients(si, active))
         n0 = side.n0.eval_real(si, active)
         table = side.table
         if table is not None and thickness_scale is None and (
@@ -409,7 +414,7 @@ class KernelStack:
         (RGB/mono AD variants; decided when the kernel is traced)."""
         if not dr.is_diff_v(mitsuba_module().Float):
             return False
-        return self._differentiating() or self._index_gradients(si, active)
+        return self._differentiating() or self.index_gradients(si, active)
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
                     transmission: bool = False, thickness_scale=None):
@@ -453,13 +458,14 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
 TABLE_CACHE = tabulate_base.TableCache()
 
 
-def _tables_cache(stack: KernelStack, side: _Side):
+def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
     """The table of ``side``, shared between stacks with identical optics.
 
     The key is the stack's numbers (every index on the 1 nm grid, thicknesses,
     incoherent flags, what is tabulated, the target, the texel cap), so two
     BSDFs with the same films share one texture. Tables are never modified in
-    place.
+    place. ``quantity``: what the table holds (``None``: the powers; else, e.g.
+    :data:`~thinfilm_mi.tabulate.mueller.MUELLER`, its channels).
     """
     import hashlib
 
@@ -476,17 +482,20 @@ def _tables_cache(stack: KernelStack, side: _Side):
             h.update(v.tobytes())
     h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
     transmission = side.transmission and not side.opaque
-    max_texels = (AUTO_MAX_TEXELS // (2 if transmission else 1) if stack.tabulate == "auto"
+    channels = quantity.channels(transmission) if quantity else (2 if transmission else 1)
+    budget = quantity.auto_max_floats if quantity else AUTO_MAX_TEXELS
+    max_texels = (budget // channels if stack.tabulate == "auto"
                   else tabulate_base.MAX_TEXELS)
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
-                   stack.table_error, stack.spectral_resolution, max_texels)).encode())
+                   stack.table_error, stack.spectral_resolution, max_texels,
+                   quantity.name if quantity else "powers")).encode())
     key = h.hexdigest()
     found, table = TABLE_CACHE.get(key)
     if found:
         side.build_report = tabulate_base.BuildReport(result="from the cache")
         return table
 
-    data = side_data(side, transmission)
+    data = side_data(side, transmission, quantity=quantity)
     side.build_report = tabulate_base.BuildReport()
     table = _band_tables.build_table(data, stack.table_error, GRID, max_texels,
                                      stack.spectral_resolution, report=side.build_report)
@@ -511,9 +520,11 @@ def _index_function(ix: SpectralIndex, real: bool = False, channel: complex | No
     return f
 
 
-def side_data(side: _Side, transmission: bool, channel: dict | None = None) -> tabulate_base.SideData:
+def side_data(side: _Side, transmission: bool, channel: dict | None = None,
+              quantity=None) -> tabulate_base.SideData:
     """The float64 build data (:class:`tables.SideData`) of ``side``; ``channel`` maps
-    media (by ``id``) given per channel to their index in the channel built."""
+    media (by ``id``) given per channel to their index in the channel built;
+    ``quantity``: what is tabulated (``None``: the powers ``R`` [, ``T``])."""
     channel = channel or {}
 
     def on(ix, real=False):
@@ -523,13 +534,16 @@ def side_data(side: _Side, transmission: bool, channel: dict | None = None) -> t
 
     def rt(n0_, cos0, films, n_exit, wl, transmission):
         return _rt(n0_, cos0, films, n_exit, wl, incoherent, transmission)
+    loop = unpolarised_rt_loop
+    if quantity is not None:
+        rt, loop = quantity.rt(incoherent), quantity.rt_loop
 
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]
     return tabulate_base.SideData(
         n0=on(side.n0, real=True), films=[(on(ix), scalar(d)) for ix, d, _ in side.films],
         n_exit=on(side.exit, real=True) if side.exit_real else on(side.exit),
-        transmission=transmission, rt=rt,
-        rt_loop=None if any(incoherent) else unpolarised_rt_loop,
+        transmission=transmission, rt=rt, quantity=quantity,
+        rt_loop=None if any(incoherent) else loop,
         kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
 

@@ -79,7 +79,11 @@ class LoopFilms:
         hi = dr.gather(mi.Float, self.grid, i + 1)
         return i, dr.clip((w - lo) / (hi - lo), 0.0, 1.0)
 
-    def rt(self, n0, cos_theta, exit_: Cx, wl, transmission: bool, thickness_scale):
+    def rt(self, n0, cos_theta, exit_: Cx, wl, transmission: bool, thickness_scale,
+           evaluator=unpolarised_rt_loop):
+        """``evaluator(n0, cos, count, film, n_exit, wl, transmission, **hints)`` over
+        these films: the powers (:func:`unpolarised.unpolarised_rt_loop`) or, in
+        polarized variants, the amplitudes (:func:`optics.mueller.loop_amplitudes`)."""
         mi = mitsuba_module()
         if self.constant:
             if self.n0_constant:
@@ -89,7 +93,7 @@ class LoopFilms:
                 d = dr.gather(mi.Float, self.thickness, j)
                 return (Cx(dr.gather(mi.Float, self.buffer, j), 0.0),
                         d if thickness_scale is None else d * thickness_scale)
-            return self._rt(film, n0, cos_theta, exit_, wl, transmission)
+            return self._rt(film, n0, cos_theta, exit_, wl, transmission, evaluator)
 
         cells = [self._cell(wl[c]) for c in range(len(wl))]
         vec = mi.Vector2f if self.real else mi.Vector4f
@@ -109,9 +113,9 @@ class LoopFilms:
             d = dr.gather(mi.Float, self.thickness, j)
             return index, (d if thickness_scale is None else d * thickness_scale)
 
-        return self._rt(film, n0, cos_theta, exit_, wl, transmission)
+        return self._rt(film, n0, cos_theta, exit_, wl, transmission, evaluator)
 
-    def _rt(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool):
-        return unpolarised_rt_loop(n0, cos_theta, self.count, film, exit_, wl, transmission,
-                                   n0_max=self.n0_max, film_n_min=self.film_n_min,
-                                   film_n_max=self.film_n_max, films_max=self.n_films)
+    def _rt(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool, evaluator):
+        return evaluator(n0, cos_theta, self.count, film, exit_, wl, transmission,
+                         n0_max=self.n0_max, film_n_min=self.film_n_min,
+                         film_n_max=self.film_n_max, films_max=self.n_films)

@@ -169,7 +169,8 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     if kind == "plain":
         kind = "band"     # the angle axis with more nodes at mid angles
     split = kind == "tir"
-    spacing = V_SPACING
+    # a quantity whose channels vary faster along v (tabulate.mueller) starts finer
+    spacing = getattr(side.quantity, "v_spacing", V_SPACING)
     rows = Rows(side, kind, resolution, spacing)
     nu = 2 * FIRST_NU if split else FIRST_NU
     budget = Budget(texels=max_texels, point_work=build_work(side, 1))

@@ -176,7 +176,10 @@ class Rows:
         self.b0 = b0
         self.nb = nb = 2 * (self.nv - 1) + 2 * b0 + 1
         self.wavenumbers = SIGMA_MAX - (np.arange(nb) - b0) * w          # decreasing ν
-        self.channels = 2 if side.transmission else 1
+        #: what is tabulated: ``None`` for the powers, else the side's quantity
+        #: (the Mueller components, :mod:`thinfilm_mi.tabulate.mueller`)
+        self.quantity = q = side.quantity
+        self.channels = q.channels(side.transmission) if q else 2 if side.transmission else 1
         self.points = 0
         self._done: dict = {}
         self._row_cos: dict = {}
@@ -231,12 +234,13 @@ class Rows:
         wl = 1.0 / nu_pts
         idx = side_indices(self.side, wl)
         cos = self._cos(xs, rows_of, idx, np.tile(np.arange(P), R)).reshape(R, P)
-        terms, exps = amplitudes(self.side, np.ascontiguousarray(cos).ravel(),
-                                 np.tile(np.arange(P), R), wl, idx)
+        q, tr = self.quantity, self.side.transmission
+        terms, exps = (q.smooth_terms if q else amplitudes)(
+            self.side, np.ascontiguousarray(cos).ravel(), np.tile(np.arange(P), R), wl, idx)
         self.points += cos.size
         terms, exps = terms.reshape(R, P, -1), exps.reshape(R, P, 2)
-        f = powers_of(terms, self.side.transmission)
-        f = np.where((cos <= 0.0)[..., None], np.array([1.0, 0.0][:C]), f)
+        f = q.values(terms, tr) if q else powers_of(terms, tr)
+        f = np.where((cos <= 0.0)[..., None], q.grazing(tr) if q else np.array([1.0, 0.0][:C]), f)
         # zeros of D_s and D_p within RESOLVE_DISTANCE sample steps of the axis
         # (positions and distances in bins)
         r, pos, d = (np.concatenate(v) for v in zip(*(near_zeros(terms, k, exps[..., e])
@@ -399,6 +403,8 @@ class Rows:
         if not keep.any():
             return np.zeros(3)
         bins = bins[keep]
+        if self.quantity:    # the powers among its channels
+            bins = self.quantity.colour_terms(bins, self.side.transmission)
         cw = cie.colour_weights()
         grid = cw[:, 0]
         inside = (wl_b >= grid[0]) & (wl_b <= grid[-1])

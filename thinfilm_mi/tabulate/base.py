@@ -104,7 +104,10 @@ class SideData:
     which the build checks the table too. ``absorbing`` (set by
     :func:`build_table`): whether each film and the exit medium absorb
     anywhere in the range, so that every evaluation of a build traces the same
-    kernel whatever its wavelengths.
+    kernel whatever its wavelengths. ``quantity``: ``None`` for the powers ``R``
+    [, ``T``]; else what is tabulated instead (the Mueller components of polarized
+    variants, :data:`thinfilm_mi.tabulate.mueller.MUELLER`), whose ``rt`` and
+    ``rt_loop`` return its channels.
     """
     n0: object                      # callable wl -> real ndarray
     films: list                     # [(callable wl -> complex ndarray, thickness)]
@@ -115,6 +118,7 @@ class SideData:
     rt_loop: object = None
     kinks: np.ndarray = field(default_factory=lambda: np.empty(0))
     absorbing: tuple | None = None
+    quantity: object = None
 
 
 def tir_kind(n0: np.ndarray, n_exit: np.ndarray) -> str | None:
@@ -386,6 +390,15 @@ class Table:
         ``wavelengths`` are ``mi.Spectrum``. A cubic lookup may overshoot
         between nodes: ``R`` is clamped to ``[0, 1]`` and ``T`` to ``[0, 1 - R]``.
         """
+        res = self.lookup_channels(cos_i, n0, n_exit, wavelengths, active)
+        res[0] = dr.clip(res[0], 0.0, 1.0)
+        if self.channels > 1:
+            res[1] = dr.clip(res[1], 0.0, 1.0 - res[0])
+        return res
+
+    def lookup_channels(self, cos_i, n0, n_exit, wavelengths, active=True) -> list:
+        """Every channel as a spectrum, as interpolated (unclamped); arguments as
+        :meth:`lookup`."""
         import mitsuba as mi
 
         cos_i = dr.clip(cos_i, 0.0, 1.0)
@@ -400,11 +413,7 @@ class Table:
             res = self.texture.eval_cubic(mi.Point2f(u, v), active)
             for c in range(self.channels):
                 out[c].append(res[c])
-        res = [mi.Spectrum(*vals) for vals in out]
-        res[0] = dr.clip(res[0], 0.0, 1.0)
-        if self.channels > 1:
-            res[1] = dr.clip(res[1], 0.0, 1.0 - res[0])
-        return res
+        return [mi.UnpolarizedSpectrum(*vals) for vals in out]
 
 
 def side_indices(side: SideData, wl: np.ndarray):
@@ -472,7 +481,7 @@ def evaluate_side(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
                   else dr.opaque(Float64, float(d)) * per_point)
                  for n, a, (_, d) in zip(film_n, absorbing, side.films)]
         res = side.rt(*args, films, *tail)
-    res = res if side.transmission else (res,)
+    res = res if isinstance(res, tuple) else (res,)
     dr.eval(*res)
     return np.stack([np.array(r, dtype=np.float64) for r in res], axis=-1)
 

@@ -1,0 +1,208 @@
+"""Tables of a stack's Mueller components, for ``*_spectral_polarized`` variants.
+
+A table of powers holds ``R`` (and ``T``); a polarized render needs the whole
+Mueller matrix of each lobe, which for a planar stack is four numbers per lobe,
+all linear in intensities (:mod:`thinfilm_mi.optics.mueller`): ``R``, ``B = (R_s -
+R_p)/2`` and ``C = r_s conj(r_p)`` (two channels). :data:`MUELLER` is the
+*quantity* a :class:`~thinfilm_mi.tabulate.base.SideData` carries to have them
+tabulated instead of the powers: 4 channels (``R, B, C_re, C_im``), 8 with
+transmission (``R, T``, then the reflection's and the transmission's ``B, C``).
+Everything else is the builders' own: the probe, the verification of every
+channel within ``table_error`` (:mod:`thinfilm_mi.tabulate.exact`), the band
+limit (:mod:`thinfilm_mi.tabulate.band`: the Gaussian in wavenumber averages
+intensity-like products, which is what partially coherent light does to each
+component), the colour check (here on ``R_s``, ``R_p`` and ``T_s``, ``T_p``,
+each a power), the cache and the build report.
+
+The quantity provides:
+
+* the evaluators: :func:`~thinfilm_mi.optics.mueller.mueller_rt` (films
+  unrolled), :func:`~thinfilm_mi.optics.incoherent_mueller.incoherent_mueller`
+  (thick films averaged incoherently, polarized) and
+  :func:`~thinfilm_mi.optics.mueller.mueller_rt_loop` (deep stacks, a loop);
+* for the band-limited build's first level, the smooth projective amplitudes
+  (:meth:`MuellerQuantity.smooth_terms`, ``N, D`` of s and p at the channels where
+  the powers' :func:`~thinfilm_mi.tabulate.band_rows.amplitudes` has them, so
+  the resonance search is the same) and the channels from them
+  (:meth:`MuellerQuantity.values`).
+"""
+from __future__ import annotations
+
+import dataclasses
+
+import drjit as dr
+import numpy as np
+
+from thinfilm_mi.optics.core import transmittance_factor_p, transmittance_factor_s
+from thinfilm_mi.optics.incoherent_mueller import incoherent_mueller
+from thinfilm_mi.optics.mueller import (
+    POWER_CHANNELS,
+    amplitude_loop,
+    channel_count,
+    mueller_rt,
+    mueller_rt_loop,
+)
+from thinfilm_mi.tabulate.base import SideData, evaluate_side
+
+__all__ = ["MUELLER", "MuellerQuantity", "AUTO_MIN_FILMS", "AUTO_MAX_FLOATS"]
+
+#: ``tabulate="auto"`` gives a polarized stack a table from this many films on
+#: (after the skips). A lookup of 4 channels at 4 wavelengths (64 texels each)
+#: costs about what the exact amplitudes of ~25 films cost: measured with
+#: benchmarks/polarized_bench.py's scene (process CPU time, medians of 9-15
+#: round-robin rounds in 4-6 processes, ratio to Mitsuba's polarized
+#: ``conductor``), exact 1.11x / 1.25x / 1.58-1.75x and tables 1.01-1.36x /
+#: 1.14-1.84x / 1.27-1.75x for 3 / 10 / 30 films (a lookup's cost varies from
+#: process to process with where its texels land in the caches; the exact
+#: path's does not). At 30 films a table saves ~10 % per render on average
+#: and its build costs ~4 s (~25 renders of the benchmark); the exact loop's
+#: first image is 1.35x ``conductor``'s. From 40 films the exact cost (~1 +
+#: 0.024 per film) clearly exceeds a lookup's.
+AUTO_MIN_FILMS = 40
+#: ``tabulate="auto"`` keeps Mueller tables of at most this many floats (texels x
+#: channels, 8 MiB): a lookup slows with the table's size (a 1.5 MiB table
+#: 1.01-1.36x, a 6.2 MiB one 1.27-1.75x, above), but the exact amplitudes of the
+#: deep stacks that need such tables cost more (the powers' budget,
+#: :data:`thinfilm_mi.render.kernel.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
+#: band-limited tables of the benchmark's 10- and 30-film stacks).
+AUTO_MAX_FLOATS = 1 << 21
+#: :meth:`MuellerQuantity.smooth_terms` rescales the amplitudes by smooth factors
+#: only (``|N|``, ``|D|`` grow by at most ~2.8 per film: within float64 to ~600
+#: films); deeper sides are divided by ``|Re D| + |Im D|`` after every film instead.
+MAX_SMOOTH_FILMS = 250
+
+
+def _terms_loop(n0, cos0, count, film, n_exit, wl, transmission, smooth: bool, **hints):
+    """The amplitudes of :func:`~thinfilm_mi.optics.mueller.amplitude_loop` as the
+    real channels of :meth:`MuellerQuantity.smooth_terms`."""
+    amps = amplitude_loop(n0, cos0, count, film, n_exit, wl, transmission=transmission,
+                          n0_max=hints.get("n0_max"), film_n_min=hints.get("film_n_min"),
+                          smooth=smooth, label="thinfilm_mueller_band")
+    zero = 0.0 * cos0 * wl
+    out = []
+    for pol in ("s", "p"):
+        N, D, _ = amps[pol]
+        out += [N.re, N.im, D.re, D.im]
+    if transmission:
+        q0 = dr.select(amps["grazing"], 1.0, amps["q0"])
+        for pol in ("s", "p"):
+            T = amps[pol][2]
+            out += [T.re, T.im]
+        out += [transmittance_factor_s(amps["q_exit"], q0),
+                transmittance_factor_p(amps["n_exit"], amps["q_exit"], q0)]
+    return tuple(zero + v for v in out)
+
+
+def _smooth_loop(n0, cos0, count, film, n_exit, wl, transmission, **hints):
+    return _terms_loop(n0, cos0, count, film, n_exit, wl, transmission, True, **hints)
+
+
+def _normalised_loop(n0, cos0, count, film, n_exit, wl, transmission, **hints):
+    return _terms_loop(n0, cos0, count, film, n_exit, wl, transmission, False, **hints)
+
+
+def _unrolled(loop):
+    """``loop`` traced film by film (a Python loop: few films), with the signature of
+    :attr:`SideData.rt`."""
+    def rt(n0, cos0, films, n_exit, wl, transmission):
+        return loop(n0, cos0, len(films), lambda j: films[j], n_exit, wl, transmission)
+    return rt
+
+
+class MuellerQuantity:
+    """What a Mueller table holds and how its builds evaluate it (see the module)."""
+
+    name = "mueller"
+    auto_min_films = AUTO_MIN_FILMS
+    auto_max_floats = AUTO_MAX_FLOATS
+    #: First v-node spacing of band-limited tables (in σ_ν; the powers' is
+    #: ``band_rows.V_SPACING`` = 0.6): the cross term ``C`` interpolates ~3.5x worse
+    #: along v than ``R`` (measured at 0.6 on the 10- and 30-film benchmark stacks:
+    #: 5.8e-4 and 6.7e-4 against R's 1.6e-4 and 3.2e-4), over the half of a 1e-3
+    #: target at which the build makes v finer and computes every row again; at 0.5
+    #: (h^4: 0.48x) it fits the first time.
+    v_spacing = 0.5
+
+    @staticmethod
+    def channels(transmission: bool) -> int:
+        return channel_count(transmission)
+
+    @staticmethod
+    def power_channels(transmission: bool) -> int:
+        """The leading channels that are unpolarised powers (``R`` [, ``T``])."""
+        return POWER_CHANNELS[transmission]
+
+    @staticmethod
+    def rt(incoherent: list):
+        """The build's evaluator ``(n0, cos0, films, n_exit, wl, transmission) ->
+        channels`` of a side with these incoherent flags."""
+        if any(incoherent):
+            return lambda n0, cos0, films, n_exit, wl, transmission: incoherent_mueller(
+                n0, cos0, films, n_exit, wl, incoherent, transmission)
+        return mueller_rt
+
+    rt_loop = staticmethod(mueller_rt_loop)
+
+    @staticmethod
+    def grazing(transmission: bool) -> np.ndarray:
+        """The channels at grazing incidence (``r_s = r_p = -1``, ``t = 0``)."""
+        return np.array([1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0] if transmission
+                        else [1.0, 0.0, 1.0, 0.0])
+
+    @staticmethod
+    def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
+                     indices) -> tuple[np.ndarray, np.ndarray]:
+        """The smooth projective amplitudes at points ``(cos0[i], wl[rows[i]])``, as
+        :func:`~thinfilm_mi.tabulate.band_rows.amplitudes` gives them: ``(terms,
+        exponents)``, ``terms`` with ``Re, Im`` of ``N_s, D_s, N_p, D_p`` (channels
+        0-7) and, with transmission, of ``T_s, T_p`` and the power factors ``w_s,
+        w_p`` (``r = N / D``, ``t = T / D``); the exponents are 0 (the smooth
+        rescaling alone keeps them in range). Beyond :data:`MAX_SMOOTH_FILMS` films
+        the amplitudes are divided by ``|Re D| + |Im D|`` after every film instead: exact
+        values, but ``D`` has no zeros left, so such sides are sampled without the
+        resonance search."""
+        smooth = len(side.films) <= MAX_SMOOTH_FILMS
+        loop = _smooth_loop if smooth else _normalised_loop
+        terms = dataclasses.replace(side, rt=_unrolled(loop), rt_loop=loop)
+        values = evaluate_side(terms, cos0, rows, wl, indices)
+        return values, np.zeros(values.shape[:-1] + (2,))
+
+    @staticmethod
+    def values(terms: np.ndarray, transmission: bool) -> np.ndarray:
+        """The channels (last axis) from :meth:`smooth_terms` (any leading shape),
+        formed as :func:`~thinfilm_mi.optics.mueller.components` forms them."""
+        def cx(k):
+            return terms[..., k] + 1j * terms[..., k + 1]
+        Ds, Dp = cx(2), cx(6)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            rs, rp = cx(0) / Ds, cx(4) / Dp
+            Rs, Rp = np.minimum(np.abs(rs) ** 2, 1.0), np.minimum(np.abs(rp) ** 2, 1.0)
+            c = rs * np.conj(rp)
+            R = np.minimum(0.5 * (Rs + Rp), 1.0)
+            out = [R, 0.5 * (Rs - Rp), c.real, c.imag]
+            if transmission:
+                ts, tp = cx(8) / Ds, cx(10) / Dp
+                w_s, w_p = terms[..., 12], terms[..., 13]
+                Ts, Tp = np.abs(ts) ** 2 * w_s, np.abs(tp) ** 2 * w_p
+                ct = ts * np.conj(tp) * np.sqrt(np.maximum(w_s * w_p, 0.0))
+                T = np.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
+                out = [R, T] + out[1:] + [0.5 * (Ts - Tp), ct.real, ct.imag]
+        out = np.stack(out, axis=-1)
+        bad = ~np.all(np.isfinite(out), axis=-1, keepdims=True)
+        return np.where(bad, MuellerQuantity.grazing(transmission), out)
+
+    @staticmethod
+    def colour_terms(values: np.ndarray, transmission: bool) -> np.ndarray:
+        """The powers the colour check compares (last axis): ``R``, ``R_s = R + B``,
+        ``R_p = R - B`` [, and the same of ``T``]: what a render through a polarizer
+        sees, each non-negative."""
+        R, B = values[..., 0], values[..., 2 if transmission else 1]
+        out = [R, R + B, R - B]
+        if transmission:
+            T, BT = values[..., 1], values[..., 5]
+            out += [T, T + BT, T - BT]
+        return np.stack(out, axis=-1)
+
+
+#: The Mueller quantity (stateless; one instance shared by every build).
+MUELLER = MuellerQuantity()
