@@ -293,11 +293,7 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.colour import (
-    attach_gradient,
-    colour_channels,
-    prepare_gradients,
-)
+from thinfilm_mi.render.colour import attach_gradient, colour_channels, prepare_gradients
 from thinfilm_mi.render.diffuse import (
     absorbs,
     colour_estimate,
