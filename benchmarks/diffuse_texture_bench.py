@@ -4,8 +4,8 @@
 
 Per variant: a sphere under ``SiO2 500; Au 4`` (model "exact") with no texture, a
 constant scale 1.2 and the soap-film bitmap (``scenes/textures/soap_film.exr``, scale
-0-1.47; spectral and polarized variants only). Load: ``mi.load_dict`` wall time
-(the tables over the scale are built there). Render: 96x96 at 16 spp, the best of 3
+0-1.47; RGB/mono variants build a table over (θ_i, θ_o, s), ``tabulate/diffuse_texture.py``).
+Load: ``mi.load_dict`` wall time (the tables over the scale are built there). Render: 96x96 at 16 spp, the best of 3
 after a warm-up render, relative to the same scene without a texture.
 """
 from __future__ import annotations
@@ -35,10 +35,9 @@ def main():
     for variant in VARIANTS:
         mi.set_variant(variant)
         import thinfilm_mi  # noqa: F401
-        cases = [("none", None), ("constant 1.2", 1.2)]
-        if mi.is_spectral:
-            cases.append(("soap-film bitmap", {"type": "bitmap", "raw": True,
-                                               "filename": "scenes/textures/soap_film.exr"}))
+        cases = [("none", None), ("constant 1.2", 1.2),
+                 ("soap-film bitmap", {"type": "bitmap", "raw": True,
+                                       "filename": "scenes/textures/soap_film.exr"})]
         base = None
         for name, tex in cases:
             t0 = time.perf_counter()

@@ -35,8 +35,8 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
  * - thickness
    - |float| or |texture|
    - Optional scale on every film's thickness at the hit (e.g. a ``bitmap`` with
-     ``raw="true"``); ``R_dh``, ``T_hemi`` are tabulated over its range (read at
-     load). RGB/mono variants accept a constant scale only.
+     ``raw="true"``); ``R_dh``, ``T_hemi`` (RGB/mono: the integrated diffuse term)
+     are tabulated over its range, read at load.
  * - roughness
    - |float| or |texture|
    - Oren–Nayar roughness ``σ`` of the base (radians, the standard deviation of the
@@ -246,7 +246,10 @@ estimate of the same integrals at stratified wavelengths per hit (the value stay
 the table's), ``R_dh`` with its derivatives at those wavelengths as below. The
 gradient with respect to a constant ``reflectance`` treats the series as constant
 (exact for "single") unless a film parameter carries gradients too (then it is the
-estimate's); through a texture it is exact.
+estimate's); through a texture it is exact. Under a ``thickness`` texture varying over
+the surface the table is 3-D, over ``(θ_i, θ_o, s)``, ``s`` in the texture's range, cubic
+over nodes uniform in ``sqrt(s)``, within 3e-3 of ``π f`` at their midpoints (at most 128
+MiB, else refused; ``tabulate/diffuse_texture.py``); the texture's gradient is the table's.
 
 **Gradients.** Film thicknesses and indices (``layers.N.thickness``,
 ``layers.N.eta``/``k``): in spectral variants exact, per wavelength, for both
@@ -294,11 +297,7 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.colour import (
-    attach_gradient,
-    colour_channels,
-    prepare_gradients,
-)
+from thinfilm_mi.render.colour import attach_gradient, colour_channels, prepare_gradients
 from thinfilm_mi.render.diffuse import (
     absorbs,
     colour_estimate,
@@ -308,8 +307,9 @@ from thinfilm_mi.render.diffuse import (
 from thinfilm_mi.render.diffuse_exact import (
     SpectralTerms,
     coating_transmission,
-    colour_factors,
+    colour_diffuse,
     colour_gradients,
+    colour_scale,
     constant_albedo,
     diffuse_factors,
     prob_specular,
@@ -322,7 +322,6 @@ from thinfilm_mi.render.orennayar import OrenNayar, coated, coated_integrated, s
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
 from thinfilm_mi.render.variant import check_variant, opaque_float
-from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple", "exact")
@@ -394,9 +393,8 @@ class ThinFilmDiffuse(mi.BSDF):
         self._update_derivatives()
         if self.mode.integrated:
             if factors is not None:
-                factors = colour_factors(factors, self.texture, NAME)
-                self.colour = ColourDiffuse(factors, self.model, colour_channels(),
-                                            constant_albedo(self.reflectance, self.base.rough))
+                self.colour = colour_diffuse(factors, self.texture, self.model, colour_channels(),
+                                             constant_albedo(self.reflectance, self.base.rough), NAME)
                 if self.film_n is not None and dr.is_diff_v(mi.Float):
                     prepare_gradients([self.film_n])
             return
@@ -439,11 +437,12 @@ class ThinFilmDiffuse(mi.BSDF):
         base = self.base.terms(si, kd, wo, active) if self.base.rough else None
         if self.colour is not None:
             multiple = self.model != "single"
+            scale = colour_scale(self, si, active)
             if base is None:
-                value = self.colour.value(cos_i, cos_o, kd, active)
+                value = self.colour.value(cos_i, cos_o, kd, active, scale)
                 g = lambda c, r_dh: self.colour.series(kd[c], r_dh)
             else:
-                value = coated_integrated(self.colour.node_values(cos_i, cos_o, active), base,
+                value = coated_integrated(self.colour.node_values(cos_i, cos_o, active, scale), base,
                                           multiple)
                 g = lambda c, r_dh: series_term(base.channel(c), r_dh, multiple)
             if colour_gradients(self, si, active):

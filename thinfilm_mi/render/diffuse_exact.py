@@ -13,7 +13,7 @@
 * :func:`scale_bounds` — the largest value of a ``thickness`` texture, read at load.
 * :func:`coating_transmission` — ``t`` in the kernel: ``k_t`` times film ``N``'s attenuation
   (scaled by the texture) or the exact model's ``n_0/n_b``; :func:`prob_specular`, the
-  lobe choice; :func:`colour_factors`, :func:`constant_albedo`, for the colour tables;
+  lobe choice; :func:`colour_diffuse`, :func:`constant_albedo`, the colour tables;
   :func:`diffuse_factors`, :func:`r_dh_with_derivatives`, :func:`colour_gradients`: the
   plugin's factors, its ``R_dh`` with derivatives, whether its films carry gradients.
 """
@@ -28,10 +28,13 @@ from thinfilm_mi.optics.core import film_attenuation
 from thinfilm_mi.render.diffuse import DiffuseFactors, grid_spectrum, with_derivatives
 from thinfilm_mi.render.textures import mitsuba_module, scalar, texture_range
 from thinfilm_mi.render.variant import spectral_mean
+from thinfilm_mi.tabulate.diffuse import ColourDiffuse
 from thinfilm_mi.tabulate.diffuse_scale import ScaleTable, exact_hemispherical
+from thinfilm_mi.tabulate.diffuse_texture import ScaledColourDiffuse
 
 __all__ = ["ExactFactors", "SpectralTerms", "scale_bounds", "coating_transmission",
-           "texture_gradients_refused", "colour_factors", "constant_albedo", "prob_specular", "diffuse_factors",
+           "texture_gradients_refused", "colour_diffuse", "constant_albedo", "colour_scale", "prob_specular",
+           "diffuse_factors",
            "r_dh_with_derivatives", "colour_gradients"]
 
 class ExactFactors(DiffuseFactors):
@@ -151,23 +154,31 @@ def prob_specular(bsdf, si, k_r, t_i, kd, series, active, cos_i):
     colour table's in RGB/mono variants)."""
     spec = spectral_mean(k_r)
     if bsdf.colour is not None:
-        diff = spectral_mean(bsdf.colour.albedo(cos_i, kd, active))
+        diff = spectral_mean(bsdf.colour.albedo(cos_i, kd, active, colour_scale(bsdf, si, active)))
     else:
         diff = spectral_mean(t_i * kd * bsdf.terms.lookup(si, bsdf.coating, active)[1] * series)
     total = spec + diff
     return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
 
 
-def colour_factors(factors, texture, plugin: str):
-    """``factors`` for the RGB/mono colour tables under a ``thickness`` texture: at its
-    constant scale (one that varies over the surface is refused there)."""
+def colour_diffuse(factors, texture, model: str, channels: str, kd, plugin: str):
+    """The RGB/mono diffuse table of ``factors`` (:class:`~thinfilm_mi.tabulate.diffuse.ColourDiffuse`;
+    ``kd``: :func:`constant_albedo`) under a ``thickness`` texture: at its scale where
+    it is constant, else over the scale in its range ``[min, max]``
+    (:class:`~thinfilm_mi.tabulate.diffuse_texture.ScaledColourDiffuse`)."""
     if texture is None:
-        return factors
-    if texture.is_spatially_varying():
-        raise ThinFilmError(f"{plugin}: a 'thickness' texture that varies over the surface is "
-                            f"not supported in the {mitsuba_module().variant()!r} variant (use a "
-                            "spectral variant, or a constant scale)")
-    return factors.at_scale(scale_bounds(texture, plugin))
+        return ColourDiffuse(factors, model, channels, kd)
+    s_max = scale_bounds(texture, plugin)
+    if not texture.is_spatially_varying():
+        return ColourDiffuse(factors.at_scale(s_max), model, channels, kd)
+    s_min = float(texture_range(texture, mono=True)[0])
+    return ScaledColourDiffuse(factors, model, channels, kd, s_max, plugin, s_min)
+
+
+def colour_scale(bsdf, si, active):
+    """The thickness scale at the hit for ``bsdf``'s colour table if it is one over the
+    scale, else ``None``."""
+    return bsdf.coating.thickness_scale_at(si, active) if bsdf.colour.scaled else None
 
 
 def constant_albedo(reflectance, rough: bool) -> np.ndarray | None:

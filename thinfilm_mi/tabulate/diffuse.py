@@ -107,6 +107,43 @@ def lagrange_basis(nodes: np.ndarray, r: np.ndarray) -> np.ndarray:
     return out
 
 
+def level_weights(level: int, channels: str):
+    """The uniform wavelengths of step ``2^-level`` nm over the spectral range and the
+    channel weights ``ŵ_c`` there, normalised to unit sum: shapes ``(n,)``, ``(C, n)``."""
+    lo, hi = SPECTRAL_RANGE
+    n = int(round((hi - lo) * (1 << level)))
+    wl = lo + np.arange(n + 1) * ((hi - lo) / n)
+    w = cie.channel_weights(channels, wl) * cie.trapezoid_weights(wl)[None, :]
+    return wl, w / w.sum(axis=1, keepdims=True)
+
+
+def integrate(t, w, r_dh, t_hemi, model: str, kd=None, nodes=None):
+    """``(M, A, nodes)``: the tables ``M[i, o, j, c] = Σ_l t[i, l] t[o, l] b[l, j, c]`` and
+    ``A[i, j, c] = Σ_l t[i, l] T_hemi[l] b[l, j, c]`` of the transmittances ``t`` (angles x
+    wavelengths) against the normalised weights ``w`` ``(C, n)``, with ``b`` the ``j``-th
+    function of ``R_dh`` times ``w``: the Lagrange basis on the Chebyshev ``nodes``
+    (default: :func:`series_nodes` over the range of ``r_dh``), or for a fixed albedo
+    ``kd`` (per channel) the one function ``G(k_d, R_dh)/k_d`` (``nodes`` ``[0]``)."""
+    C = w.shape[0]
+    t = np.ascontiguousarray(t)     # (a strided view would take numpy's matmul off BLAS)
+    if kd is not None:
+        k = np.asarray(kd, np.float64).reshape(C, 1)
+        s = 1.0 if model == "single" else 1.0 / (1.0 - k * r_dh[None, :])
+        nodes, b = np.zeros(1), (w * s).T[:, None, :]
+    else:
+        if nodes is None:
+            nodes = series_nodes(float(r_dh.min()), float(r_dh.max()), model)
+        b = lagrange_basis(nodes, r_dh)[:, :, None] * w.T[:, None, :]
+    # one matrix product per (j, c) (BLAS; einsum's path search alone costs more at these sizes)
+    K = b.shape[1]
+    M = np.empty((t.shape[0], t.shape[0], K, C))
+    for j in range(K):
+        for c in range(C):
+            M[:, :, j, c] = (t * b[:, j, c][None, :]) @ t.T
+    A = ((t * t_hemi[None, :]) @ b.reshape(b.shape[0], -1)).reshape(t.shape[0], K, C)
+    return M, A, nodes
+
+
 class ColourDiffuse:
     """The integrated diffuse term and albedo estimate of one ``thinfilm_diffuse``
     (``factors``: a :class:`DiffuseFactors`).
@@ -124,16 +161,15 @@ class ColourDiffuse:
         C = 1 if channels == "mono" else 3
         self.C = C
         self.fixed = kd is not None
-        lo, hi = SPECTRAL_RANGE
+        #: whether the lookups read a thickness scale (a table over it)
+        self.scaled = False
         axis = LinearAxis()
         levels = {}
 
         def level_data(level):
             """Wavelengths, normalised weights ``(C, n)`` and the hemispherical factors."""
             if level not in levels:
-                n = int(round((hi - lo) * (1 << level)))
-                wl = lo + np.arange(n + 1) * ((hi - lo) / n)
-                w = cie.channel_weights(channels, wl) * cie.trapezoid_weights(wl)[None, :]
+                wl, w = level_weights(level, channels)
                 if level - 1 in levels:     # the coarser level's wavelengths are every other one
                     _, _, r_c, t_c = levels[level - 1]
                     r_new, t_new = factors.hemispherical(wl[1::2])
@@ -141,31 +177,12 @@ class ColourDiffuse:
                     r_dh[0::2], r_dh[1::2], t_hemi[0::2], t_hemi[1::2] = r_c, r_new, t_c, t_new
                 else:
                     r_dh, t_hemi = factors.hemispherical(wl)
-                levels[level] = (wl, w / w.sum(axis=1, keepdims=True), r_dh, t_hemi)
+                levels[level] = (wl, w, r_dh, t_hemi)
             return levels[level]
 
-        def basis(level):
-            """``(nodes, b)``: ``b[l, j, c] = ŵ_c(λ_l) x`` the ``j``-th function of ``R_dh``."""
-            wl, w, r_dh, _ = level_data(level)
-            if self.fixed:
-                k = np.asarray(kd, np.float64).reshape(C, 1)
-                s = 1.0 if model == "single" else 1.0 / (1.0 - k * r_dh[None, :])
-                return np.zeros(1), (w * s).T[:, None, :]
-            nodes = series_nodes(float(r_dh.min()), float(r_dh.max()), model)
-            return nodes, lagrange_basis(nodes, r_dh)[:, :, None] * w.T[:, None, :]
-
         def tables(level, t):
-            _, _, _, t_hemi = level_data(level)
-            nodes, b = basis(level)
-            # M[i, o, j, c] = sum_l t[i, l] t[o, l] b[l, j, c]: one matrix product
-            # per (j, c) (BLAS; einsum's path search alone costs more at these sizes)
-            K = b.shape[1]
-            M = np.empty((t.shape[0], t.shape[0], K, C))
-            for j in range(K):
-                for c in range(C):
-                    M[:, :, j, c] = (t * b[:, j, c][None, :]) @ t.T
-            A = ((t * t_hemi[None, :]) @ b.reshape(b.shape[0], -1)).reshape(t.shape[0], K, C)
-            return M, A, nodes
+            _, w, r_dh, t_hemi = level_data(level)
+            return integrate(t, w, r_dh, t_hemi, model, kd)
 
         #: what the build did: ``points`` (values of ``t`` evaluated), the wavelength
         #: ``level``, the angle ``nodes`` and the table's ``texels`` (floats)
@@ -199,10 +216,13 @@ class ColourDiffuse:
             nu, M, A, nodes = 2 * nu - 1, M2, A2, nodes2
             if same:
                 break
+        #: the wavelength level and the angle nodes computed exactly (before the
+        #: linear subdivision), for :class:`~thinfilm_mi.tabulate.diffuse_texture.ScaledColourDiffuse`
+        self.level, self.exact_nodes = level, nu
         # texels for the linear lookup (judged on the values at k_d = 1)
         budget = Budget(points=0, texels=MAX_TABLE_FLOATS)
         while nu < 4 * MAX_NODES and budget.allows(texels=(2 * nu - 1) ** 2 * M.shape[2] * C):
-            m = self._at_one(M, nodes)
+            m = self.at_one(M, nodes)
             if max(float(np.max(np.abs(linear_error(m, ax, True)))) for ax in (0, 1)) <= LINEAR_ABS:
                 break
             M, A = subdivide(subdivide(M, 0, True), 1, True), subdivide(A, 0, True)
@@ -234,19 +254,21 @@ class ColourDiffuse:
                                   filter_mode=dr.FilterMode.Linear,
                                   wrap_mode=dr.WrapMode.Clamp)
 
-    def _at_one(self, M, nodes):
+    def at_one(self, M, nodes):
         """``π f`` at ``k_d = 1`` (the series) and the single term (the ``ℓ_j`` sum
-        to 1), shape ``(nu, nu, 2 C)``; with a fixed ``k_d``: ``M`` (twice)."""
+        to 1) of tables ``M`` of shape ``(..., K, C)``: shape ``(..., 2 C)``; with a
+        fixed ``k_d``: ``M`` (twice)."""
         g = np.ones(1) if self.fixed else np.broadcast_to(_g(1.0, nodes, self.model), nodes.shape)
-        return np.concatenate([np.einsum("iojc,j->ioc", M, g), M.sum(axis=2)], axis=-1)
+        return np.concatenate([np.einsum("...jc,j->...c", M, g), M.sum(axis=-2)], axis=-1)
 
     def _close(self, M, nodes, M2, nodes2) -> bool:
-        a, b = self._at_one(M, nodes), self._at_one(M2, nodes2)
+        a, b = self.at_one(M, nodes), self.at_one(M2, nodes2)
         if a.shape != b.shape:
             return False
         return float(np.max(np.abs(a - b))) <= LEVEL_ABS
 
-    def _u(self, cos):
+    def coordinate(self, cos):
+        """The angle axis's texture coordinate of ``cos``."""
         cos = dr.clip(cos, 0.0, 1.0)
         sin = dr.safe_sqrt((1.0 - cos) * (1.0 + cos))
         return (u_texel(cos, sin, 1.0, 1.0, "plain", self._nu) + 0.5) * self._inv_u
@@ -258,7 +280,8 @@ class ColourDiffuse:
             return [kd]
         return [_g(kd, r, self.model) for r in self._r]
 
-    def _combine(self, res, kd):
+    def combine(self, res, kd):
+        """``Σ_j G(k_d, r_j)`` times the table's channels ``res`` of node ``j``."""
         import mitsuba as mi
         C = self.C
         out = mi.Spectrum(0.0)
@@ -278,25 +301,26 @@ class ColourDiffuse:
         """``G(k_d, R_dh)`` of the model (per channel ``k_d``, spectral ``R_dh``)."""
         return _g(kd, r_dh, self.model)
 
-    def value(self, cos_i, cos_o, kd, active=True):
-        """``π f`` (``mi.Spectrum``): the diffuse term without ``1/π`` and ``cos θ_o``."""
+    def value(self, cos_i, cos_o, kd, active=True, scale=None):
+        """``π f`` (``mi.Spectrum``): the diffuse term without ``1/π`` and ``cos θ_o``
+        (``scale``: the thickness scale, read by a table over it only)."""
         import mitsuba as mi
-        res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
-        return self._combine(res, kd)
+        res = self._M.eval(mi.Point2f(self.coordinate(cos_o), self.coordinate(cos_i)), active)
+        return self.combine(res, kd)
 
-    def node_values(self, cos_i, cos_o, active=True):
+    def node_values(self, cos_i, cos_o, active=True, scale=None):
         """``[(r_j, M_j)]``: the nodes ``r_j`` of ``R_dh`` (opaque ``mi.Float``) and the
         table's ``M_jc = ∫ ŵ_c t(θ_i) t(θ_o) ℓ_j(R_dh) dλ`` (``mi.Spectrum``) of a table
         built without a fixed albedo, for a base other than Lambert's
         (:func:`thinfilm_mi.render.orennayar.coated_integrated`)."""
         import mitsuba as mi
         assert not self.fixed, "node_values needs a table built without a fixed albedo"
-        res = self._M.eval(mi.Point2f(self._u(cos_o), self._u(cos_i)), active)
+        res = self._M.eval(mi.Point2f(self.coordinate(cos_o), self.coordinate(cos_i)), active)
         C = self.C
         return [(r, mi.Spectrum(*res[j * C:(j + 1) * C]) if C > 1 else mi.Spectrum(res[j * C]))
                 for j, r in enumerate(self._r)]
 
-    def albedo(self, cos_i, kd, active=True):
+    def albedo(self, cos_i, kd, active=True, scale=None):
         """``∫ f cos θ_o dω_o``: the diffuse lobe's albedo for light from ``cos_i``."""
         import mitsuba as mi
-        return self._combine(self._A.eval(mi.Point1f(self._u(cos_i)), active), kd)
+        return self.combine(self._A.eval(mi.Point1f(self.coordinate(cos_i)), active), kd)
