@@ -150,9 +150,7 @@ base medium; with film ``N``, ``R_up = k_a^2 k_r`` (down and up through film
 coating, and ``R_up + t <= k_r + k_t <= 1`` in any case). ``R_dh`` is computed
 per wavelength at load time (and when a film is edited) with the float64
 core over a Gauss-Legendre rule and stored as a ``regular`` spectrum; in AD
-variants its derivatives with respect to every film's thickness and index too
-(see **Gradients**). The
-internal light is Lambertian (the base re-diffuses everything it receives), so
+variants its derivatives too (see **Gradients**). The internal light is Lambertian (the base re-diffuses everything it receives), so
 the exit factor is the same ``t(θ)`` and the radiance scaling ``1/η^2`` of
 ``plastic`` is 1 (matched base medium). The albedo for light from ``θ_i`` is
 ``k_r + t(θ_i) k_d T_hemi/(1 - k_d R_dh)`` with ``T_hemi = 2∫ t μ dμ``: for a
@@ -259,11 +257,9 @@ exactly, not from a table, where a parameter carries gradients); ``R_dh``
 (1 nm, linear like ``R_dh``) for every film's thickness, ``Re n`` and ``Im n``,
 computed by reverse-mode AD through the same float64 quadrature when a film
 parameter carries gradients: at the ``params.update()`` that enables them and at each
-edit of the films after it (~0.06 s for 3 films, ~0.2 s for 30;
-``benchmarks/README.md``; never at scene load, where Mitsuba runs constructors on
-its thread pool and nothing carries gradients yet). A render that differentiates a
-film parameter whose gradients were enabled without ``params.update()`` is refused
-with that advice, never silently biased. The kernel adds ``Σ ∂R_dh/∂x (x - detach(x))`` to
+later edit of the films (~0.06 s for 3 films, ~0.2 s for 30), never at scene load. A
+render differentiating a film parameter whose gradients were enabled without
+``params.update()`` is refused with that advice, never silently biased. The kernel adds ``Σ ∂R_dh/∂x (x - detach(x))`` to
 ``R_dh`` (the chain rule through any index texture: ``R_dh(λ)`` depends on the
 indices at ``λ`` only). At ``k = 0`` the derivative with respect to ``k`` is the
 one-sided one (loss). Differentiate with ``path`` (the whole sample is
