@@ -148,10 +148,10 @@ directions, which is exact for the base medium ``ext_ior``). Without film
 base medium; with film ``N``, ``R_up = k_a^2 k_r`` (down and up through film
 ``N``, the coating reflecting alike from both sides: exact for a lossless
 coating, and ``R_up + t <= k_r + k_t <= 1`` in any case). ``R_dh`` is computed
-per wavelength at load time (and when a film is edited) with the float64
-core over a Gauss-Legendre rule and stored as a ``regular`` spectrum; in AD
-variants its derivatives too (see **Gradients**). The internal light is Lambertian (the base re-diffuses everything it receives), so
-the exit factor is the same ``t(θ)`` and the radiance scaling ``1/η^2`` of
+per wavelength at load time (and when a film is edited) with the float64 core over a
+Gauss-Legendre rule and stored as a ``regular`` spectrum; in AD variants its derivatives
+too (see **Gradients**). The internal light is Lambertian (the base re-diffuses all it
+receives), so the exit factor is the same ``t(θ)`` and the radiance scaling ``1/η^2`` of
 ``plastic`` is 1 (matched base medium). The albedo for light from ``θ_i`` is
 ``k_r + t(θ_i) k_d T_hemi/(1 - k_d R_dh)`` with ``T_hemi = 2∫ t μ dμ``: for a
 lossless stack ``T_hemi = 1 - R_dh`` and a white base gives exactly 1; for any
@@ -259,9 +259,9 @@ computed by reverse-mode AD through the same float64 quadrature when a film
 parameter carries gradients: at the ``params.update()`` that enables them and at each
 later edit of the films (~0.06 s for 3 films, ~0.2 s for 30), never at scene load. A
 render differentiating a film parameter whose gradients were enabled without
-``params.update()`` is refused with that advice, never silently biased. The kernel adds ``Σ ∂R_dh/∂x (x - detach(x))`` to
-``R_dh`` (the chain rule through any index texture: ``R_dh(λ)`` depends on the
-indices at ``λ`` only). At ``k = 0`` the derivative with respect to ``k`` is the
+``params.update()`` is refused with that advice, never silently biased. The kernel adds
+``Σ ∂R_dh/∂x (x - detach(x))`` to ``R_dh`` (the chain rule through any index texture:
+``R_dh(λ)`` depends on the indices at ``λ`` only). At ``k = 0`` the derivative with respect to ``k`` is the
 one-sided one (loss). Differentiate with ``path`` (the whole sample is
 differentiated, both components). Mitsuba's ``prb`` family samples detached and
 re-evaluates ``eval`` at the sampled direction for the derivative; ``eval`` holds
