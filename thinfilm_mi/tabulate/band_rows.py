@@ -23,6 +23,7 @@ from thinfilm_mi.tabulate.base import (
     SideData,
     band_cos,
     evaluate_side,
+    film_gather,
     side_indices,
 )
 from thinfilm_mi.tabulate.refine import optical_thickness, power_of_two_step
@@ -462,16 +463,7 @@ def amplitudes(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarra
 
     real = not any(np.any(n.imag) for n in film_n)
     re = np.concatenate([n.real for n in film_n])
-    buf_re = float64_array(re)
-    buf_im = None if real else float64_array(np.concatenate([n.imag for n in film_n]))
-    thick = float64_array(np.array([d for _, d in side.films], np.float64))
-    width = dr.opaque(UInt32, len(wl))
-
-    def film(j):
-        i = j * width + at
-        m = Cx(dr.gather(Float64, buf_re, i), 0.0 if real else dr.gather(Float64, buf_im, i))
-        return m, dr.gather(Float64, thick, j)
-
+    film = film_gather(film_n, [d for _, d in side.films], at, len(wl), real)
     exit_cx = Cx(per_row(n_exit.real), per_row(n_exit.imag) if np.any(n_exit.imag) else 0.0)
     terms, fac, grazing = op.stack_loop_terms(
         per_row(n0), float64_array(cos0), dr.opaque(UInt32, len(film_n), len(rows)), film,

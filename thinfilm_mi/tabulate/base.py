@@ -4,7 +4,8 @@ float64 batches, the table axes, cubic B-splines, the lookup object and the cach
 * :class:`SideData`: a side of a stack as the builders see it (media on a
   wavelength grid, films, the float64 ``rt`` functions), and :func:`evaluate_side`,
   which evaluates ``R`` (and ``T``) at any set of (angle, wavelength) points in
-  batches (looping over the films for deep stacks).
+  batches (looping over the films for deep stacks, whose indices
+  :func:`film_gather` gathers from one buffer inside the kernel).
 * Axes: :func:`u_texel` / :func:`u_nodes_cos` (the angle axis, split at the
   critical angle where the exit medium totally reflects; ``kind="band"`` warps it
   for band-limited tables) and :func:`v_texel` (the wavelength axis, uniform in
@@ -423,6 +424,29 @@ def side_indices(side: SideData, wl: np.ndarray):
     return side.n0(wl_ix), [n(wl_ix) for n, _ in side.films], side.n_exit(wl_ix)
 
 
+def film_gather(film_n, thicknesses, at, width: int, real: bool, scale=None):
+    """``film(j)`` for the float64 film loops of :mod:`thinfilm_mi.optics.core`: film
+    ``j``'s index at each point's row ``at`` (a ``UInt32`` array), gathered inside the
+    kernel from one buffer of ``len(film_n) x width`` entries (``film_n``: the films'
+    complex indices over ``width`` wavelengths; a literal zero imaginary part where
+    ``real``), and its thickness (times the per-point ``scale`` if given)."""
+    from drjit.llvm import Float64, UInt32
+
+    from thinfilm_mi.optics.backend import float64_array
+
+    buf_re = float64_array(np.concatenate([n.real for n in film_n]))
+    buf_im = None if real else float64_array(np.concatenate([n.imag for n in film_n]))
+    thick = float64_array(np.array(thicknesses, np.float64))
+    w = dr.opaque(UInt32, width)
+
+    def film(j):
+        i = j * w + at
+        m = Cx(dr.gather(Float64, buf_re, i), 0.0 if real else dr.gather(Float64, buf_im, i))
+        d = dr.gather(Float64, thick, j)
+        return m, d if scale is None else d * scale
+    return film
+
+
 def evaluate_side(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
               indices, scale: np.ndarray | None = None) -> np.ndarray:
     """Exact float64 R [, T] at points ``(cos0[i], wl[rows[i]])`` (flat arrays),
@@ -460,18 +484,7 @@ def evaluate_side(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
     if side.rt_loop is not None and len(film_n) >= BUILD_LOOP_MIN_FILMS:
         re = np.concatenate([n.real for n in film_n])
         real = not any(absorbing[:-1])
-        buf_re = float64_array(re)
-        buf_im = None if real else float64_array(np.concatenate([n.imag for n in film_n]))
-        thick = float64_array(np.array([d for _, d in side.films], np.float64))
-        width = dr.opaque(UInt32, len(wl))
-
-        def film(j):
-            i = j * width + at
-            m = Cx(dr.gather(Float64, buf_re, i),
-                   0.0 if real else dr.gather(Float64, buf_im, i))
-            d = dr.gather(Float64, thick, j)
-            return m, d if per_point is None else d * per_point
-
+        film = film_gather(film_n, [d for _, d in side.films], at, len(wl), real, per_point)
         res = side.rt_loop(*args, dr.opaque(UInt32, len(film_n), len(rows)), film, *tail,
                            n0_max=float(np.max(n0)), film_n_min=float(re.min()) if real else None,
                            film_n_max=float(re.max()) if real else None,
