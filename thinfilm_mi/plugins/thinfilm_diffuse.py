@@ -317,7 +317,8 @@ from thinfilm_mi.render.media import real_index
 from thinfilm_mi.render.orennayar import OrenNayar, coated, coated_integrated, series_term
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
-from thinfilm_mi.render.variant import check_variant, opaque_float
+from thinfilm_mi.render.variant import check_variant
+from thinfilm_mi.tabulate.base import opaque_float
 
 NAME = "thinfilm_diffuse"
 MODELS = ("single", "multiple", "exact")

@@ -32,7 +32,7 @@ from thinfilm_mi.materials.model import SPECTRAL_RANGE
 from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar, texture_range, uniform
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate import colour as integrated
-from thinfilm_mi.tabulate.base import grid_coordinate
+from thinfilm_mi.tabulate.base import grid_coordinate, linear_texture
 from thinfilm_mi.tabulate.refine import LinearAxis, optical_thickness
 
 
@@ -164,13 +164,9 @@ class GradientSampler:
     _by_variant: dict = {}
 
     def __init__(self, channels: str):
-        mi = mitsuba_module()
         w = cie.normalised_weights(channels)       # on GRID, the 1 nm grid
         self.C = w.shape[0]
-        self.texture = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(w.T, np.float32)),
-                                    use_accel=False, migrate=False,
-                                    filter_mode=dr.FilterMode.Linear,
-                                    wrap_mode=dr.WrapMode.Clamp)
+        self.texture = linear_texture(w.T)
 
     @classmethod
     def get(cls) -> "GradientSampler":
@@ -230,11 +226,8 @@ def _wavelength_texture(ix):
         return None
     tex = getattr(ix, "_wl_texture", None)
     if tex is None:
-        mi = mitsuba_module()
         v = ix.material.index(GRID)
-        tex = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(
-            np.stack([v.real, v.imag], axis=1), np.float32)), use_accel=False, migrate=False,
-            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+        tex = linear_texture(np.stack([v.real, v.imag], axis=1))
         ix._wl_texture = tex
     return tex
 

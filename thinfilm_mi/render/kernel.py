@@ -39,7 +39,6 @@ from thinfilm_mi.render.colour import (
 from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
-from thinfilm_mi.render.variant import opaque_float
 from thinfilm_mi.tabulate import band as _band_tables
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.mueller import MUELLER
@@ -142,7 +141,7 @@ class KernelStack:
                  coherence_thickness: float = DEFAULT_COHERENCE_THICKNESS,
                  sides: dict | None = None, plugin: str = "thin-film BSDF"):
         self.indices = [f[0] for f in films]
-        self.thickness = [opaque_float(f[1]) for f in films]
+        self.thickness = [tabulate_base.opaque_float(f[1]) for f in films]
         self.ambient = ambient
         self.substrate = substrate
         #: Optional Mitsuba texture; every film's thickness is multiplied by its

@@ -1,10 +1,8 @@
 """The variant the plugins run in: :func:`check_variant` refuses the ones a plugin
-cannot serve, :func:`opaque_float` makes a kernel input that never recompiles, and
-:func:`spectral_mean` averages a spectrum in every variant.
+cannot serve, and :func:`spectral_mean` averages a spectrum in every variant. (A kernel
+input that never recompiles: :func:`thinfilm_mi.tabulate.base.opaque_float`.)
 """
 from __future__ import annotations
-
-import drjit as dr
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.llvm import require_llvm
@@ -31,16 +29,6 @@ def check_variant(plugin: str) -> None:
         )
     if variant.startswith("llvm") or not mi.is_spectral:
         require_llvm()
-
-
-def opaque_float(value: float):
-    """``value`` as a ``mi.Float`` that is an opaque kernel input (a scalar in
-    scalar variants), so that changing it never recompiles a kernel."""
-    mi = mitsuba_module()
-    x = mi.Float(value)
-    if dr.is_jit_v(x):
-        dr.make_opaque(x)
-    return x
 
 
 def spectral_mean(x):

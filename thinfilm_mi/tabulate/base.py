@@ -330,6 +330,24 @@ def bspline_at(coeffs: np.ndarray, t: np.ndarray, g: int) -> np.ndarray:
 
 
 # -- building -------------------------------------------------------------------
+def opaque_float(value: float):
+    """``value`` as a ``mi.Float`` that is an opaque kernel input (a plain value in scalar
+    variants), so that changing it (an edit, a table of another shape) never recompiles a
+    kernel."""
+    import mitsuba as mi
+    return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else mi.Float(value)
+
+
+def linear_texture(values: np.ndarray):
+    """A float32 ``Texture1f``/``Texture2f`` of ``values`` (the last axis holds the
+    channels; one or two axes before it), linearly interpolated and clamped at its edges,
+    as every table lookup reads it."""
+    import mitsuba as mi
+    texture = {1: mi.Texture1f, 2: mi.Texture2f}[values.ndim - 1]
+    return texture(mi.TensorXf(np.ascontiguousarray(values, np.float32)), use_accel=False,
+                   migrate=False, filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+
+
 class Table:
     """A built table: a float32 ``Texture2f`` (channels ``R`` [, ``T``]) with its axes.
 
@@ -341,7 +359,6 @@ class Table:
 
     def __init__(self, values: np.ndarray, kind: str, error: float, channels: int,
                  resolution: float = 0.0):
-        import mitsuba as mi
 
         g = GHOST
         segments = 2 if kind == "tir" else 1
@@ -356,23 +373,18 @@ class Table:
         self.resolution = resolution
         #: bytes of the texture's float32 data
         self.nbytes = int(values.size) * 4
-        tensor = mi.TensorXf(np.ascontiguousarray(values, dtype=np.float32))
-        self.texture = mi.Texture2f(tensor, use_accel=False, migrate=False,
-                                    filter_mode=dr.FilterMode.Linear,
-                                    wrap_mode=dr.WrapMode.Clamp)
+        self.texture = linear_texture(values)
 
         # Shape-dependent constants of the lookup, opaque so that a table of
         # another shape reuses the render kernel.
-        def constant(value):
-            return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else mi.Float(value)
-        self._nu = constant(self.nu)
-        self._nv = constant(self.nv)
-        self._inv_u = constant(1.0 / values.shape[1])
-        self._inv_v = constant(1.0 / (self.nv + 2 * g))
+        self._nu = opaque_float(self.nu)
+        self._nv = opaque_float(self.nv)
+        self._inv_u = opaque_float(1.0 / values.shape[1])
+        self._inv_v = opaque_float(1.0 / (self.nv + 2 * g))
         self._offset = g + 0.5   # node 0 sits at texel centre g
         # a split axis: node coordinates beyond the critical cell are in the
         # second segment, 2g texels further
-        self._split = constant(0.5 * self.nu - 0.5) if kind == "tir" else None
+        self._split = opaque_float(0.5 * self.nu - 0.5) if kind == "tir" else None
 
     @property
     def texels(self) -> int:

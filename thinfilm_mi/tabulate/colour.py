@@ -49,7 +49,7 @@ import numpy as np
 
 from thinfilm_mi.colour.cie import colour_differences, colour_weights, normalised_weights
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
-from thinfilm_mi.tabulate.base import BuildReport, u_texel
+from thinfilm_mi.tabulate.base import BuildReport, linear_texture, opaque_float, u_texel
 from thinfilm_mi.tabulate.refine import (
     Budget,
     LinearAxis,
@@ -268,7 +268,6 @@ class ColourTable:
 
     def __init__(self, values: np.ndarray, axis: LinearAxis, channels: int, transmission: bool,
                  scale_max: float | None, report: BuildReport | None = None):
-        import mitsuba as mi
         #: what the build did (:func:`build`)
         self.report = report
         self.axis = axis
@@ -278,20 +277,15 @@ class ColourTable:
         self.values = values                      # float64 (S, nu, k*C) for tests
         self.nbytes = values.size * 4
         self.ns, self.nu = values.shape[0], values.shape[1]
-        data = np.ascontiguousarray(values if scale_max is not None else values[0], np.float32)
-        tex = mi.Texture2f if scale_max is not None else mi.Texture1f
-        self.texture = tex(mi.TensorXf(data), use_accel=False, migrate=False,
-                           filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
+        self.texture = linear_texture(values if scale_max is not None else values[0])
 
-        def constant(value):
-            return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else mi.Float(value)
-        self._nu = constant(self.nu)
-        self._inv_u = constant(1.0 / self.nu)
-        self._n0 = constant(axis.n0)
-        self._n_exit = constant(axis.n_exit)
+        self._nu = opaque_float(self.nu)
+        self._inv_u = opaque_float(1.0 / self.nu)
+        self._n0 = opaque_float(axis.n0)
+        self._n_exit = opaque_float(axis.n_exit)
         if scale_max is not None:
-            self._s = constant((self.ns - 1) / scale_max if scale_max > 0 else 0.0)
-            self._inv_s = constant(1.0 / self.ns)
+            self._s = opaque_float((self.ns - 1) / scale_max if scale_max > 0 else 0.0)
+            self._inv_s = opaque_float(1.0 / self.ns)
 
     @property
     def texels(self) -> int:

@@ -45,7 +45,7 @@ import numpy as np
 
 from thinfilm_mi.colour import cie
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
-from thinfilm_mi.tabulate.base import BuildReport, grid_coordinate, u_texel
+from thinfilm_mi.tabulate.base import BuildReport, grid_coordinate, linear_texture, opaque_float, u_texel
 from thinfilm_mi.tabulate.refine import Budget, LinearAxis, interleave, linear_error, subdivide
 
 #: Relative error of the Chebyshev interpolation of ``G(k_d, r)`` in ``r``.
@@ -156,7 +156,6 @@ class ColourDiffuse:
 
     def __init__(self, factors, model: str, channels: str,
                  kd: np.ndarray | None = None):
-        import mitsuba as mi
         self.model = model
         C = 1 if channels == "mono" else 3
         self.C = C
@@ -234,25 +233,15 @@ class ColourDiffuse:
         self.albedo_values = A                # (nu, K, C)
         K = nodes.size
         self.nbytes = (M.size + A.size) * 4
-        self._M = mi.Texture2f(mi.TensorXf(np.ascontiguousarray(
-            M.reshape(nu, nu, K * C), np.float32)), use_accel=False, migrate=False,
-            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
-        self._A = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(
-            A.reshape(nu, K * C), np.float32)), use_accel=False, migrate=False,
-            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
-
-        def constant(value):
-            return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else mi.Float(value)
-        self._nu = constant(nu)
-        self._inv_u = constant(1.0 / nu)
-        self._r = [constant(float(r)) for r in nodes]
+        self._M = linear_texture(M.reshape(nu, nu, K * C))
+        self._A = linear_texture(A.reshape(nu, K * C))
+        self._nu = opaque_float(nu)
+        self._inv_u = opaque_float(1.0 / nu)
+        self._r = [opaque_float(float(r)) for r in nodes]
         #: R_dh on the 1 nm grid, for the gradient estimate (its derivatives are the
         #: plugin's DerivativeTable, on the same grid)
         r_dh = level_data(0)[2]
-        self._r_dh = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(r_dh[:, None], np.float32)),
-                                  use_accel=False, migrate=False,
-                                  filter_mode=dr.FilterMode.Linear,
-                                  wrap_mode=dr.WrapMode.Clamp)
+        self._r_dh = linear_texture(r_dh[:, None])
 
     def at_one(self, M, nodes):
         """``π f`` at ``k_d = 1`` (the series) and the single term (the ``ℓ_j`` sum

@@ -36,7 +36,7 @@ from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.optics.backend import float64_array
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
-from thinfilm_mi.tabulate.base import grid_coordinate
+from thinfilm_mi.tabulate.base import grid_coordinate, linear_texture, opaque_float
 
 __all__ = ["base_rule", "nodes_for", "exact_hemispherical", "paper_hemispherical", "ScaleTable",
            "SCALE_ABS"]
@@ -217,7 +217,6 @@ class ScaleTable:
     ``s_max <= 0``: one node at ``s = 0``."""
 
     def __init__(self, hemi: Callable, s_max: float):
-        import mitsuba as mi
         if s_max <= 0.0:
             s = np.zeros(1)
             values = np.stack(hemi(s), axis=-1)                 # (1, nw, 2)
@@ -240,12 +239,8 @@ class ScaleTable:
         self.values = values                                    # for tests
         self.s_max = float(s[-1])
         ns = s.size
-        self._texture = mi.Texture2f(mi.TensorXf(np.ascontiguousarray(values, np.float32)),
-                                     use_accel=False, migrate=False,
-                                     filter_mode=dr.FilterMode.Linear,
-                                     wrap_mode=dr.WrapMode.Clamp)
-        inv = 1.0 / self.s_max if self.s_max > 0 else 0.0
-        self._inv = dr.opaque(mi.Float, inv) if dr.is_jit_v(mi.Float) else mi.Float(inv)
+        self._texture = linear_texture(values)
+        self._inv = opaque_float(1.0 / self.s_max if self.s_max > 0 else 0.0)
         self._span = (ns - 1) / ns
         self._half = 0.5 / ns
 

@@ -41,7 +41,7 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.tabulate.base import BuildReport
+from thinfilm_mi.tabulate.base import BuildReport, linear_texture, opaque_float
 from thinfilm_mi.tabulate.colour import TOLERANCE_ABS_2D
 from thinfilm_mi.tabulate.diffuse import LINEAR_ABS, ColourDiffuse, integrate, level_weights, series_nodes
 from thinfilm_mi.tabulate.refine import Budget, LinearAxis, interleave, linear_error, subdivide
@@ -78,7 +78,6 @@ class ScaledColourDiffuse(ColourDiffuse):
 
     def __init__(self, factors, model: str, channels: str, kd: np.ndarray | None, s_max: float,
                  plugin: str = "thinfilm_diffuse", s_min: float = 0.0):
-        import mitsuba as mi
         s_max = max(float(s_max), 0.0)
         s_lo = min(max(float(s_min), 0.0), s_max)
         span = s_max - s_lo
@@ -171,21 +170,14 @@ class ScaledColourDiffuse(ColourDiffuse):
         # with bilinear filtering inside its own rows (the angle coordinate stays within
         # [0.5, nu - 0.5] texels of a slice)
         self.ns = ns
-        self._M = mi.Texture2f(mi.TensorXf(np.ascontiguousarray(
-            M.reshape(ns * nu, nu, K * C), np.float32)), use_accel=False, migrate=False,
-            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
-        self._A = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(
-            A.reshape(ns * nu, K * C), np.float32)), use_accel=False, migrate=False,
-            filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
-
-        def constant(value):
-            return dr.opaque(mi.Float, value) if dr.is_jit_v(mi.Float) else mi.Float(value)
-        self._nu = constant(nu)
-        self._inv_u = constant(1.0 / nu)
-        self._r = [constant(float(r)) for r in nodes]
-        self._q_lo = constant(q_lo)
-        self._inv_s = constant(1.0 / s_max if s_max > 0 else 0.0)
-        self._inv_q = constant(1.0 / (1.0 - q_lo) if span > 0 else 0.0)
+        self._M = linear_texture(M.reshape(ns * nu, nu, K * C))
+        self._A = linear_texture(A.reshape(ns * nu, K * C))
+        self._nu = opaque_float(nu)
+        self._inv_u = opaque_float(1.0 / nu)
+        self._r = [opaque_float(float(r)) for r in nodes]
+        self._q_lo = opaque_float(q_lo)
+        self._inv_s = opaque_float(1.0 / s_max if s_max > 0 else 0.0)
+        self._inv_q = opaque_float(1.0 / (1.0 - q_lo) if span > 0 else 0.0)
         #: R_dh at s_max on the 1 nm grid (:meth:`r_dh_at`): read by the gradient estimate of
         #: model "single" only, where it drops out (the other models refuse film-parameter
         #: gradients together with a texture)

@@ -41,7 +41,7 @@ from thinfilm_mi.materials.model import GRID  # where the factors are tabulated
 from thinfilm_mi.optics.backend import aligned_array, float64_array, repeated
 from thinfilm_mi.optics.core import Cx, film_attenuation
 from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
-from thinfilm_mi.tabulate.base import grid_coordinate
+from thinfilm_mi.tabulate.base import grid_coordinate, linear_texture
 
 __all__ = ["hemispherical_factors",
            "r_dh_partials", "DerivativeTable"]
@@ -228,11 +228,7 @@ class DerivativeTable:
     (linear in ``λ``, as the ``R_dh`` it differentiates), for the render kernel."""
 
     def __init__(self, partials: np.ndarray):
-        import mitsuba as mi
-        self.texture = mi.Texture1f(mi.TensorXf(np.ascontiguousarray(partials.T, np.float32)),
-                                    use_accel=False, migrate=False,
-                                    filter_mode=dr.FilterMode.Linear,
-                                    wrap_mode=dr.WrapMode.Clamp)
+        self.texture = linear_texture(partials.T)
 
     def tangent(self, wavelengths, carriers: dict, active=True):
         """``Σ_p ∂R_dh/∂x_p (λ) c_p`` at ``wavelengths`` (``mi.UnpolarizedSpectrum``,
