@@ -143,7 +143,7 @@ from thinfilm_mi.plugins.thinfilm_conductor import substrate_from_props
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.params import MAX_ALPHA, ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
-from thinfilm_mi.render.textures import check_texture_range, uniform
+from thinfilm_mi.render.textures import checked_texture, uniform
 from thinfilm_mi.render.variant import check_variant
 
 NAME = "thinfilm_roughconductor"
@@ -164,14 +164,8 @@ def _alpha_texture(props, name: str, plugin: str):
                                 f"and <= {MAX_ALPHA:g}, got {value!r} (for a smooth surface "
                                 "use the smooth plugin)")
         return uniform(value)
-    try:
-        tex = props.get_texture(name)
-    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-        raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0 or a texture, "
-                            f"got {value!r} ({e})") from None
-    check_texture_range(tex, f"{plugin}: '{name}' (roughness)", 0.0, MAX_ALPHA, mono=True,
-                        strict=True)
-    return tex
+    return checked_texture(props, name, plugin, "a number > 0 or a texture",
+                           f"{plugin}: '{name}' (roughness)", 0.0, MAX_ALPHA, mono=True, strict=True)
 
 
 class Microfacet:

@@ -24,7 +24,7 @@ from thinfilm_mi.optics.core import Cx, film_attenuation
 from thinfilm_mi.render.colour import GradientSampler, index_on_wavelengths
 from thinfilm_mi.render.kernel import side_rt
 from thinfilm_mi.render.params import ALBEDO_SLACK
-from thinfilm_mi.render.textures import check_texture_range, mitsuba_module, regular, scalar, uniform
+from thinfilm_mi.render.textures import checked_texture, mitsuba_module, regular, scalar, uniform
 from thinfilm_mi.tabulate.diffuse_scale import exact_hemispherical, paper_hemispherical
 from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable, hemispherical_factors, r_dh_partials
 
@@ -163,14 +163,9 @@ def reflectance_from_props(props, plugin: str):
         if not (0.0 <= value <= 1.0):
             raise ThinFilmError(f"{plugin}: 'reflectance' must be in [0, 1] (an albedo), "
                                 f"got {value!r}")
-    try:
-        tex = props.get_texture("reflectance")
-    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-        raise ThinFilmError(f"{plugin}: 'reflectance' must be a number, a spectrum or a texture, "
-                            f"got {value!r} ({e})") from None
-    check_texture_range(tex, f"{plugin}: 'reflectance' (an albedo, energy conservation)", 0.0,
-                        1.0 + ALBEDO_SLACK)
-    return tex
+    return checked_texture(props, "reflectance", plugin, "a number, a spectrum or a texture",
+                           f"{plugin}: 'reflectance' (an albedo, energy conservation)", 0.0,
+                           1.0 + ALBEDO_SLACK)
 
 
 def grid_spectrum(tex, values):

@@ -38,7 +38,7 @@ from typing import NamedTuple
 import drjit as dr
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.render.textures import check_texture_range, mitsuba_module, texture_range, uniform
+from thinfilm_mi.render.textures import checked_texture, mitsuba_module, texture_range, uniform
 
 __all__ = ["ROUGHNESS_MODELS", "MAX_ROUGHNESS", "H_AVG", "C1_FON", "C2_FON", "BaseTerms", "OrenNayar",
            "coefficients", "qualitative_h", "coated", "coated_integrated", "series_term"]
@@ -123,12 +123,8 @@ class OrenNayar:
                 raise ThinFilmError(f"{plugin}: 'roughness' (σ, radians) must be finite and in "
                                     f"[0, {MAX_ROUGHNESS:.6g}], got {value!r}")
             return uniform(float(value))
-        try:
-            tex = props.get_texture("roughness")
-        except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-            raise ThinFilmError(f"{plugin}: 'roughness' must be {want}, got {value!r} ({e})") from None
-        check_texture_range(tex, f"{plugin}: 'roughness' (σ, radians)", 0.0, MAX_ROUGHNESS, mono=True)
-        return tex
+        return checked_texture(props, "roughness", plugin, want, f"{plugin}: 'roughness' (σ, radians)",
+                               0.0, MAX_ROUGHNESS, mono=True)
 
     def _carries_gradients(self) -> bool:
         mi = mitsuba_module()

@@ -16,7 +16,7 @@ from thinfilm_mi.render.kernel import (
     KernelStack,
 )
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR, SpectralIndex, real_index
-from thinfilm_mi.render.textures import check_texture_range
+from thinfilm_mi.render.textures import checked_texture
 
 
 def optional_texture(props, name: str, plugin: str):
@@ -25,14 +25,8 @@ def optional_texture(props, name: str, plugin: str):
     finite and >= 0 (a negative or infinite factor renders black or NaN)."""
     if name not in props:
         return None
-    value = props.get(name)
-    try:
-        tex = props.get_texture(name)
-    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-        raise ThinFilmError(f"{plugin}: '{name}' must be a number, a spectrum or a texture, "
-                            f"got {value!r} ({e})") from None
-    check_texture_range(tex, f"{plugin}: '{name}'", 0.0)
-    return tex
+    return checked_texture(props, name, plugin, "a number, a spectrum or a texture",
+                           f"{plugin}: '{name}'", 0.0)
 
 
 def films_from_props(props, plugin: str) -> list[tuple[SpectralIndex, float]]:
@@ -69,14 +63,9 @@ def thickness_texture_from_props(props, plugin: str):
         if not math.isfinite(value) or value < 0:
             raise ThinFilmError(f"{plugin}: 'thickness' (a scale on every film's thickness) "
                                 f"must be a finite number >= 0 or a texture, got {value!r}")
-    try:
-        tex = props.get_texture("thickness")
-    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-        raise ThinFilmError(f"{plugin}: 'thickness' must be a number or a texture, "
-                            f"got {value!r} ({e})") from None
-    check_texture_range(tex, f"{plugin}: 'thickness' (a scale on every film's thickness)", 0.0,
-                        mono=True)
-    return tex
+    return checked_texture(props, "thickness", plugin, "a number or a texture",
+                           f"{plugin}: 'thickness' (a scale on every film's thickness)", 0.0,
+                           mono=True)
 
 
 def tabulate_from_props(props, plugin: str) -> bool | str:

@@ -225,6 +225,21 @@ def texture_range(tex, mono: bool = False):
     return float(np.min(arr)), float(np.max(arr))
 
 
+def checked_texture(props, name: str, plugin: str, want: str, what: str, lo: float = -math.inf,
+                    hi: float = math.inf, *, mono: bool = False, strict: bool = False):
+    """The plugin property ``name`` as a Mitsuba texture (``props.get_texture``), refused
+    with a :class:`ThinFilmError` saying it must be ``want`` where Mitsuba cannot make one
+    of it, and its values checked at load by :func:`check_texture_range` (``what``,
+    ``lo``, ``hi``, ``mono``, ``strict``)."""
+    value = props.get(name)
+    try:
+        tex = props.get_texture(name)
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"{plugin}: '{name}' must be {want}, got {value!r} ({e})") from None
+    check_texture_range(tex, what, lo, hi, mono=mono, strict=strict)
+    return tex
+
+
 def check_texture_range(tex, what: str, lo: float = -math.inf, hi: float = math.inf, *,
                         mono: bool = False, strict: bool = False) -> None:
     """Raise :class:`ThinFilmError` naming ``what`` unless the texture's values
