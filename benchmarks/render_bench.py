@@ -49,6 +49,11 @@ import warnings
 
 import numpy as np
 
+# Builds are what these benchmarks time: the table store on disk
+# (thinfilm_mi.tabulate.store) is off unless the environment names one, and
+# first_images(store="warm") measures it on purpose.
+os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 SCENES = os.path.join(REPO, "scenes")
@@ -164,21 +169,33 @@ def first_image_child(config: str):
     print(json.dumps({"load": t1 - t0, "render": t2 - t1, "mode": mode_of(scene)}))
 
 
-def first_images(script: str, configs, repeats: int) -> dict:
+def first_images(script: str, configs, repeats: int, store: str = "off") -> dict:
     """Per configuration, the run (``{"load", "render", "mode"}``) with the median
     total of ``repeats``: each a new process running ``script
     --first-image-child CONFIG`` with a fresh ``DRJIT_CACHE_DIR``, the
-    configurations round-robin (as in steady())."""
+    configurations round-robin (as in steady()). ``store``: the table store on
+    disk is ``"off"`` (every process builds its tables), or ``"warm"``: a store
+    filled by one untimed run per configuration (a script run again)."""
     runs = {c: [] for c in configs}
-    for _ in range(repeats):
-        for c in configs:
+    with tempfile.TemporaryDirectory(prefix="tables_") as tables:
+        setting = tables if store == "warm" else "off"
+
+        def child(c: str) -> dict:
             with tempfile.TemporaryDirectory(prefix="drjit_cache_") as cache:
-                env = dict(os.environ, DRJIT_CACHE_DIR=cache)
+                env = dict(os.environ, DRJIT_CACHE_DIR=cache, THINFILM_MI_TABLE_CACHE=setting)
                 res = subprocess.run([sys.executable, os.path.abspath(script),
                                       "--first-image-child", c], env=env, capture_output=True,
                                      text=True, check=True)
-                runs[c].append(json.loads(res.stdout.strip().splitlines()[-1]))
-            print(f"  first image {c}: {runs[c][-1]}", file=sys.stderr, flush=True)
+                return json.loads(res.stdout.strip().splitlines()[-1])
+
+        if store == "warm":
+            for c in configs:
+                child(c)
+        for _ in range(repeats):
+            for c in configs:
+                runs[c].append(child(c))
+                print(f"  first image {c} (table store {store}): {runs[c][-1]}", file=sys.stderr,
+                      flush=True)
     return {c: sorted(runs[c], key=lambda r: r["load"] + r["render"])[len(runs[c]) // 2]
             for c in configs}
 

@@ -49,6 +49,9 @@ import os
 import time
 import warnings
 
+# builds are timed: no tables from the store on disk unless the environment names one
+os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np

@@ -42,6 +42,7 @@ from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on
 from thinfilm_mi.tabulate import band as _band_tables
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.mueller import MUELLER
+from thinfilm_mi.tabulate.store import default_store
 
 #: Default coherence thickness (nm): thicker films are averaged incoherently.
 DEFAULT_COHERENCE_THICKNESS = 5000.0
@@ -455,6 +456,10 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
 
 #: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).
 TABLE_CACHE = tabulate_base.TableCache()
+#: Builds of at least this many exact evaluations (~30 ms and more: the probes of
+#: 10 films and more, every band-limited build) are kept in the table store
+#: (:mod:`thinfilm_mi.tabulate.store`) for later processes; cheaper ones are rebuilt.
+STORE_MIN_POINTS = 50_000
 
 
 def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
@@ -465,6 +470,12 @@ def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
     BSDFs with the same films share one texture. Tables are never modified in
     place. ``quantity``: what the table holds (``None``: the powers; else, e.g.
     :data:`~thinfilm_mi.tabulate.mueller.MUELLER`, its channels).
+
+    Not in this process's cache, the table is looked up in the table store on
+    disk (:func:`~thinfilm_mi.tabulate.store.default_store`, the report then says
+    ``"from the table store"`` with the original build's report under ``build``);
+    a build of :data:`STORE_MIN_POINTS` evaluations or more is kept there for
+    later processes.
     """
     import hashlib
 
@@ -493,12 +504,23 @@ def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
     if found:
         side.build_report = tabulate_base.BuildReport(result="from the cache")
         return table
+    disk = default_store()
+    if disk is not None:
+        found, table, report = disk.get(key)
+        if found:
+            side.build_report = tabulate_base.BuildReport(result="from the table store",
+                                                          build=report)
+            TABLE_CACHE.put(key, table)
+            return table
 
     data = side_data(side, transmission, quantity=quantity)
-    side.build_report = tabulate_base.BuildReport()
+    side.build_report = report = tabulate_base.BuildReport()
     table = _band_tables.build_table(data, stack.table_error, GRID, max_texels,
-                                     stack.spectral_resolution, report=side.build_report)
+                                     stack.spectral_resolution, report=report)
     TABLE_CACHE.put(key, table)
+    work = report.get("points", 0) + (report.get("exact_attempt") or {}).get("points", 0)
+    if disk is not None and work >= STORE_MIN_POINTS:
+        disk.put(key, table, report)
     return table
 
 

@@ -6,6 +6,8 @@ The shared base, used by every builder:
   exact float64 evaluation in batches, the cubic tables' angle and wavelength axes,
   B-splines and their midpoint prediction, the :class:`Table` lookup, :class:`BuildReport`
   and the :class:`TableCache`.
+* :mod:`thinfilm_mi.tabulate.store` -- built tables kept on disk between processes (the
+  table store, ``THINFILM_MI_TABLE_CACHE``).
 * :mod:`thinfilm_mi.tabulate.refine` -- the :class:`~thinfilm_mi.tabulate.refine.Budget` a
   build may spend, the first sample step from the stack's optical thickness, the
   convergence-order refinement of the cubic tables, and the 4-point rule and angle axis

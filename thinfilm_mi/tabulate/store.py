@@ -1,0 +1,195 @@
+"""Built tables kept on disk between processes, as Dr.Jit keeps its compiled kernels.
+
+A band-limited table of a 10- or 30-film stack takes 0.3-1 s to build
+(:mod:`thinfilm_mi.tabulate.band`) and is then read in milliseconds: a script run
+again, a CLI render, or a sweep's worker processes would otherwise rebuild the same
+table in every process. :class:`TableStore` keeps each built table (and each stack
+found not tabulable, with its build report) in one file per key under a directory:
+
+* **where**: ``$THINFILM_MI_TABLE_CACHE`` if set (``off``, ``0`` or empty: no
+  store), else ``$XDG_CACHE_HOME/thinfilm-mi/tables`` (``~/.cache/...``);
+  :func:`default_store`;
+* **which key**: the caller's key of the table's optics (the in-memory cache's,
+  :func:`thinfilm_mi.render.kernel.table_key`) hashed with :func:`code_fingerprint`:
+  the source of this package and the versions of Mitsuba, Dr.Jit and NumPy, so a
+  table built by other code is never read;
+* **what is read back**: the float32 texture values exactly as built, so a table
+  from the store gives the same image bit for bit as the one it stands for
+  (``tests/test_table_store.py``);
+* **safety**: files are written under a temporary name and renamed (atomic on one
+  file system: another process never reads half a file), read with
+  ``allow_pickle=False`` and checked (shape, channels, finite values); a file that
+  fails is removed and the table rebuilt. A store that cannot be written (a
+  read-only home) is skipped without error. The store is bounded
+  (:data:`MAX_BYTES`): the least recently used files go first.
+"""
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import os
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from thinfilm_mi.tabulate.base import GHOST, BuildReport, Table
+
+__all__ = ["ENVIRONMENT", "MAX_BYTES", "TableStore", "code_fingerprint", "default_store"]
+
+#: The environment variable naming the store's directory (``off``, ``0`` or empty: none).
+ENVIRONMENT = "THINFILM_MI_TABLE_CACHE"
+#: The store's bound: beyond it the least recently used files are removed until
+#: three quarters remain (a 30-film table is 1.3 MiB, a polarized one 5 MiB).
+MAX_BYTES = 256 << 20
+#: Angle axes a stored table may have (:class:`~thinfilm_mi.tabulate.base.Table`).
+KINDS = ("plain", "band", "tir")
+_SUFFIX = ".npz"
+
+
+@functools.cache
+def code_fingerprint() -> str:
+    """A hash of every Python source file of this package and of the versions of
+    Mitsuba, Dr.Jit and NumPy: any change to the code that builds or reads a table
+    gives new keys."""
+    import drjit
+    import mitsuba
+
+    h = hashlib.sha256()
+    root = Path(__file__).resolve().parent.parent
+    for path in sorted(root.rglob("*.py")):
+        h.update(str(path.relative_to(root)).encode())
+        h.update(path.read_bytes())
+    h.update(repr((mitsuba.__version__, drjit.__version__, np.__version__)).encode())
+    return h.hexdigest()
+
+
+def _plain(value):
+    """``value`` with tuples, NumPy scalars and arrays made JSON's lists and numbers."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
+
+class TableStore:
+    """Tables on disk under ``directory`` (see the module). Thread-safe: several
+    plugin constructors may read and write at once (each file is written whole,
+    then renamed)."""
+
+    def __init__(self, directory: str | os.PathLike, max_bytes: int = MAX_BYTES):
+        self.directory = Path(directory)
+        self.max_bytes = max_bytes
+        self._lock = threading.Lock()
+
+    def _path(self, key: str) -> Path:
+        name = hashlib.sha256((key + code_fingerprint()).encode()).hexdigest()[:40]
+        return self.directory / (name + _SUFFIX)
+
+    def get(self, key: str):
+        """``(True, table, report)`` for a stored key (``table`` ``None`` for a stack
+        the build found not tabulable; ``report`` the build's
+        :class:`~thinfilm_mi.tabulate.base.BuildReport`), else ``(False, None, None)``."""
+        path = self._path(key)
+        try:
+            with np.load(path, allow_pickle=False) as f:
+                meta = json.loads(bytes(f["meta"]).decode())
+                values = np.array(f["values"]) if meta["table"] else None
+        except FileNotFoundError:
+            return False, None, None
+        except Exception:     # noqa: BLE001 -- any damaged file is a miss, and removed
+            self._remove(path)
+            return False, None, None
+        table = self._table(values, meta) if meta.get("table") else None
+        if meta.get("table") and table is None:
+            self._remove(path)
+            return False, None, None
+        try:
+            os.utime(path)      # recently used
+        except OSError:
+            pass
+        return True, table, BuildReport(meta.get("report") or {})
+
+    @staticmethod
+    def _table(values, meta) -> Table | None:
+        """The table of stored ``values`` if they are what ``meta`` says, else ``None``."""
+        try:
+            kind, channels = meta["kind"], int(meta["channels"])
+            error, resolution = float(meta["error"]), float(meta["resolution"])
+        except (KeyError, TypeError, ValueError):
+            return None
+        g = GHOST
+        if (kind not in KINDS or values.dtype != np.float32 or values.ndim != 3
+                or values.shape[2] != channels or min(values.shape[:2]) <= 4 * g
+                or not np.all(np.isfinite(values)) or not np.isfinite(error)):
+            return None
+        return Table(values, kind, error, channels, resolution)
+
+    def put(self, key: str, table: Table | None, report: dict | None) -> None:
+        """Keep ``table`` (``None``: not tabulable) and its build ``report`` under ``key``;
+        nothing happens where the directory cannot be written."""
+        path = self._path(key)
+        meta = {"table": table is not None, "report": _plain(dict(report or {}))}
+        arrays = {}
+        if table is not None:
+            meta.update(kind=table.kind, channels=table.channels, error=float(table.error),
+                        resolution=float(table.resolution))
+            arrays["values"] = np.array(table.texture.tensor(), dtype=np.float32)
+        arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
+        tmp = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.tmp")
+        try:
+            self.directory.mkdir(parents=True, exist_ok=True)
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+            os.replace(tmp, path)
+        except OSError:
+            self._remove(tmp)
+            return
+        self._trim()
+
+    def _trim(self) -> None:
+        """Remove the least recently used files while the store exceeds its bound."""
+        with self._lock:
+            try:
+                files = [(p.stat(), p) for p in self.directory.glob("*" + _SUFFIX)]
+            except OSError:
+                return
+            total = sum(s.st_size for s, _ in files)
+            if total <= self.max_bytes:
+                return
+            for s, p in sorted(files, key=lambda sp: sp[0].st_mtime):
+                if total <= 0.75 * self.max_bytes:
+                    break
+                self._remove(p)
+                total -= s.st_size
+
+    @staticmethod
+    def _remove(path: Path) -> None:
+        try:
+            path.unlink()
+        except OSError:
+            pass
+
+    def clear(self) -> None:
+        """Remove every stored table."""
+        for p in self.directory.glob("*" + _SUFFIX):
+            self._remove(p)
+
+
+def default_store() -> TableStore | None:
+    """The store the environment names (read at every call: a process may turn it
+    off): ``$THINFILM_MI_TABLE_CACHE``, or ``$XDG_CACHE_HOME/thinfilm-mi/tables``
+    (``~/.cache`` without it); ``None`` where it is ``off``, ``0`` or empty."""
+    setting = os.environ.get(ENVIRONMENT)
+    if setting is not None:
+        if setting.strip().lower() in ("", "0", "off", "false", "no"):
+            return None
+        return TableStore(setting)
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return TableStore(os.path.join(base, "thinfilm-mi", "tables"))
