@@ -49,11 +49,12 @@ DEFAULT_COHERENCE_THICKNESS = 5000.0
 #: Default target for the tables: max abs error in R and T.
 DEFAULT_TABLE_ERROR = 1e-3
 #: ``tabulate="auto"`` uses a table for stacks of at least this many films (after
-#: the skips). A single film stays exact: a lookup is ~2x cheaper per call (3-4
-#: against 5-8 ns per point), but a render only ~5 % faster (1.05-1.10x against
-#: 0.99-1.05x ``conductor``), while the exact recursion is ~100x more accurate
-#: (max error 4e-6, a 1e-3 table's ~3e-4) and needs no build (benchmarks/SPEED.md).
-AUTO_MIN_FILMS = 2
+#: the skips): one. A single film's lookup is ~2x cheaper per call than its
+#: recursion (3-4 against 5-8 ns per point): a render costs 0.98x Mitsuba's
+#: ``conductor`` against 1.07x exact (issue 32's target: <= 1.02x), for a build of
+#: ~10 ms and an error within ``table_error`` (measured ~3e-4 at the default 1e-3,
+#: where the float32 recursion errs by ~4e-6; ``tabulate=false`` keeps it exact).
+AUTO_MIN_FILMS = 1
 #: ``tabulate="auto"`` keeps tables of at most this many texels (over all
 #: channels, 2 MiB of float32): a cubic lookup in a table that fits the cache
 #: costs 3-4.6 ns per point, beyond it 7-12 ns, as much as the exact recursion
