@@ -2,7 +2,7 @@
 ``conductor``, the exact evaluation's cost per film, and the share of a gradient
 descent spent in table builds.
 
-    python benchmarks/deep_bench.py [--rounds 3] [--only loads|steady|descent]
+    python benchmarks/deep_bench.py [--rounds 3] [--only loads|steady|descent|edits]
 
 Stacks: the Al stacks of render_bench.py (2.3/1.46 films, 50-200 nm from
 ``default_rng(6)``), default settings (``tabulate="auto"``, ``spectral_resolution``
@@ -18,6 +18,14 @@ Stacks: the Al stacks of render_bench.py (2.3/1.46 films, 50-200 nm from
 3. Descent: 50 steps of gradient descent on the first film's thickness of the
    30-film stack (32x32, 1 spp, ``prb``-free ``path`` integrator, a fixed target
    image); total time and time spent in ``KernelStack._plan_tables``.
+4. Edits: the sphere scene at the issue's 128x128, 8 spp, 1, 10 and 30 films at
+   default settings and with ``tabulate`` false; a plain render (median of
+   --rounds + 2) against a thickness edit through ``mi.traverse(scene)`` (a new
+   value each time, so no table comes from a cache) + ``params.update()`` + the
+   render (median of as many).
+
+The table store on disk is off (builds are what is timed) unless the environment
+names one.
 """
 from __future__ import annotations
 
@@ -32,6 +40,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
 
 DEPTHS = (10, 30, 100, 300, 1000)
 
@@ -145,10 +154,49 @@ def descent() -> None:
           f"({100 * spent[0] / total:.1f} %)")
 
 
+def edits(rounds: int) -> None:
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_spectral")
+    import render_bench as rb
+
+    import thinfilm_mi  # noqa: F401
+    n = rounds + 2
+    print("\n### A thickness edit + render against a plain render (128x128, 8 spp, "
+          f"medians of {n})\n")
+    print("| films | mode | plain render (s) | edit + render (s) | ratio | the edit's build |")
+    print("|---:|---|---:|---:|---:|---|")
+    for L in (1, 10, 30):
+        for exact in (False, True):
+            s = rb.scene_dict("conductor", 128, 8)
+            s["sphere"]["bsdf"] = dict(bsdf(L), **({"tabulate": False} if exact else {}))
+            scene = mi.load_dict(s)
+            rb.render_sync(scene, seed=0)
+            plain = []
+            for i in range(n):
+                t = time.perf_counter()
+                rb.render_sync(scene, seed=i + 1)
+                plain.append(time.perf_counter() - t)
+            params = mi.traverse(scene)
+            key = "sphere.bsdf.layers.0.thickness"
+            base = float(params[key][0])
+            edit = []
+            for i in range(n):
+                t = time.perf_counter()
+                params[key] = base + 0.25 * (i + 1)
+                params.update()
+                rb.render_sync(scene, seed=i + 1)
+                edit.append(time.perf_counter() - t)
+            stack = scene.shapes()[0].bsdf().stack
+            report = stack.plan[False].build_report or {}
+            a, b = statistics.median(plain), statistics.median(edit)
+            print(f"| {L} | {stack.mode()} | {a:.3f} | {b:.3f} | {b / a:.2f} | "
+                  f"{report.get('result', '-')} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--only", choices=("loads", "steady", "descent"))
+    ap.add_argument("--only", choices=("loads", "steady", "descent", "edits"))
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
@@ -160,6 +208,8 @@ def main() -> None:
         steady(a.rounds)
     if a.only in (None, "descent"):
         descent()
+    if a.only in (None, "edits"):
+        edits(a.rounds)
 
 
 if __name__ == "__main__":
