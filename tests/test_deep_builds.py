@@ -18,6 +18,7 @@ import pytest
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.render import kernel as K
+from thinfilm_mi.tabulate import base as tabulate_base
 
 
 @pytest.fixture(autouse=True)
@@ -89,3 +90,32 @@ def test_gradients_build_no_table_and_the_image_does_not_depend_on_the_build():
     again = mi.load_dict(_scene(10))
     assert again.shapes()[0].bsdf().stack.plan[False].build_report["result"] == "table"
     assert np.array_equal(_render(again), first)
+
+
+def test_a_table_asked_for_may_take_longer_than_auto_waits():
+    """40 films: ``auto`` expects 1.4e8 film units, over its budget (1e8), and
+    evaluates exactly without spending any; ``tabulate=true`` may spend
+    ``REQUESTED_BUDGET_SCALE`` times as much and gets a verified band-limited table
+    (measured 2.5e6 evaluations, ~1.5 s)."""
+    K.TABLE_CACHE.clear()
+    auto = mi.load_dict(_bsdf(40))
+    report = auto.stack.plan[False].build_report
+    assert auto.stack.mode() == "exact" and report["result"] == "over budget (expected)"
+    assert report["expected_work"] > tabulate_base.MAX_BUILD_WORK
+    asked = mi.load_dict(dict(_bsdf(40), tabulate=True))
+    report = asked.stack.plan[False].build_report
+    assert asked.stack.mode() == "table" and report["result"] == "table"
+    assert report["expected_work"] <= K.REQUESTED_BUDGET_SCALE * tabulate_base.MAX_BUILD_WORK
+    assert asked.stack.plan[False].table.error <= 1e-3 and asked.stack.plan[False].table.resolution == 1.0
+    K.TABLE_CACHE.clear()
+
+
+def test_a_table_asked_for_beyond_even_that_is_refused_before_the_work():
+    """300 films: the band-limited build's expected 2e9 film units exceed 10x the
+    budget (measured: it takes ~3 minutes); the warning says why."""
+    K.TABLE_CACHE.clear()
+    with pytest.warns(UserWarning, match=r"over budget \(expected\)"):
+        b = mi.load_dict(dict(_bsdf(300), tabulate=True))
+    assert b.stack.mode() == "exact"
+    assert b.stack.plan[False].build_report["points"] == 0
+    K.TABLE_CACHE.clear()

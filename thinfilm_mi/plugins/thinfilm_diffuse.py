@@ -54,7 +54,9 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
      ``auto`` tabulates every stack with films in vectorised variants, unless a
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
      within 2^19 texels, a table that still fits the cache, by a table of the exact
-     values or one of the band-limited values (``spectral_resolution``) (then: exact).
+     values or one of the band-limited values (``spectral_resolution``) (then: exact),
+     or in a build of ~2 s (40 films or more on a metal: not started); ``true`` waits up
+     to 10x longer (100 films: ~10 s). Built tables are kept on disk (the table store).
      In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
      components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
      within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
@@ -80,13 +82,13 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
      ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
      shows (default: 5000).
 
-A diffuse base (Lambertian, or Oren–Nayar with ``roughness``) under a stack of
-thin films, after Hirayama et al. section 2.4. Component 0 is the delta reflection of the
-coating, component 1 the diffuse lobe; the thin films are evaluated at the
-path's wavelengths in the render kernel (float32), for unpolarised light. In
-``*_spectral_polarized`` variants component 0 is the Mueller matrix of the
-coating's amplitudes (exact or tabulated, see ``tabulate``; rotated as Mitsuba's ``conductor`` does) and
-component 1 is Mitsuba's ``depolarizer`` of the value below, as ``diffuse``.
+A diffuse base (Lambertian, or Oren–Nayar with ``roughness``) under a stack of thin
+films, after Hirayama et al. section 2.4. Component 0 is the delta reflection of the
+coating, component 1 the diffuse lobe; the films are evaluated at the path's wavelengths
+in the render kernel (float32), for unpolarised light. In ``*_spectral_polarized``
+variants component 0 is the Mueller matrix of the coating's amplitudes (exact or
+tabulated, see ``tabulate``; rotated as Mitsuba's ``conductor`` does) and component 1
+is Mitsuba's ``depolarizer`` of the value below, as ``diffuse``.
 
 **The two parts of the stack.** With films ``1..N`` (outside in) and an
 *absorbing* innermost film ``N`` (``k > 0`` somewhere in 360-830 nm), the
@@ -103,12 +105,11 @@ only attenuates. Then, for an angle ``θ`` measured in the ambient medium,
 * ``t(θ) = k_t(θ) k_a(θ)``: the power fraction of light arriving at ``θ`` that
   reaches the base (eq. 10).
 
-If the innermost film does not absorb (or there are no films), there is no film
-``N``: the coating is the whole stack, its exit medium is the base medium
-(index ``ext_ior``, see below), ``k_a = 1``, and ``k_r``, ``t = k_t`` are the
-exact composite reflectance and transmittance of all films. With no films
-``k_r = 0`` and ``t = 1``, and every model *is* Mitsuba's ``diffuse``
-(the kernel takes that path without any stack work: bit-identical results).
+If the innermost film does not absorb (or there are no films), there is no film ``N``:
+the coating is the whole stack, its exit medium is the base medium (index ``ext_ior``,
+see below), ``k_a = 1``, and ``k_r``, ``t = k_t`` are the exact composite reflectance
+and transmittance of all films. With no films ``k_r = 0`` and ``t = 1``, and every model
+*is* Mitsuba's ``diffuse``, bit for bit (the kernel does no stack work there).
 
 **model = "single"** (eq. 8-10). With ``ω_i`` the viewing direction (the
 paper's ``θ_i``) and ``ω_o`` the light direction (``θ_l``)::
@@ -347,8 +348,7 @@ class ThinFilmDiffuse(mi.BSDF):
         check_unqueried(props, NAME)
 
         self.no_films = len(films) == 0
-        # RGB/mono variants read only k_r from the coating's colour table: the
-        # transmission enters through the diffuse table (coated_diffuse)
+        # RGB/mono: only k_r from the colour table; t enters through coated_diffuse
         sides = {False: not self.mode.integrated}
         if model == "exact":
             # The whole stack, coherent, over the base medium.

@@ -253,9 +253,12 @@ class KernelStack:
                     self._gave_up.add(inside)
         if self.tabulate is True and self.table_failed:
             import warnings
+            why = "; ".join(sorted({str((self.plan[i].build_report or {}).get("result"))
+                                    for i in self.table_failed}))
             warnings.warn(f"{self.plugin}: the stack {self.describe()} cannot be tabulated "
                           f"within table_error={self.table_error:g} in {tabulate_base.MAX_TEXELS} "
-                          "texels; it is evaluated exactly", stacklevel=3)
+                          f"texels and {REQUESTED_BUDGET_SCALE:g}x the build budget of 'auto' "
+                          f"({why}); it is evaluated exactly", stacklevel=3)
 
     def mode(self) -> str:
         """``"table"`` if every planned side reads a table, ``"exact"`` if none, else ``"mixed"``."""
@@ -457,6 +460,12 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
 
 #: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).
 TABLE_CACHE = tabulate_base.TableCache()
+#: ``tabulate=true`` lets a build spend this many times the evaluations and work
+#: ``"auto"`` allows (``tabulate.base.MAX_BUILD_WORK``, ~2 s): a table asked for
+#: is worth a longer wait, paid once with the table store. A 100-film stack's
+#: band-limited table (expected 6.7e8 film units) then builds in ~10 s; a 300-film
+#: one (expected 2e9, measured 175 s) is still refused before the work.
+REQUESTED_BUDGET_SCALE = 10.0
 #: Builds of at least this many exact evaluations (~30 ms and more: the probes of
 #: 10 films and more, every band-limited build) are kept in the table store
 #: (:mod:`thinfilm_mi.tabulate.store`) for later processes; cheaper ones are rebuilt.
@@ -495,10 +504,11 @@ def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
     transmission = side.transmission and not side.opaque
     channels = quantity.channels(transmission) if quantity else (2 if transmission else 1)
     budget = quantity.auto_max_floats if quantity else AUTO_MAX_TEXELS
-    max_texels = (budget // channels if stack.tabulate == "auto"
-                  else tabulate_base.MAX_TEXELS)
+    auto = stack.tabulate == "auto"
+    max_texels = budget // channels if auto else tabulate_base.MAX_TEXELS
+    budget_scale = 1.0 if auto else REQUESTED_BUDGET_SCALE
     h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
-                   stack.table_error, stack.spectral_resolution, max_texels,
+                   stack.table_error, stack.spectral_resolution, max_texels, budget_scale,
                    quantity.name if quantity else "powers")).encode())
     key = h.hexdigest()
     found, table = TABLE_CACHE.get(key)
@@ -517,7 +527,8 @@ def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
     data = side_data(side, transmission, quantity=quantity)
     side.build_report = report = tabulate_base.BuildReport()
     table = _band_tables.build_table(data, stack.table_error, GRID, max_texels,
-                                     stack.spectral_resolution, report=report)
+                                     stack.spectral_resolution, report=report,
+                                     budget_scale=budget_scale)
     TABLE_CACHE.put(key, table)
     work = report.get("points", 0) + (report.get("exact_attempt") or {}).get("points", 0)
     if disk is not None and work >= STORE_MIN_POINTS:

@@ -110,20 +110,24 @@ EXPECTED_TOTAL = 14.0
 
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
                 max_texels: int = tabulate_base.MAX_TEXELS, resolution: float = 0.0,
-                report: BuildReport | None = None) -> Table | None:
+                report: BuildReport | None = None, budget_scale: float = 1.0) -> Table | None:
     """The table of one side: of the exact values (:func:`tables.build_table`) if
     one resolves them within ``error`` (1-3 films: unchanged by band-limiting),
     else, if ``resolution`` > 0, of ``R_σ`` (:func:`build_band_table`); ``None``
     if neither can be built. What the build did is written into ``report`` (a
     :class:`~thinfilm_mi.tabulate.base.BuildReport`; the exact attempt's report
-    under ``"exact_attempt"`` when a band-limited table was tried after it)."""
+    under ``"exact_attempt"`` when a band-limited table was tried after it).
+    ``budget_scale`` multiplies the evaluations and work both builds may spend
+    (:meth:`~thinfilm_mi.tabulate.refine.Budget.scaled`)."""
     report = report if report is not None else BuildReport()
     exact = BuildReport()
-    table = _tables.build_table(side, error, wavelengths, max_texels, report=exact)
+    table = _tables.build_table(side, error, wavelengths, max_texels, report=exact,
+                                budget_scale=budget_scale)
     if table is not None or resolution <= 0:
         report.update(exact)
         return table
-    table = build_band_table(side, error, wavelengths, max_texels, resolution, report=report)
+    table = build_band_table(side, error, wavelengths, max_texels, resolution, report=report,
+                             budget_scale=budget_scale)
     report["exact_attempt"] = exact
     return table
 
@@ -143,12 +147,14 @@ def _axis(kind: str, nu: int):
 
 
 def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
-                     max_texels: int, resolution: float, report: BuildReport | None = None) -> Table | None:
+                     max_texels: int, resolution: float, report: BuildReport | None = None,
+                     budget_scale: float = 1.0) -> Table | None:
     """A verified table of ``R_σ`` (see the module), or ``None`` if the colour
     check fails or the target needs more than ``max_texels`` texels,
     :data:`MAX_BUILD_POINTS` exact evaluations or :data:`MAX_BUILD_WORK` (the
     expected total, :data:`EXPECTED_TOTAL`, checked before any evaluation; then
-    each round's before it runs). Writes its account into ``report``.
+    each round's before it runs), both times ``budget_scale``. Writes its account
+    into ``report``.
 
     Rounds: the rows of the angle nodes (a plain axis's ghosts included) and of
     their midpoints are computed (each row: every bin, so the v nodes and their
@@ -173,7 +179,7 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     spacing = getattr(side.quantity, "v_spacing", V_SPACING)
     rows = Rows(side, kind, resolution, spacing)
     nu = 2 * FIRST_NU if split else FIRST_NU
-    budget = Budget(texels=max_texels, point_work=build_work(side, 1))
+    budget = Budget.scaled(budget_scale, texels=max_texels, point_work=build_work(side, 1))
     first = EXPECTED_TOTAL * sum(len(x) for x in _axis(kind, nu)) * ((rows.nb - 1) / rows.step + 1)
     stats["expected_work"] = build_work(side, first)
     if not budget.allows(first):

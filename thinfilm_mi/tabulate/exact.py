@@ -376,7 +376,8 @@ def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: d
 
 
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
-                max_texels: int = MAX_TEXELS, report: BuildReport | None = None) -> Table | None:
+                max_texels: int = MAX_TEXELS, report: BuildReport | None = None,
+                budget_scale: float = 1.0) -> Table | None:
     """Build and verify a table of the exact values of one side, or ``None`` if
     the target cannot be met within ``max_texels`` texels,
     :data:`MAX_BUILD_POINTS` evaluations and :data:`MAX_BUILD_WORK` (or the exit
@@ -398,6 +399,7 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     is refined, at the convergence order observed between rounds.
 
     What the build did is written into ``report`` (a :class:`BuildReport`).
+    ``budget_scale`` multiplies the evaluations and work allowed (the probe's too).
     """
     kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
     stats = report if report is not None else BuildReport()
@@ -409,11 +411,11 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     split = kind == "tir"
     side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)
                       + (bool(np.any(np.asarray(side.n_exit(wavelengths)).imag)),))
-    if build_work(side, PROBE_POINTS) > MAX_PROBE_WORK:
+    if build_work(side, PROBE_POINTS) > MAX_PROBE_WORK * budget_scale:
         stats["result"] = "probe over budget"
         return None
     nu, nv = table_resolution(side, error, wavelengths)
-    budget = Budget(texels=max_texels, point_work=build_work(side, 1))
+    budget = Budget.scaled(budget_scale, texels=max_texels, point_work=build_work(side, 1))
     pu, pv = _estimate(side, kind, error, max_texels, stats)
     budget.spend(stats["probe_points"])
     stats["points"] = budget.spent

@@ -48,6 +48,12 @@ class Budget:
     point_work: float = 0.0
     work: float = MAX_BUILD_WORK
 
+    @classmethod
+    def scaled(cls, scale: float = 1.0, **kw) -> "Budget":
+        """A budget of ``scale`` times the default evaluations and work (a table asked
+        for with ``tabulate=true`` may take longer than ``"auto"`` would wait)."""
+        return cls(points=int(MAX_BUILD_POINTS * scale), work=MAX_BUILD_WORK * scale, **kw)
+
     def allows(self, points: float = 0, texels: float = 0) -> bool:
         """Whether a round of ``points`` more evaluations giving ``texels`` texels fits."""
         total = self.spent + points
