@@ -46,6 +46,10 @@ MAX_BYTES = 256 << 20
 #: Angle axes a stored table may have (:class:`~thinfilm_mi.tabulate.base.Table`).
 KINDS = ("plain", "band", "tir")
 _SUFFIX = ".npz"
+#: One trimming at a time in this process (stores are made per call; other
+#: processes may trim the same directory: every file operation tolerates a file
+#: that has just gone).
+_TRIM_LOCK = threading.Lock()
 
 
 @functools.cache
@@ -79,14 +83,13 @@ def _plain(value):
 
 
 class TableStore:
-    """Tables on disk under ``directory`` (see the module). Thread-safe: several
-    plugin constructors may read and write at once (each file is written whole,
-    then renamed)."""
+    """Tables on disk under ``directory`` (see the module). Thread- and
+    process-safe: several plugin constructors, or processes, may read and write at
+    once (each file is written whole under a name of its own, then renamed)."""
 
     def __init__(self, directory: str | os.PathLike, max_bytes: int = MAX_BYTES):
         self.directory = Path(directory)
         self.max_bytes = max_bytes
-        self._lock = threading.Lock()
 
     def _path(self, key: str) -> Path:
         name = hashlib.sha256((key + code_fingerprint()).encode()).hexdigest()[:40]
@@ -155,7 +158,7 @@ class TableStore:
 
     def _trim(self) -> None:
         """Remove the least recently used files while the store exceeds its bound."""
-        with self._lock:
+        with _TRIM_LOCK:
             try:
                 files = [(p.stat(), p) for p in self.directory.glob("*" + _SUFFIX)]
             except OSError:
