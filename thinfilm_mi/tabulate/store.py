@@ -9,8 +9,9 @@ found not tabulable, with its build report) in one file per key under a director
 * **where**: ``$THINFILM_MI_TABLE_CACHE`` if set (``off``, ``0`` or empty: no
   store), else ``$XDG_CACHE_HOME/thinfilm-mi/tables`` (``~/.cache/...``);
   :func:`default_store`;
-* **which key**: the caller's key of the table's optics (the in-memory cache's,
-  :func:`thinfilm_mi.render.kernel.table_key`) hashed with :func:`code_fingerprint`:
+* **which key**: the caller's key of the table's optics (the render layer's, which
+  also keys this process's ``TableCache``: every index on the 1 nm grid, the
+  thicknesses, the variant, the target...) hashed with :func:`code_fingerprint`:
   the source of this package and the versions of Mitsuba, Dr.Jit and NumPy, so a
   table built by other code is never read;
 * **what is read back**: the float32 texture values exactly as built, so a table
