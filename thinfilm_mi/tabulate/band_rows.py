@@ -160,10 +160,13 @@ class Rows:
     """
 
     def __init__(self, side: SideData, kind: str, resolution: float,
-                 spacing: float = V_SPACING):
+                 spacing: float = V_SPACING, extent: tuple | None = None):
         self.side, self.kind = side, kind
         self.sigma = sigma_nu(resolution)
-        span = SIGMA_MAX - SIGMA_MIN
+        # the wavenumbers the bins cover (a sheared table's rows reach beyond
+        # 360-830 nm, :meth:`sample`), SIGMA_MIN .. SIGMA_MAX by default
+        low, self.top = extent if extent is not None else (SIGMA_MIN, SIGMA_MAX)
+        span = self.top - low
         self.nv = max(int(math.ceil(span / (spacing * self.sigma))) + 1, 16)
         self.w = w = span / (2.0 * (self.nv - 1))
         self.sig = math.sqrt(self.sigma ** 2 - w * w / 3.0)
@@ -176,13 +179,14 @@ class Rows:
         b0 += (-(2 * (self.nv - 1) + 2 * b0)) % quantum // 2
         self.b0 = b0
         self.nb = nb = 2 * (self.nv - 1) + 2 * b0 + 1
-        self.wavenumbers = SIGMA_MAX - (np.arange(nb) - b0) * w          # decreasing ν
+        self.wavenumbers = self.top - (np.arange(nb) - b0) * w          # decreasing ν
         #: what is tabulated: ``None`` for the powers, else the side's quantity
         #: (the Mueller components, :mod:`thinfilm_mi.tabulate.mueller`)
         self.quantity = q = side.quantity
         self.channels = q.channels(side.transmission) if q else 2 if side.transmission else 1
         self.points = 0
         self._done: dict = {}
+        self._raw: dict = {}      # the rows' bins I_b, for sample()
         self._row_cos: dict = {}
         #: the largest colour difference of the rows so far under D65, A, F11
         self.colour_errors = np.zeros(3)
@@ -385,9 +389,33 @@ class Rows:
             bins = self._bins(fresh)
             self.colour_errors = np.maximum(self.colour_errors, self._colour_check(fresh, bins))
             smooth = self._convolve(bins)
-            for k, v in zip(fresh, smooth):
+            for k, v, b in zip(fresh, smooth, bins):
                 self._done[k] = v
+                self._raw[k] = b
         return np.stack([self._done[k] for k in keys])
+
+    def sample(self, xs: np.ndarray, nus: np.ndarray) -> np.ndarray:
+        """``R_σ`` [, ``T_σ``] of the rows ``xs`` at any wavenumbers ``nus`` (shape
+        ``(len xs, K)``, within the bins' extent): ``(len xs, K, C)``, the Gaussian
+        of :meth:`_convolve` summed over the bins directly (the same values at the
+        bins, to rounding)."""
+        xs = np.asarray(xs, np.float64)
+        self.values(xs)
+        raw = np.stack([self._raw[k] for k in np.round(xs, 12)])        # (R, nb, C)
+        p = (self.top - np.asarray(nus, np.float64)) / self.w + self.b0  # bin coordinates
+        k0 = np.floor(p).astype(np.int64)
+        R, K = p.shape
+        flat = raw.reshape(R * self.nb, -1)
+        base = (np.arange(R) * self.nb)[:, None]
+        norm = 1.0 / (self.sig * math.sqrt(2.0 * math.pi))
+        out = np.zeros((R, K, flat.shape[1]))
+        for j in range(-self.reach, self.reach + 2):
+            b = k0 + j
+            inside = (b >= 0) & (b < self.nb)
+            g = np.exp(-0.5 * ((p - b) * (self.w / self.sig)) ** 2) * norm * inside
+            out += g[..., None] * flat.take((base + np.clip(b, 0, self.nb - 1)).ravel(),
+                                            axis=0).reshape(R, K, -1)
+        return out
 
     # -- colour check -------------------------------------------------------------
     def _colour_check(self, xs: np.ndarray, bins: np.ndarray) -> np.ndarray:

@@ -358,8 +358,7 @@ class Table:
     """
 
     def __init__(self, values: np.ndarray, kind: str, error: float, channels: int,
-                 resolution: float = 0.0):
-
+                 resolution: float = 0.0, shear=None):
         g = GHOST
         segments = 2 if kind == "tir" else 1
         self.nv, self.nu = values.shape[0] - 2 * g, values.shape[1] - 2 * g * segments
@@ -385,6 +384,10 @@ class Table:
         # a split axis: node coordinates beyond the critical cell are in the
         # second segment, 2g texels further
         self._split = opaque_float(0.5 * self.nu - 0.5) if kind == "tir" else None
+        #: a band-limited table's sheared v axis (:class:`~thinfilm_mi.tabulate.shear.Shear`)
+        self.shear = shear
+        if shear is not None:
+            self._v_scale = opaque_float((self.nv - 1) / (SIGMA_MAX - shear.low))
 
     @property
     def texels(self) -> int:
@@ -419,10 +422,13 @@ class Table:
         out = [[] for _ in range(self.channels)]
         if self.kind != "tir":
             u = self._u(cos_i, sin_i, 1.0, 1.0)
+        factor = self.shear.factor(sin_i) if self.shear is not None else None
         for i in range(len(wavelengths)):
             if self.kind == "tir":
                 u = self._u(cos_i, sin_i, n0[i], n_exit[i])
-            v = (v_texel(wavelengths[i], self._nv) + self._offset) * self._inv_v
+            t = (v_texel(wavelengths[i], self._nv) if factor is None
+                 else (SIGMA_MAX - factor / wavelengths[i]) * self._v_scale)
+            v = (t + self._offset) * self._inv_v
             res = self.texture.eval_cubic(mi.Point2f(u, v), active)
             for c in range(self.channels):
                 out[c].append(res[c])

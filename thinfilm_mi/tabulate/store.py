@@ -14,7 +14,8 @@ found not tabulable, with its build report) in one file per key under a director
   thicknesses, the variant, the target...) hashed with :func:`code_fingerprint`:
   the source of this package and the versions of Mitsuba, Dr.Jit and NumPy, so a
   table built by other code is never read;
-* **what is read back**: the float32 texture values exactly as built, so a table
+* **what is read back**: the float32 texture values exactly as built (with a
+  band-limited table's shear, :mod:`thinfilm_mi.tabulate.shear`), so a table
   from the store gives the same image bit for bit as the one it stands for
   (``tests/test_table_store.py``);
 * **safety**: files are written under a temporary name and renamed (atomic on one
@@ -36,6 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from thinfilm_mi.tabulate.base import GHOST, BuildReport, Table
+from thinfilm_mi.tabulate.shear import Shear
 
 __all__ = ["ENVIRONMENT", "MAX_BYTES", "TableStore", "code_fingerprint", "default_store"]
 
@@ -126,6 +128,7 @@ class TableStore:
         try:
             kind, channels = meta["kind"], int(meta["channels"])
             error, resolution = float(meta["error"]), float(meta["resolution"])
+            shear = Shear.from_plain(meta["shear"]) if meta.get("shear") is not None else None
         except (KeyError, TypeError, ValueError):
             return None
         g = GHOST
@@ -133,7 +136,7 @@ class TableStore:
                 or values.shape[2] != channels or min(values.shape[:2]) <= 4 * g
                 or not np.all(np.isfinite(values)) or not np.isfinite(error)):
             return None
-        return Table(values, kind, error, channels, resolution)
+        return Table(values, kind, error, channels, resolution, shear=shear)
 
     def put(self, key: str, table: Table | None, report: dict | None) -> None:
         """Keep ``table`` (``None``: not tabulable) and its build ``report`` under ``key``;
@@ -143,7 +146,8 @@ class TableStore:
         arrays = {}
         if table is not None:
             meta.update(kind=table.kind, channels=table.channels, error=float(table.error),
-                        resolution=float(table.resolution))
+                        resolution=float(table.resolution),
+                        shear=table.shear.to_plain() if table.shear is not None else None)
             arrays["values"] = np.array(table.texture.tensor(), dtype=np.float32)
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
         tmp = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.tmp")
