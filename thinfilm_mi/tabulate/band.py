@@ -247,6 +247,11 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
             factor = convergence_factor(nu, err_u, goal, last, FIRST_ORDER, margin=1.1, cap=6.0,
                                         highest=4.0)
             last = (nu, err_u)
+            if not split and factor <= 2.0:
+                # halving the spacing reuses every row computed (the nodes and the
+                # midpoints): 2 (nu - 1) new rows, never more than a smaller factor
+                # would compute afresh
+                factor = 2.0
             if split:
                 nu = 2 * (int(math.ceil((nu // 2 - 1) * factor)) + 1)
             else:

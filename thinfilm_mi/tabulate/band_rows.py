@@ -505,7 +505,7 @@ class Amplitudes:
         # exponents is checked by :meth:`usable`
         shift = exps - exps.max(axis=1, keepdims=True)
         self.range = float(-shift.min()) if shift.size else 0.0
-        flat = np.array(terms, np.float64).reshape(R * P, K)
+        flat = np.ascontiguousarray(terms, np.float64).reshape(R * P, K)   # the caller's, in place
         if self.range:
             scale = np.exp2(shift.reshape(R * P, 2))
             flat[:, 0:4] *= scale[:, 0:1]
@@ -513,6 +513,7 @@ class Amplitudes:
             if quantity is None and K > 8:
                 flat[:, 8:10] *= scale * scale
         self.flat = flat
+        self._buffer = None
 
     #: Largest spread of a row's exponents (powers of two) the common unit
     #: may absorb: their squares stay far above float64's smallest normal.
@@ -525,17 +526,26 @@ class Amplitudes:
     def values(self, r: np.ndarray, s: np.ndarray) -> np.ndarray:
         """The values (shape ``(points, C)``) at rows ``r`` and sample coordinates
         ``s`` (fractional indices of the first level's samples)."""
-        n, P = INTERPOLATION_NODES, self.P
+        from drjit.llvm import Float64, UInt32
+
+        from thinfilm_mi.optics.backend import aligned_array, float64_array
+
+        n, P, K = INTERPOLATION_NODES, self.P, self.K
         i0 = np.clip(np.floor(s).astype(np.int64) - (n // 2 - 1), 0, P - n)
-        x = s - i0
-        at = r * P + i0
-        out = 0.0
+        if self._buffer is None:      # one kernel for every stack of K channels
+            self._buffer = float64_array(self.flat.ravel())
+        x = float64_array(s - i0)
+        at = aligned_array((r * P + i0) * K, np.uint32, UInt32)
+        out = [Float64(0.0)] * K
         for k in range(n):
-            w = np.ones_like(x)
+            w = Float64(1.0)
             for m in range(n):
                 if m != k:
-                    w *= (x - m) * (1.0 / (k - m))
-            out = out + w[:, None] * self.flat.take(at + k, axis=0)
+                    w = w * ((x - m) * (1.0 / (k - m)))
+            for c in range(K):
+                out[c] = dr.fma(w, dr.gather(Float64, self._buffer, at + (k * K + c)), out[c])
+        dr.eval(*out)
+        out = np.stack([np.array(v, dtype=np.float64) for v in out], axis=-1)
         q, tr = self.quantity, self.transmission
         f = q.values(out, tr) if q else powers_of(out, tr)
         C = f.shape[-1]
