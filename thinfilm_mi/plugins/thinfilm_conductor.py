@@ -47,7 +47,7 @@ Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
      within 2^19 texels, a table that still fits the cache, by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact),
      or in a build of ~2 s (70 films or more on a metal: not started); ``true`` waits up
-     to 10x longer (100 films: ~9 s). Built tables are kept on disk (the table store).
+     to 10x longer (100 films: ~2.5 s). Built tables are kept on disk (the table store).
      In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
      components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
      within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as

@@ -464,7 +464,7 @@ TABLE_CACHE = tabulate_base.TableCache()
 #: ``"auto"`` allows (``tabulate.base.MAX_BUILD_WORK``, ~2 s): a table asked for
 #: is worth a longer wait, paid once with the table store. A 70-film stack's
 #: band-limited table (``auto`` expects 2e8 film units and does not start it)
-#: then builds in ~1.2 s, a 100-film one in ~9 s; a 300-film one is refused after
+#: then builds in ~1.2 s, a 100-film one in ~2.5 s; a 300-film one is refused after
 #: its first rows (~3 s; the whole build took 175 s before the sheared axis).
 REQUESTED_BUDGET_SCALE = 10.0
 #: Builds of at least this many exact evaluations (~30 ms and more: the probes of
