@@ -52,8 +52,8 @@ verified outside the same grazing sliver; the angle rows are refined until the
 spline through them predicts the midpoint rows within the target. Lit from the
 ambient, its v axis is sheared (:mod:`thinfilm_mi.tabulate.shear`): ``ν' = ν
 P(sin²θ)`` follows the films' fringes as the angle grows, so 65 rows do where the
-plain axis needed 385 (the 30-film benchmark stack: one round, 0.28 s instead of
-0.77 s, a 4x smaller table); its nodes' values are the Gaussian summed over the
+plain axis needed 385 (the 30-film benchmark stack: one round, 0.3-0.4 s instead
+of 0.8-1.4 s, a 4x smaller table); its nodes' values are the Gaussian summed over the
 bins at ``ν'_t / P`` (:meth:`band_rows.Rows.sample`), the bins spanning every
 wavenumber a row's nodes reach. Lit from inside a denser medium (a split axis) the
 v nodes sit on every other bin (their midpoints on the others), so a row gives
