@@ -226,8 +226,9 @@ class Rows:
 
     def _first(self, xs: np.ndarray, nu_pts: np.ndarray):
         """The first level: exact ``R`` [, ``T``] of every row at ``nu_pts`` (shape
-        ``(rows, P, C)``), ``cos`` there, and the resonances panels must resolve
-        (:class:`_Resonances`).
+        ``(rows, P, C)``), ``cos`` there, the resonances panels must resolve
+        (:class:`_Resonances`), and the amplitudes' interpolation the panels read
+        (an ``Amplitudes``, or ``None``: the panels evaluate the films).
 
         The amplitudes ``N``, ``D`` of :func:`amplitudes` (``R = |N|²/|D|²``)
         are smooth where ``R`` has resonances: a resonance is a zero of ``D_s``
