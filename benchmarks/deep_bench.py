@@ -12,7 +12,8 @@ Stacks: the Al stacks of render_bench.py (2.3/1.46 films, 50-200 nm from
    cache; the build kernels compiled by a first load of a 2-film stack), --rounds
    round-robin rounds over 10, 30, 100, 300, 1000 films, medians; what the build did.
 2. Steady: the sphere scene of render_bench.py, 128x128, 16 spp; ``conductor`` and
-   100, 300, 1000 films; one warm-up render each, then --rounds round-robin rounds,
+   100, 300, 1000 films, and 100 films with ``tabulate=true`` (its load printed);
+   one warm-up render each, then --rounds round-robin rounds,
    medians; the exact evaluation's cost per film from the slope between 100 and
    1000 films.
 3. Descent: 50 steps of gradient descent on the first film's thickness of the
@@ -89,13 +90,18 @@ def steady(rounds: int) -> None:
     import render_bench as rb
 
     import thinfilm_mi  # noqa: F401
-    configs = ["conductor", 100, 300, 1000]
+    configs = ["conductor", 100, 300, 1000, "100 tabulate=true"]
     scenes = {}
     for c in configs:
         s = rb.scene_dict("conductor", 128, 16)
-        if c != "conductor":
+        if c == "100 tabulate=true":
+            s["sphere"]["bsdf"] = dict(bsdf(100), tabulate=True)
+        elif c != "conductor":
             s["sphere"]["bsdf"] = bsdf(c)
+        t = time.perf_counter()
         scenes[c] = mi.load_dict(s)
+        if c == "100 tabulate=true":
+            print(f"100 films with tabulate=true: load {time.perf_counter() - t:.2f} s")
         mi.render(scenes[c], seed=0).numpy()
     times = {c: [] for c in configs}
     for r in range(rounds):
