@@ -213,17 +213,17 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
             # the cost per row measured on SAMPLE_ROWS of the first round's rows (then
             # part of it) before the rest is spent: the expectation is a bound from the
             # first level alone, and the adaptive panels grow with the resonances
-            rows.values(coords[np.linspace(0, coords.size - 1, SAMPLE_ROWS).round().astype(int)])
-            per_row = rows.points / len(rows._done)
+            rows.compute(coords[np.linspace(0, coords.size - 1, SAMPLE_ROWS).round().astype(int)])
+            per_row = rows.points / rows.computed
         # the round's new rows at the cost per row so far
-        todo = sum(k not in rows._done for k in np.round(coords, 12))
+        todo = rows.missing(coords)
         if nu > MAX_U or nv > MAX_V or not budget.allows(rows.points + todo * per_row, nu * nv):
             stats["result"] = "over budget"
             stats["points"] = budget.spent + rows.points
             return None
         table, err_u, err_v = (_round(rows, kind, nu) if shear is None
                                else _round_sheared(rows, shear, nu, nv))
-        per_row = max(per_row, rows.points / len(rows._done))
+        per_row = max(per_row, rows.points / rows.computed)
         stats["rounds"] += 1
         stats["points"] = budget.spent + rows.points
         stats["colour_error"] = rows.colour_error
@@ -272,11 +272,10 @@ def _rows(side: SideData, kind: str, resolution: float, spacing: float, shear: S
     ``ν'_t / P`` of any row (ghosts included) can ask for."""
     if shear is None:
         return Rows(side, kind, resolution, spacing)
-    p = shear.factor_np(np.linspace(0.0, 1.0, 257))
     dv = (SIGMA_MAX - shear.low) / (_sheared_nv(shear, sigma_nu(resolution), spacing) - 1)
     margin = (GHOST + 1) * dv
     return Rows(side, kind, resolution, spacing,
-                extent=((shear.low - margin) / p.max(), (SIGMA_MAX + margin) / p.min()))
+                extent=((shear.low - margin) / shear.max_factor, (SIGMA_MAX + margin) / shear.min_factor))
 
 
 def _round_sheared(rows: Rows, shear: Shear, nu: int, nv: int):

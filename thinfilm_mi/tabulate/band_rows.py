@@ -84,19 +84,21 @@ _GL3_X = (-0.5 * math.sqrt(0.6), 0.0, 0.5 * math.sqrt(0.6))
 _GL3_W = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
 
 
-def _stack_ot(side: SideData) -> float:
-    """The stack's largest optical thickness ``Σ n_j d_j`` over the spectrum (nm)."""
-    return optical_thickness(side.films, np.linspace(360.0, 830.0, 48))
+def fringe_step(side: SideData, w: float) -> float:
+    """A 32nd of an interference fringe of the stack's whole optical thickness
+    (period ``1 / (2 Σ n_j d_j)`` in wavenumber), in bins of width ``w`` (nm⁻¹)."""
+    ot = optical_thickness(side.films, np.linspace(360.0, 830.0, 48))
+    return 1.0 / max(2.0 * ot, 1e-9) / w / 32.0
 
 
-def first_step(side: SideData, w: float) -> float:
-    """The first level's sample step (bins of width ``w``, nm⁻¹): 32 samples per
-    interference fringe of the stack's whole optical thickness (period ``1 / (2 Σ
-    n_j d_j)`` in wavenumber), as a power of two from 1/2 to :data:`MAX_STEP`.
-    (Accepted panels stand for their quadratics, so the step bounds ``R_σ``'s
-    error where no resonance refines it: measured on the 10-film stack against a
-    brute-force convolution, 5e-5 at 16 samples per fringe, 4e-6 at 32.)"""
-    return power_of_two_step(1.0 / max(2.0 * _stack_ot(side), 1e-9) / w / 32.0, 0.5, MAX_STEP)
+def first_step(side: SideData, w: float, fringe: float | None = None) -> float:
+    """The first level's sample step (bins of width ``w``): 32 samples per
+    interference fringe (:func:`fringe_step`, or ``fringe`` if given), as a power of
+    two from 1/2 to :data:`MAX_STEP`. (Accepted panels stand for their quadratics,
+    so the step bounds ``R_σ``'s error where no resonance refines it: measured on
+    the 10-film stack against a brute-force convolution, 5e-5 at 16 samples per
+    fringe, 4e-6 at 32.)"""
+    return power_of_two_step(fringe_step(side, w) if fringe is None else fringe, 0.5, MAX_STEP)
 
 
 def _bspline_weights(t):
@@ -172,12 +174,12 @@ class Rows:
         self.w = w = span / (2.0 * (self.nv - 1))
         self.sig = math.sqrt(self.sigma ** 2 - w * w / 3.0)
         self.reach = int(math.ceil(TAIL * self.sig / w))
-        self.step = first_step(side, w)
+        fringe = fringe_step(side, w)
+        self.step = first_step(side, w, fringe)
         #: whether the adaptive panels take their values from the first level's
         #: amplitudes (:class:`Amplitudes`) instead of the films: where the first
         #: level samples them, at least 32 times per fringe
-        self.interpolate = (samples_amplitudes(side)
-                            and self.step <= 1.0 / max(2.0 * _stack_ot(side), 1e-9) / w / 32.0)
+        self.interpolate = samples_amplitudes(side) and self.step <= fringe
         # margins: ghosts, the Gaussian's reach, and whole pairs of first panels
         # (nb - 1 a multiple of 4 steps; it is even, and so is every quantum)
         quantum = int(round(4 * self.step))
@@ -191,8 +193,8 @@ class Rows:
         self.quantity = q = side.quantity
         self.channels = q.channels(side.transmission) if q else 2 if side.transmission else 1
         self.points = 0
-        self._done: dict = {}
-        self._raw: dict = {}      # the rows' bins I_b, for sample()
+        self._bins_of: dict = {}     # the rows computed: their bins I_b
+        self._smooth: dict = {}      # R_σ at the bins of the rows values() was asked for
         self._row_cos: dict = {}
         #: the largest colour difference of the rows so far under D65, A, F11
         self.colour_errors = np.zeros(3)
@@ -393,29 +395,47 @@ class Rows:
         spec = np.fft.rfft(bins, n=n, axis=1) * np.fft.rfft(kern)[None, :, None]
         return np.fft.irfft(spec, n=n, axis=1)[:, :nb]
 
-    def values(self, xs: np.ndarray) -> np.ndarray:
-        """``R_σ`` [, ``T_σ``] at the bins of the rows ``xs``: ``(len xs, nb, C)``."""
-        xs = np.asarray(xs, np.float64)
-        keys = np.round(xs, 12)
-        new = np.array([k not in self._done for k in keys])
-        if new.any():
-            fresh = np.unique(keys[new])
+    @staticmethod
+    def _keys(xs) -> np.ndarray:
+        return np.round(np.asarray(xs, np.float64), 12)
+
+    @property
+    def computed(self) -> int:
+        """How many rows have been computed."""
+        return len(self._bins_of)
+
+    def missing(self, xs) -> int:
+        """How many of the rows ``xs`` are not computed yet."""
+        return len({k for k in self._keys(xs) if k not in self._bins_of})
+
+    def compute(self, xs) -> None:
+        """Compute the bins (and the colour check) of the rows ``xs`` not seen yet."""
+        keys = self._keys(xs)
+        fresh = np.unique([k for k in keys if k not in self._bins_of])
+        if fresh.size:
             bins = self._bins(fresh)
             self.colour_errors = np.maximum(self.colour_errors, self._colour_check(fresh, bins))
-            smooth = self._convolve(bins)
-            for k, v, b in zip(fresh, smooth, bins):
-                self._done[k] = v
-                self._raw[k] = b
-        return np.stack([self._done[k] for k in keys])
+            for k, b in zip(fresh, bins):
+                self._bins_of[k] = b
+
+    def values(self, xs: np.ndarray) -> np.ndarray:
+        """``R_σ`` [, ``T_σ``] at the bins of the rows ``xs``: ``(len xs, nb, C)``."""
+        keys = self._keys(xs)
+        self.compute(keys)
+        todo = [k for k in np.unique(keys) if k not in self._smooth]
+        if todo:
+            for k, v in zip(todo, self._convolve(np.stack([self._bins_of[k] for k in todo]))):
+                self._smooth[k] = v
+        return np.stack([self._smooth[k] for k in keys])
 
     def sample(self, xs: np.ndarray, nus: np.ndarray) -> np.ndarray:
         """``R_σ`` [, ``T_σ``] of the rows ``xs`` at any wavenumbers ``nus`` (shape
         ``(len xs, K)``, within the bins' extent): ``(len xs, K, C)``, the Gaussian
         of :meth:`_convolve` summed over the bins directly (the same values at the
         bins, to rounding)."""
-        xs = np.asarray(xs, np.float64)
-        self.values(xs)
-        raw = np.stack([self._raw[k] for k in np.round(xs, 12)])        # (R, nb, C)
+        keys = self._keys(xs)
+        self.compute(keys)
+        raw = np.stack([self._bins_of[k] for k in keys])                 # (R, nb, C)
         p = (self.top - np.asarray(nus, np.float64)) / self.w + self.b0  # bin coordinates
         k0 = np.floor(p).astype(np.int64)
         R, K = p.shape

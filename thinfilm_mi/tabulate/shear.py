@@ -23,6 +23,8 @@ many rows the table needs. The axis covers ``ν'`` from ``low = σ_min P_min`` t
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from thinfilm_mi.tabulate.base import SIGMA_MAX, SIGMA_MIN, opaque_float
@@ -34,6 +36,13 @@ REFERENCE_WAVELENGTH = 550.0
 #: Stacks whose ``P`` would fall below this on ``[0, 1]`` (films of index near or
 #: below the ambient's, where ``q_j`` vanishes) keep the plain axis.
 MIN_FACTOR = 0.5
+
+
+def _range(coeffs) -> tuple[float, float]:
+    """The least and the largest ``P`` on ``[0, 1]`` (on 257 points; between them a
+    lookup falls within the table's ghost nodes)."""
+    p = np.polynomial.polynomial.polyval(np.linspace(0.0, 1.0, 257), coeffs)
+    return (float(p.min()), float(p.max())) if np.all(np.isfinite(p)) else (math.nan, math.nan)
 
 
 class Shear:
@@ -63,16 +72,20 @@ class Shear:
         q = np.sqrt((n[None, :] ** 2 - (n0r * n0r) * s[:, None]).astype(np.complex128)).real
         ratio = (q * d[None, :]).sum(axis=1) / total
         coeffs = np.polynomial.polynomial.polyfit(s, ratio, 3)
-        grid = np.linspace(0.0, 1.0, 257)
-        p = np.polynomial.polynomial.polyval(grid, coeffs)
-        if not np.all(np.isfinite(p)) or p.min() < MIN_FACTOR:
+        low, _ = _range(coeffs)
+        if not np.isfinite(low) or low < MIN_FACTOR:
             return None
-        return cls(coeffs, SIGMA_MIN * float(p.min()))
+        return cls(coeffs, SIGMA_MIN * low)
 
     @property
     def min_factor(self) -> float:
         """``P_min``: the least ``P`` on ``[0, 1]`` (``low / σ_min``)."""
         return self.low / SIGMA_MIN
+
+    @property
+    def max_factor(self) -> float:
+        """The largest ``P`` on ``[0, 1]`` (1 at normal incidence, to the fit)."""
+        return _range(self.coeffs)[1]
 
     def factor_np(self, s: np.ndarray) -> np.ndarray:
         """``P(s)`` (float64 numpy)."""
