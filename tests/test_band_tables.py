@@ -7,6 +7,7 @@ import math
 import mitsuba as mi
 import numpy as np
 import pytest
+from _stacks import benchmark_layers, benchmark_thicknesses
 
 import thinfilm_mi as tf
 from thinfilm_mi.colour import cie
@@ -26,8 +27,7 @@ def _resonant_side(monkeypatch, films=10):
     """The ambient side of a resonant stack (2.3/1.46 films on a constant metal):
     the SideData the kernel hands to the build (captured; spectral_resolution 0, so
     the build only tries, and fails, a table of the exact values)."""
-    d = np.random.default_rng(6).uniform(50.0, 200.0, films)
-    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(films))
+    layers = benchmark_layers(films)
     captured = {}
     build = tables.build_table
 
@@ -183,8 +183,7 @@ def test_band_table_of_a_side_lit_from_inside_glass(monkeypatch):
     table verifies within the target, and its R and T agree with brute-force
     R_σ and T_σ at off-node points on both sides of the critical angle (41.8°)
     within the verified error plus the float32 texture's rounding."""
-    d = np.random.default_rng(6).uniform(50.0, 200.0, 10)
-    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(10))
+    layers = benchmark_layers(10)
     sides = []
     build = tables.build_table
 
@@ -273,8 +272,7 @@ def test_amplitudes_stay_in_range_at_any_depth(monkeypatch):
         captured["side"] = side
 
     monkeypatch.setattr(tables, "build_table", capture)
-    d = np.random.default_rng(6).uniform(50.0, 200.0, 1000)
-    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(1000))
+    layers = benchmark_layers(1000)
     K.TABLE_CACHE.clear()
     with pytest.warns(UserWarning):
         mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "layers": layers,
@@ -318,9 +316,7 @@ def test_a_sheared_table_of_r_and_t_matches_a_brute_force_convolution():
     verified error 2.5e-4) within the verified error plus 1e-4 (the float32 texture
     and the brute force's σ/400 steps); an axis sheared the wrong way, or nodes
     sampled at the plain wavenumbers, errs by 1e-2 or more."""
-    d = np.random.default_rng(6).uniform(50.0, 200.0, 30)
-    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(30))
-    b = mi.load_dict({"type": "thinfilm_dielectric", "layers": layers, "int_ior": 1.5,
+    b = mi.load_dict({"type": "thinfilm_dielectric", "layers": benchmark_layers(30), "int_ior": 1.5,
                       "tabulate": False})
     side = K.side_data(b.stack.plan[False], True)
     table = band_tables.build_band_table(side, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0)
@@ -347,7 +343,7 @@ def test_the_shear_follows_the_films_and_refuses_bad_data():
     rebuilds)."""
     from thinfilm_mi.tabulate.shear import Shear
 
-    d = np.random.default_rng(6).uniform(50.0, 200.0, 30)
+    d = benchmark_thicknesses(30)
     films = [((lambda wl, n=2.3 if i % 2 == 0 else 1.46: np.full(np.shape(wl), n + 0j)), float(d[i]))
              for i in range(30)]
     shear = Shear.of(films, 1.0)

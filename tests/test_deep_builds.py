@@ -15,6 +15,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
+from _stacks import benchmark_layers, sphere_scene
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.render import kernel as K
@@ -28,13 +29,8 @@ def _variant():
     yield
 
 
-def _layers(films: int) -> str:
-    d = np.random.default_rng(6).uniform(50.0, 200.0, films)
-    return "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(films))
-
-
 def _bsdf(films: int) -> dict:
-    return {"type": "thinfilm_conductor", "material": "Al", "layers": _layers(films)}
+    return {"type": "thinfilm_conductor", "material": "Al", "layers": benchmark_layers(films)}
 
 
 @pytest.mark.parametrize("films, probe", [(100, "rejected by the probe"), (300, "probe over budget")])
@@ -50,17 +46,7 @@ def test_deep_stacks_are_rejected_before_the_work(films, probe):
 
 
 def _scene(films: int) -> dict:
-    return {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 3},
-        "sensor": {"type": "perspective", "fov": 35,
-                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0],
-                                                              up=[0, 1, 0]),
-                   "sampler": {"type": "independent", "sample_count": 1},
-                   "film": {"type": "hdrfilm", "width": 24, "height": 24, "rfilter": {"type": "box"}}},
-        "emitter": {"type": "constant"},
-        "ball": {"type": "sphere", "bsdf": _bsdf(films)},
-    }
+    return sphere_scene(_bsdf(films))
 
 
 def _render(scene) -> np.ndarray:

@@ -24,6 +24,7 @@ import mitsuba as mi
 import numpy as np
 import pytest
 import tmm
+from _stacks import benchmark_thicknesses
 from drjit.llvm import Float64, UInt32
 
 import thinfilm_mi  # noqa: F401  (registers the plugins in every variant)
@@ -372,7 +373,7 @@ def test_exact_deep_stacks_run_as_a_film_loop(plugin, films, tol):
     7.6e-5 for the loop and 8.3e-5 for the unrolled recursion it replaces."""
     from test_polarized import directions, interaction, mat, rotated, tmm_matrix
 
-    d = np.random.default_rng(6).uniform(50.0, 200.0, films)
+    d = benchmark_thicknesses(films)
     stack = [(2.3 if i % 2 == 0 else 1.46, float(d[i])) for i in range(films)]
     substrate = {"thinfilm_conductor": {"eta": 0.2, "k": 3.0}, "thinfilm_dielectric": {"int_ior": 1.5}}
     n_sub = 0.2 + 3.0j if plugin == "thinfilm_conductor" else 1.5

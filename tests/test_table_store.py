@@ -20,6 +20,7 @@ import textwrap
 import mitsuba as mi
 import numpy as np
 import pytest
+from _stacks import benchmark_layers, sphere_scene
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.render import kernel as K
@@ -43,26 +44,7 @@ def tables(tmp_path, monkeypatch):
     K.TABLE_CACHE.clear()
 
 
-def _layers(films: int) -> str:
-    d = np.random.default_rng(6).uniform(50.0, 200.0, films)
-    return "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(films))
-
-
-BSDF = {"type": "thinfilm_conductor", "material": "Al", "layers": _layers(10)}
-
-
-def _scene(bsdf: dict) -> dict:
-    return {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 3},
-        "sensor": {"type": "perspective", "fov": 35,
-                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0],
-                                                              up=[0, 1, 0]),
-                   "sampler": {"type": "independent", "sample_count": 1},
-                   "film": {"type": "hdrfilm", "width": 24, "height": 24, "rfilter": {"type": "box"}}},
-        "emitter": {"type": "constant"},
-        "sphere": {"type": "sphere", "bsdf": bsdf},
-    }
+BSDF = {"type": "thinfilm_conductor", "material": "Al", "layers": benchmark_layers(10)}
 
 
 def _values(bsdf) -> np.ndarray:
@@ -70,7 +52,7 @@ def _values(bsdf) -> np.ndarray:
 
 
 def test_a_stored_table_is_read_back_bit_for_bit_and_renders_the_same_image(tables):
-    built = mi.load_dict(_scene(BSDF))
+    built = mi.load_dict(sphere_scene(BSDF))
     first = built.shapes()[0].bsdf()
     assert first.stack.plan[False].build_report["result"] == "table"
     assert first.stack.plan[False].build_report["resolution"] == 1.0     # band-limited
@@ -78,7 +60,7 @@ def test_a_stored_table_is_read_back_bit_for_bit_and_renders_the_same_image(tabl
     image = np.array(mi.render(built, seed=3))
 
     K.TABLE_CACHE.clear()
-    again = mi.load_dict(_scene(BSDF))
+    again = mi.load_dict(sphere_scene(BSDF))
     second = again.shapes()[0].bsdf()
     report = second.stack.plan[False].build_report
     assert report["result"] == "from the table store"

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import tmm
 from _kernels import compiled, interaction
+from _stacks import benchmark_layers
 
 import thinfilm_mi as tf
 from thinfilm_mi.optics import unpolarised
@@ -340,8 +341,7 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     report = bsdf.stack.plan[False].build_report
     assert report["result"] == "table" and report["rounds"] == 1
     assert report["probe_points"] < 0.5 * report["points"]
-    d = np.random.default_rng(6).uniform(50.0, 200.0, 30)
-    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(30))
+    layers = benchmark_layers(30)
     with pytest.warns(UserWarning, match="cannot be tabulated"):
         deep = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                              "tabulate": True, "spectral_resolution": 0.0})
