@@ -266,26 +266,32 @@ def _eval_sum(b, n=256):
     return dr.sum(b.eval(mi.BSDFContext(), make_si(n, wi), wo), axis=None)
 
 
-@pytest.mark.parametrize("key, value, step", [("layers.0.thickness", 300.0, 0.5),
-                                              ("layers.1.thickness", 4.0, 0.05)])
-def test_exact_gradient_wrt_layer_thickness(key, value, step):
-    # tabulate false: the finite differences must see the exact stack, not a 1e-3 table
-    b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300; Au 4", "model": "exact",
-                      "reflectance": 0.8, "tabulate": False})
+def _gradient_and_difference(b, key, value, step):
+    """``∂/∂x`` of :func:`_eval_sum` at the parameter ``key`` = ``value`` by AD, and the
+    central difference over ``value ± step``."""
     params = mi.traverse(b)
+    assert key in params
     x = mi.Float(value)
     dr.enable_grad(x)
     params[key] = x
     params.update()
-    y = _eval_sum(b)
-    dr.backward(y)
+    dr.backward(_eval_sum(b))
     grad = float(dr.grad(x)[0])
 
     def at(v):
         params[key] = mi.Float(v)
         params.update()
         return float(_eval_sum(b)[0])
-    fd = (at(value + step) - at(value - step)) / (2 * step)
+    return grad, (at(value + step) - at(value - step)) / (2 * step)
+
+
+@pytest.mark.parametrize("key, value, step", [("layers.0.thickness", 300.0, 0.5),
+                                              ("layers.1.thickness", 4.0, 0.05)])
+def test_exact_gradient_wrt_layer_thickness(key, value, step):
+    # tabulate false: the finite differences must see the exact stack, not a 1e-3 table
+    b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300; Au 4", "model": "exact",
+                      "reflectance": 0.8, "tabulate": False})
+    grad, fd = _gradient_and_difference(b, key, value, step)
     # central difference in float32 (sum of 1024 values ~1e2, rounding ~1e-5 / step)
     # against an exact derivative: 2 % (measured < 0.5 %)
     assert grad == pytest.approx(fd, rel=2e-2), (grad, fd)
@@ -295,22 +301,7 @@ def test_gradient_wrt_thickness_texture():
     b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300; Au 4", "model": "exact",
                       "reflectance": 0.8,
                       "thickness": {"type": "checkerboard", "color0": 0.5, "color1": 1.5}})
-    params = mi.traverse(b)
-    key = "thickness.color0.value"
-    assert key in params
-    x = mi.Float(0.9)
-    dr.enable_grad(x)
-    params[key] = x
-    params.update()
-    y = _eval_sum(b)
-    dr.backward(y)
-    grad = float(dr.grad(x)[0])
-
-    def at(v):
-        params[key] = mi.Float(v)
-        params.update()
-        return float(_eval_sum(b)[0])
-    fd = (at(0.91) - at(0.89)) / 0.02
+    grad, fd = _gradient_and_difference(b, "thickness.color0.value", 0.9, 0.01)
     # the kernel's T(θ) is differentiated exactly, R_dh through the table's ∂R_dh/∂s
     # (second-order differences of nodes ~0.003 apart): 3 % (measured < 1 %)
     assert grad == pytest.approx(fd, rel=3e-2), (grad, fd)
