@@ -36,7 +36,7 @@ import warnings
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from render_bench import first_images, mode_of, render_sync  # noqa: E402
+from render_bench import first_image_table, first_images, mode_of, render_sync  # noqa: E402
 from render_bench import scene_dict as base_scene_dict  # noqa: E402
 
 VARIANT = "llvm_ad_spectral_polarized"
@@ -113,21 +113,9 @@ def steady(films, args):
 def first(films, args):
     configs = ["conductor"] + [f"{L}:{m}" for L in films for m in ("auto", "exact")]
     out = first_images(__file__, configs, args.first_repeats)
-    r = out["conductor"]
-    base = r["load"] + r["render"]
     print(f"\n### {VARIANT}: first image, empty kernel cache (fresh process and "
           f"DRJIT_CACHE_DIR per run; the run with the median total of {args.first_repeats})\n")
-    print("| BSDF | films | tabulate | mode obtained | mi.load (s) | first mi.render (s) "
-          "| total (s) | ratio to conductor |")
-    print("|---|---:|---|---|---:|---:|---:|---:|")
-    print(f"| conductor (Al) | – | – | – | {r['load']:.2f} | {r['render']:.2f} | {base:.2f} "
-          "| 1.00 |")
-    for c in configs[1:]:
-        L, m = c.split(":")
-        r = out[c]
-        tot = r["load"] + r["render"]
-        print(f"| thinfilm_conductor | {L} | {m} | {r['mode']} | {r['load']:.2f} | "
-              f"{r['render']:.2f} | {tot:.2f} | {tot / base:.2f} |")
+    first_image_table(out, configs, asked="tabulate")
 
 
 def main(argv=None):

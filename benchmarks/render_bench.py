@@ -200,16 +200,14 @@ def first_images(script: str, configs, repeats: int, store: str = "off") -> dict
             for c in configs}
 
 
-def first_image(repeats: int):
-    configs = ["conductor"] + [f"{L}:{m}" for L in FILMS for m in ("exact", "table")]
-    out = first_images(__file__, configs, repeats)
-    base = out["conductor"]["load"] + out["conductor"]["render"]
-    print("\n### First image, empty kernel cache (fresh DRJIT_CACHE_DIR per "
-          f"configuration and run; the run with the median total of {repeats})\n")
-    print("| BSDF | films | mode asked | mode obtained | mi.load (s) | first mi.render (s) "
+def first_image_table(out: dict, configs, asked: str = "mode asked") -> None:
+    """Print :func:`first_images`' runs (``configs``: ``"conductor"`` first, then
+    ``"L:mode"``) as a table with their ratios to ``conductor``'s total."""
+    r = out["conductor"]
+    base = r["load"] + r["render"]
+    print(f"| BSDF | films | {asked} | mode obtained | mi.load (s) | first mi.render (s) "
           "| total (s) | ratio to conductor |")
     print("|---|---:|---|---|---:|---:|---:|---:|")
-    r = out["conductor"]
     print(f"| conductor (Al) | – | – | – | {r['load']:.2f} | {r['render']:.2f} | {base:.2f} "
           f"| 1.00 |")
     for c in configs[1:]:
@@ -218,6 +216,14 @@ def first_image(repeats: int):
         tot = r["load"] + r["render"]
         print(f"| thinfilm_conductor | {L} | {m} | {r['mode']} | {r['load']:.2f} | "
               f"{r['render']:.2f} | {tot:.2f} | {tot / base:.2f} |")
+
+
+def first_image(repeats: int):
+    configs = ["conductor"] + [f"{L}:{m}" for L in FILMS for m in ("exact", "table")]
+    out = first_images(__file__, configs, repeats)
+    print("\n### First image, empty kernel cache (fresh DRJIT_CACHE_DIR per "
+          f"configuration and run; the run with the median total of {repeats})\n")
+    first_image_table(out, configs)
     return out
 
 
