@@ -26,6 +26,7 @@ import pytest
 import tmm
 from _stacks import benchmark_thicknesses
 from drjit.llvm import Float64, UInt32
+from test_polarized import polarized_variant, pytestmark  # noqa: F401  (the skip mark, variant fixture)
 
 import thinfilm_mi  # noqa: F401  (registers the plugins in every variant)
 from thinfilm_mi.optics.core import Cx
@@ -39,20 +40,9 @@ from thinfilm_mi.tabulate import band_rows
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.mueller import AUTO_MAX_FLOATS, AUTO_MIN_FILMS, MUELLER
 
-VARIANT = "llvm_ad_spectral_polarized"
-DEFAULT = "llvm_ad_spectral"
 # A float32 kernel value against float64: rounding below 3e-5 for these stacks
 # (tests/test_tables.py, the same recursion and lookups).
 F32 = 3e-5
-
-pytestmark = pytest.mark.skipif(VARIANT not in mi.variants(), reason="no polarized variant")
-
-
-@pytest.fixture(scope="module", autouse=True)
-def polarized_variant():
-    mi.set_variant(VARIANT)
-    yield
-    mi.set_variant(DEFAULT)
 
 
 def f32(x):
