@@ -26,20 +26,20 @@ from thinfilm_mi.cli.parser import failure, report_error
 from thinfilm_mi.cli.render import summary
 from thinfilm_mi.errors import RenderError, ThinFilmError, UsageError, require_extra
 
-__all__ = ["add_parser", "cmd_design", "design_scene", "render_design"]
+__all__ = ["add_parser", "cmd_design", "design_scene", "render_design", "ProgressBar"]
 
 PROG = "python -m thinfilm_mi design"
 RENDER_SIZE = "320x213"
 RENDER_SPP = 32
 
 
-class _Bar:
-    """The design's progress (``progress(fraction, message)`` of
-    :func:`thinfilm_mi.design.design`) on the one progress bar of the commands
+class ProgressBar:
+    """A ``progress(fraction, message)`` callback (:func:`thinfilm_mi.design.design`,
+    :func:`thinfilm_mi.design.fit`) on the one progress bar of the commands
     (:func:`thinfilm_mi.batch.scene.progress_bar`, tqdm), in thousandths."""
 
-    def __init__(self, stream: TextIO):
-        self.bar = batch_scene.progress_bar(stream, total=1000, unit="‰", desc="design")
+    def __init__(self, stream: TextIO, desc: str = "design"):
+        self.bar = batch_scene.progress_bar(stream, total=1000, unit="‰", desc=desc)
 
     def __call__(self, fraction: float, message: str) -> None:
         self.bar.set_postfix_str(message, refresh=False)
@@ -128,7 +128,7 @@ def cmd_design(args: argparse.Namespace) -> int:
         if args.evaluate is not None:
             result = dz.evaluate(args.targets, args.evaluate, tolerance=tolerance, tolerance_seed=args.seed or 0)
         else:
-            bar = None if args.quiet else _Bar(sys.stderr)
+            bar = None if args.quiet else ProgressBar(sys.stderr)
             result = dz.design(args.targets, start=args.start, max_layers=args.max_layers, seeds=args.seeds,
                                seed=args.seed, time_limit=args.time_limit, tolerance=tolerance,
                                tolerance_seed=args.seed or 0, progress=bar)

@@ -9,6 +9,7 @@ Subcommands::
                (table, --json, --csv, --plot), under D65, A, F11 or blackbody:T
     demo       render scenes/demo.xml into OUT/demo.exr and OUT/demo.png
     design     design a coating for a targets file (thinfilm_mi.cli.design)
+    fit        fit a stack to measured spectra (thinfilm_mi.cli.fit)
 
 Examples::
 
@@ -386,8 +387,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.set_defaults(func=cmd_demo)
 
     from thinfilm_mi.cli import design as design_cli
+    from thinfilm_mi.cli import fit as fit_cli
 
     design_cli.add_parser(sub)
+    fit_cli.add_parser(sub)
     return parser
 
 

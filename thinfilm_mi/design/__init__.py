@@ -11,7 +11,9 @@ synthesises a stack with needle optimisation and refines it on exact gradients
 (:mod:`.synthesis`, :mod:`.merit`, :mod:`.matrices`); :func:`refine` and
 :func:`evaluate` take a given stack; :func:`parse_tolerance` and
 :func:`tolerance_analysis` do Monte-Carlo thickness errors. The command line is
-``python -m thinfilm_mi design TARGETS.yml``.
+``python -m thinfilm_mi design TARGETS.yml``. :func:`fit` goes the other way:
+from measured spectra (a measurements file, :mod:`.fitfile`) to the stack as
+built, with standard errors (``python -m thinfilm_mi fit MEASUREMENTS.yml``).
 
 This subpackage uses the optics conventions of :mod:`thinfilm_mi.optics.core`, the
 materials of :mod:`thinfilm_mi.materials.catalog` and the colorimetry of
@@ -20,6 +22,9 @@ materials of :mod:`thinfilm_mi.materials.catalog` and the colorimetry of
 from __future__ import annotations
 
 from thinfilm_mi.design.api import design, evaluate, refine
+from thinfilm_mi.design.fit import fit
+from thinfilm_mi.design.fitfile import Measurement, load_measurements
+from thinfilm_mi.design.fitresult import FitResult
 from thinfilm_mi.design.merit import Design, Merit, TargetValues
 from thinfilm_mi.design.result import DesignResult
 from thinfilm_mi.design.targets import Problem, Target, load_problem
@@ -28,5 +33,5 @@ from thinfilm_mi.design.tolerance import ToleranceResult, ToleranceSpec, parse_t
 __all__ = [
     "design", "refine", "evaluate", "load_problem", "Problem", "Target", "Design", "Merit",
     "TargetValues", "DesignResult", "parse_tolerance", "tolerance_analysis", "ToleranceSpec",
-    "ToleranceResult",
+    "ToleranceResult", "fit", "load_measurements", "Measurement", "FitResult",
 ]

@@ -38,7 +38,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["normal_index", "admittance", "Response", "stack_response", "needle_response"]
+__all__ = ["normal_index", "admittance", "Response", "stack_response", "film_index_response", "needle_response"]
 
 TWO_PI = 2.0 * np.pi
 
@@ -182,6 +182,25 @@ def stack_response(n_in, n_out, films, d, wl, beta2, pol, index_groups=(), deriv
         dC.append(c)
     if not dB:
         return Response(st.R, st.T, np.zeros(shape + (0,)), np.zeros(shape + (0,)))
+    dR, dT = st.powers_from(np.stack(dB, axis=-1), np.stack(dC, axis=-1))
+    return Response(st.R, st.T, dR, dT)
+
+
+def film_index_response(n_in, n_out, films, d, wl, beta2, pol) -> Response:
+    """R and T of one polarisation (arguments as :func:`stack_response`) with
+    their derivatives with respect to each film's thickness, then each film's
+    ``n`` and each film's ``k``: ``dR``, ``dT`` (P, 3 L). A fit whose films'
+    indices follow dispersion models chains these per point to its parameters."""
+    st = _Stack(n_in, n_out, films, d, wl, beta2, pol)
+    shape = np.shape(st.R)
+    L = len(films)
+    if not L:
+        return Response(st.R, st.T, np.zeros(shape + (0,)), np.zeros(shape + (0,)))
+    thick = [st.through(j, st.dM_dthickness(j)) for j in range(L)]
+    index = [st.through(j, st.dM_dindex(j, 1.0)) for j in range(L)]
+    # dM_dindex is complex-linear in its change: a change 1j of the index (of k) is 1j times it
+    dB = [np.broadcast_to(b, shape) for b, _ in thick] + [b for b, _ in index] + [1j * b for b, _ in index]
+    dC = [np.broadcast_to(c, shape) for _, c in thick] + [c for _, c in index] + [1j * c for _, c in index]
     dR, dT = st.powers_from(np.stack(dB, axis=-1), np.stack(dC, axis=-1))
     return Response(st.R, st.T, dR, dT)
 

@@ -11,10 +11,11 @@ import numpy as np
 from thinfilm_mi.design.merit import Design, Merit, TargetValues
 from thinfilm_mi.design.targets import Problem, Target
 
-__all__ = ["DesignResult", "format_layers", "film_specs"]
+__all__ = ["DesignResult", "format_layers", "film_specs", "format_index", "format_nm", "json_list"]
 
 
-def _index_text(z: complex) -> str:
+def format_index(z: complex) -> str:
+    """A constant index as a ``layers`` string writes it (n to 1e-6, then ``+kj``)."""
     text = f"{z.real:.6f}".rstrip("0").rstrip(".")
     return text + (f"+{z.imag:.6g}j" if z.imag else "")
 
@@ -25,20 +26,22 @@ def film_specs(problem: Problem, design: Design) -> list[str]:
     free = [i for i, m in enumerate(problem.materials) if m.free]
     for m in design.films:
         dm = problem.materials[m]
-        out.append(_index_text(complex(design.n[free.index(m)], dm.n0.imag)) if dm.free else dm.spec)
+        out.append(format_index(complex(design.n[free.index(m)], dm.n0.imag)) if dm.free else dm.spec)
     return out
 
 
 def format_layers(problem: Problem, design: Design) -> str:
     """``"MATERIAL NM; ..."`` (thicknesses to 0.1 pm): what every plugin's ``layers`` accepts."""
-    return "; ".join(f"{spec} {_nm(d)}" for spec, d in zip(film_specs(problem, design), design.d))
+    return "; ".join(f"{spec} {format_nm(d)}" for spec, d in zip(film_specs(problem, design), design.d))
 
 
-def _nm(d: float) -> str:
+def format_nm(d: float) -> str:
+    """A thickness in nm as a ``layers`` string writes it (to 0.1 pm)."""
     return f"{d:.4f}".rstrip("0").rstrip(".") or "0"
 
 
-def _list(a) -> Any:
+def json_list(a) -> Any:
+    """An array as a JSON list (floats to 1e-10)."""
     return np.round(np.asarray(a, dtype=np.float64), 10).tolist()
 
 
@@ -98,20 +101,20 @@ class DesignResult:
             t = v.target
             rec: dict[str, Any] = {"target": t.index, "quantity": t.quantity, "kind": t.kind,
                                    "polarization": t.polarization, "side": t.side,
-                                   "angles": _list(t.angles)}
+                                   "angles": json_list(t.angles)}
             if t.quantity in ("R", "T", "A"):
-                rec.update(wavelengths=_list(t.wavelengths), wanted=_list(t.value),
-                           tolerance=_list(t.tolerance), achieved=_list(v.achieved))
+                rec.update(wavelengths=json_list(t.wavelengths), wanted=json_list(t.value),
+                           tolerance=json_list(t.tolerance), achieved=json_list(v.achieved))
             else:
                 rec.update(illuminant=t.illuminant, observer=t.observer, of=t.of,
                            tolerance=float(t.tolerance[0]))
                 if t.quantity == "Y":
-                    rec.update(wanted=float(t.value[0]), achieved=_list(v.achieved))
+                    rec.update(wanted=float(t.value[0]), achieved=json_list(v.achieved))
                 else:
-                    rec.update(space=t.space, wanted=_list(t.reference), achieved=_list(v.achieved),
-                               **{"delta_e2000" if t.space == "Lab" else "distance": _list(v.error)})
+                    rec.update(space=t.space, wanted=json_list(t.reference), achieved=json_list(v.achieved),
+                               **{"delta_e2000" if t.space == "Lab" else "distance": json_list(v.error)})
             within = v.within
-            rec.update(error=_list(v.error), within=bool(np.all(within)),
+            rec.update(error=json_list(v.error), within=bool(np.all(within)),
                        points_within=int(np.sum(within)), points=int(within.size),
                        residual_sq=float(v.residual_sq))
             out.append(rec)

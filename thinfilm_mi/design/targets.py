@@ -169,61 +169,61 @@ class Problem:
     start_n: dict | None = None       # free index values the start gives {material index: n}
 
 
-def _fail(where: str, message: str):
+def fail(where: str, message: str):
     raise ThinFilmError(f"{where}: {message}")
 
 
-def _number(value: Any, where: str, what: str) -> float:
+def parse_number(value: Any, where: str, what: str) -> float:
     if isinstance(value, bool):
-        _fail(where, f"{what} must be a number, got {value!r}")
+        fail(where, f"{what} must be a number, got {value!r}")
     try:
         x = float(value)
     except (TypeError, ValueError):
-        _fail(where, f"{what} must be a number, got {value!r}")
+        fail(where, f"{what} must be a number, got {value!r}")
     if not math.isfinite(x):
-        _fail(where, f"{what} must be finite, got {value!r}")
+        fail(where, f"{what} must be finite, got {value!r}")
     return x
 
 
-def _grid(value: Any, where: str, what: str) -> np.ndarray:
+def parse_grid(value: Any, where: str, what: str) -> np.ndarray:
     """``"START:STOP:STEP"``, one number, a list, or a string of numbers -> floats."""
     if isinstance(value, str) and ":" in value:
         parts = value.split(":")
         if len(parts) != 3:
-            _fail(where, f"{what} {value!r}: expected START:STOP:STEP, e.g. 420:680:5")
-        start, stop, step = (_number(p, where, f"{what} {value!r}") for p in parts)
+            fail(where, f"{what} {value!r}: expected START:STOP:STEP, e.g. 420:680:5")
+        start, stop, step = (parse_number(p, where, f"{what} {value!r}") for p in parts)
         if step <= 0 or stop < start:
-            _fail(where, f"{what} {value!r}: need STOP >= START and STEP > 0")
+            fail(where, f"{what} {value!r}: need STOP >= START and STEP > 0")
         count = int(math.floor((stop - start) / step + 1e-9)) + 1
         if count > MAX_POINTS:
-            _fail(where, f"{what} {value!r}: {count} values; at most {MAX_POINTS}")
+            fail(where, f"{what} {value!r}: {count} values; at most {MAX_POINTS}")
         return start + step * np.arange(count)
     if isinstance(value, str):
         value = [t for t in re.split(r"[,\s]+", value.strip()) if t]
     items = value if isinstance(value, (list, tuple)) else [value]
     if not items:
-        _fail(where, f"{what}: none given")
-    return np.array([_number(v, where, what) for v in items], dtype=np.float64)
+        fail(where, f"{what}: none given")
+    return np.array([parse_number(v, where, what) for v in items], dtype=np.float64)
 
 
 def _per_point(value: Any, count: int, where: str, what: str) -> np.ndarray:
-    arr = _grid(value, where, what) if isinstance(value, (list, tuple)) else \
-        np.array([_number(value, where, what)])
+    arr = parse_grid(value, where, what) if isinstance(value, (list, tuple)) else \
+        np.array([parse_number(value, where, what)])
     if arr.size not in (1, count):
-        _fail(where, f"{what}: give one number or one per wavelength ({count}), got {arr.size}")
+        fail(where, f"{what}: give one number or one per wavelength ({count}), got {arr.size}")
     return np.broadcast_to(arr, (count,)).copy()
 
 
-def _choice(value: Any, options: tuple[str, ...], where: str, what: str, aliases=None) -> str:
+def parse_choice(value: Any, options: tuple[str, ...], where: str, what: str, aliases=None) -> str:
     text = str(value).strip()
     key = (aliases or {}).get(text.lower(), text)
     for option in options:
         if key.lower() == option.lower():
             return option
-    _fail(where, f"{what}: expected one of {', '.join(options)}, got {value!r}")
+    fail(where, f"{what}: expected one of {', '.join(options)}, got {value!r}")
 
 
-def _locate(spec: Any, base: Path | None) -> Any:
+def locate_file(spec: Any, base: Path | None) -> Any:
     """A material file named relative to the targets file, as a path beside it."""
     if isinstance(spec, str) and base is not None and spec.strip().lower().endswith(
             (".csv", ".spd", ".yml", ".yaml", ".txt")):
@@ -233,13 +233,13 @@ def _locate(spec: Any, base: Path | None) -> Any:
     return spec
 
 
-def _resolve(spec: Any, where: str, base: Path | None) -> _materials.Material:
-    spec = _locate(spec, base)
+def resolve_material(spec: Any, where: str, base: Path | None) -> _materials.Material:
+    spec = locate_file(spec, base)
     try:
         return _materials.resolve(spec, require_range=None)
     except ValueError as e:
         msg = str(e)
-        _fail(where, msg[len("material: "):] if msg.startswith("material: ") else msg)
+        fail(where, msg[len("material: "):] if msg.startswith("material: ") else msg)
 
 
 def _material_entry(entry: Any, where: str, base: Path | None) -> DesignMaterial:
@@ -247,28 +247,28 @@ def _material_entry(entry: Any, where: str, base: Path | None) -> DesignMaterial
     if isinstance(entry, dict):
         unknown = set(entry) - {"index", "free"}
         if unknown or "index" not in entry:
-            _fail(where, f"expected a material or {{index: N, free: [LO, HI]}}, got {entry!r}")
+            fail(where, f"expected a material or {{index: N, free: [LO, HI]}}, got {entry!r}")
         spec, free_spec = entry["index"], entry.get("free", False)
     else:
         spec, free_spec = entry, False
     if isinstance(spec, (list, dict)) or spec is None:
-        _fail(where, f"expected a material (number, n+kj, name or file), got {spec!r}")
-    material = _resolve(spec, where, base)
-    text = str(_locate(spec, base)).strip()
+        fail(where, f"expected a material (number, n+kj, name or file), got {spec!r}")
+    material = resolve_material(spec, where, base)
+    text = str(locate_file(spec, base)).strip()
     if any(c.isspace() for c in text) or ";" in text:
-        _fail(where, f"material {text!r}: a layers string cannot hold spaces or ';' in a material")
+        fail(where, f"material {text!r}: a layers string cannot hold spaces or ';' in a material")
     if free_spec not in (False, None):
         if material.constant is None:
-            _fail(where, f"free: only a numeric index can be free, not the dataset {text!r}")
+            fail(where, f"free: only a numeric index can be free, not the dataset {text!r}")
         n = material.constant.real
         if free_spec is True:
             lo, hi = 0.9 * n, 1.1 * n
         elif isinstance(free_spec, (list, tuple)) and len(free_spec) == 2:
-            lo, hi = (_number(v, where, "free bounds") for v in free_spec)
+            lo, hi = (parse_number(v, where, "free bounds") for v in free_spec)
         else:
-            _fail(where, f"free: expected true or [LO, HI], got {free_spec!r}")
+            fail(where, f"free: expected true or [LO, HI], got {free_spec!r}")
         if not (_materials.MIN_INDEX <= lo <= n <= hi <= _materials.MAX_INDEX):
-            _fail(where, f"free: need {_materials.MIN_INDEX:g} <= LO <= n = {n:g} <= HI, got [{lo:g}, {hi:g}]")
+            fail(where, f"free: need {_materials.MIN_INDEX:g} <= LO <= n = {n:g} <= HI, got [{lo:g}, {hi:g}]")
         free = (lo, hi)
     return DesignMaterial(text, material, free)
 
@@ -277,51 +277,51 @@ def _check_reach(target: Target, wavelengths: np.ndarray, media: list[tuple[str,
     """Every material must be defined at every wavelength the target needs."""
     lo, hi = float(wavelengths.min()), float(wavelengths.max())
     if lo <= 0:
-        _fail(target.name, f"wavelengths must be > 0 nm, got {lo:g}")
+        fail(target.name, f"wavelengths must be > 0 nm, got {lo:g}")
     for name, mat in media:
         a, b = mat.wavelength_range
         if lo < a * (1 - 1e-9) or hi > b * (1 + 1e-9):
             bad = lo if lo < a * (1 - 1e-9) else hi
             need = ("" if target.wavelengths is not None
                     else f" (the {target.illuminant} colour integral needs {lo:g}-{hi:g} nm)")
-            _fail(target.name, f"wavelength {bad:g} nm is out of reach: {name} {mat.name!r} has data "
+            fail(target.name, f"wavelength {bad:g} nm is out of reach: {name} {mat.name!r} has data "
                                f"for {a:g}-{b:g} nm only{need}")
 
 
 def _target(entry: Any, i: int, media, back_ok: str | None) -> Target:
     where = f"targets[{i}]"
     if not isinstance(entry, dict):
-        _fail(where, f"expected a mapping such as {{quantity: R, wavelengths: '420:680:5', value: 0, "
+        fail(where, f"expected a mapping such as {{quantity: R, wavelengths: '420:680:5', value: 0, "
                      f"tolerance: 0.005}}, got {entry!r}")
     if "quantity" not in entry:
-        _fail(where, f"missing 'quantity' (one of {', '.join(QUANTITIES)})")
+        fail(where, f"missing 'quantity' (one of {', '.join(QUANTITIES)})")
     raw = str(entry["quantity"]).strip()
     quantity = {"r": "R", "t": "T", "a": "A", "y": "Y", "colour": "colour", "color": "colour"}.get(raw.lower())
     if quantity is None:
-        _fail(where, f"unknown quantity {entry['quantity']!r}; expected one of {', '.join(QUANTITIES)}")
+        fail(where, f"unknown quantity {entry['quantity']!r}; expected one of {', '.join(QUANTITIES)}")
     where = f"targets[{i}] ({quantity})"
     unknown = [k for k in entry if k not in _KEYS[quantity]]
     if unknown:
-        _fail(where, f"unknown key {unknown[0]!r} for quantity {quantity}; expected "
+        fail(where, f"unknown key {unknown[0]!r} for quantity {quantity}; expected "
                      f"{', '.join(k for k in _KEYS[quantity] if k != 'quantity')}")
     for key in ("tolerance",) + (("value",) if quantity != "colour" else ()):
         if key not in entry:
-            _fail(where, f"missing {key!r}")
-    angles = _grid(entry.get("angles", [0.0]), where, "angles")
+            fail(where, f"missing {key!r}")
+    angles = parse_grid(entry.get("angles", [0.0]), where, "angles")
     bad = angles[(angles < 0) | (angles >= 90)]
     if bad.size:
-        _fail(where, f"angles: each must be in [0, 90) degrees, got {bad[0]:g}")
+        fail(where, f"angles: each must be in [0, 90) degrees, got {bad[0]:g}")
     t = Target(i, quantity, angles, np.zeros(1))
-    t.kind = _choice(entry.get("kind", "="), KINDS, where, "kind", {"==": "="})
-    t.polarization = _choice(entry.get("polarization", "unpolarized"), POLARIZATIONS, where, "polarization",
+    t.kind = parse_choice(entry.get("kind", "="), KINDS, where, "kind", {"==": "="})
+    t.polarization = parse_choice(entry.get("polarization", "unpolarized"), POLARIZATIONS, where, "polarization",
                              {"unpolarised": "unpolarized", "u": "unpolarized"})
-    t.side = _choice(entry.get("side", "front"), SIDES, where, "side")
+    t.side = parse_choice(entry.get("side", "front"), SIDES, where, "side")
     if t.side == "back" and back_ok:
-        _fail(where, f"side: back needs light coming from the substrate, but {back_ok}")
+        fail(where, f"side: back needs light coming from the substrate, but {back_ok}")
     if quantity in ("R", "T", "A"):
         if "wavelengths" not in entry:
-            _fail(where, "missing 'wavelengths' (e.g. \"420:680:5\" or 550)")
-        t.wavelengths = _grid(entry["wavelengths"], where, "wavelengths")
+            fail(where, "missing 'wavelengths' (e.g. \"420:680:5\" or 550)")
+        t.wavelengths = parse_grid(entry["wavelengths"], where, "wavelengths")
         count = t.wavelengths.size
         t.value = _per_point(entry["value"], count, where, "value")
         t.tolerance = _per_point(entry["tolerance"], count, where, "tolerance")
@@ -331,33 +331,33 @@ def _target(entry: Any, i: int, media, back_ok: str | None) -> Target:
             t.illuminant = resolve_illuminant(entry.get("illuminant", "D65")).name
             t.observer = resolve_observer(entry.get("observer", 2))
         except ThinFilmError as e:
-            _fail(where, str(e))
-        t.of = _choice(entry.get("of", "R"), ("R", "T"), where, "of")
-        t.tolerance = np.array([_number(entry["tolerance"], where, "tolerance")])
+            fail(where, str(e))
+        t.of = parse_choice(entry.get("of", "R"), ("R", "T"), where, "of")
+        t.tolerance = np.array([parse_number(entry["tolerance"], where, "tolerance")])
         need = integration_wavelengths(t.illuminant)
         if quantity == "Y":
-            t.value = np.array([_number(entry["value"], where, "value")])
+            t.value = np.array([parse_number(entry["value"], where, "value")])
         else:
             given = [k for k in ("Lab", "xy") if k in entry]
             if len(given) != 1:
-                _fail(where, "give exactly one of Lab: [L, a, b] or xy: [x, y]")
+                fail(where, "give exactly one of Lab: [L, a, b] or xy: [x, y]")
             t.space = given[0]
             ref = entry[t.space]
             size = 3 if t.space == "Lab" else 2
             if not isinstance(ref, (list, tuple)) or len(ref) != size:
-                _fail(where, f"{t.space}: expected {size} numbers, got {ref!r}")
-            t.reference = np.array([_number(v, where, t.space) for v in ref])
+                fail(where, f"{t.space}: expected {size} numbers, got {ref!r}")
+            t.reference = np.array([parse_number(v, where, t.space) for v in ref])
             if t.space == "Lab" and not 0 <= t.reference[0] <= 100:
-                _fail(where, f"Lab: L* must be in [0, 100], got {t.reference[0]:g}")
+                fail(where, f"Lab: L* must be in [0, 100], got {t.reference[0]:g}")
             if t.space == "xy" and not (0 < t.reference[0] < 1 and 0 < t.reference[1] < 1):
-                _fail(where, f"xy: x and y must be in (0, 1), got {list(t.reference)}")
+                fail(where, f"xy: x and y must be in (0, 1), got {list(t.reference)}")
             if t.kind != "=":
-                _fail(where, f"kind: colour targets are '=' only (a colour difference), got {t.kind!r}")
+                fail(where, f"kind: colour targets are '=' only (a colour difference), got {t.kind!r}")
     if np.any(t.tolerance <= 0):
-        _fail(where, f"tolerance must be > 0, got {float(t.tolerance[t.tolerance <= 0][0]):g}")
+        fail(where, f"tolerance must be > 0, got {float(t.tolerance[t.tolerance <= 0][0]):g}")
     if t.value is not None and np.any((t.value < 0) | (t.value > 1)):
         bad_v = float(t.value[(t.value < 0) | (t.value > 1)][0])
-        _fail(where, f"value must be a fraction in [0, 1], got {bad_v:g}")
+        fail(where, f"value must be a fraction in [0, 1], got {bad_v:g}")
     _check_reach(t, need, media)
     return t
 
@@ -372,7 +372,7 @@ def films_from_layers(materials: list[DesignMaterial], text: Any, base: Path | N
     out, free = [], {}
     for j, (spec, d) in enumerate(parse_layers(str(text), name)):
         where = f"{name}[{j}] material"
-        mat = _resolve(spec, where, base)
+        mat = resolve_material(spec, where, base)
         c = mat.constant
         match = [i for i, m in enumerate(materials) if not m.free and (m.material is mat or (
             c is not None and m.material.constant == c))]
@@ -381,42 +381,47 @@ def films_from_layers(materials: list[DesignMaterial], text: Any, base: Path | N
                      and m.free[0] <= c.real <= m.free[1]]
             if match:
                 if free.setdefault(match[0], c.real) != c.real:
-                    _fail(where, f"films of the free material {materials[match[0]].spec!r} must share one "
+                    fail(where, f"films of the free material {materials[match[0]].spec!r} must share one "
                                  f"index, got {free[match[0]]:g} and {c.real:g}")
         if not match:
-            materials.append(DesignMaterial(str(_locate(spec, base)), mat, needle=False))
+            materials.append(DesignMaterial(str(locate_file(spec, base)), mat, needle=False))
             match = [len(materials) - 1]
         out.append((match[0], d))
     return out, free
 
 
+def read_yaml(source: Any, what: str) -> tuple[Any, Path | None, str]:
+    """``(document, folder, name)`` of a YAML file path, a YAML string or a dict:
+    ``folder`` is the file's (for files named relative to it, else ``None``) and
+    ``name`` what errors call it (the path, else ``what``). An unreadable file or
+    bad YAML raises :class:`ThinFilmError` naming it."""
+    if isinstance(source, dict):
+        return source, None, what
+    import yaml
+
+    base, name = None, what
+    if isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source
+                                           and source.strip().lower().endswith((".yml", ".yaml"))):
+        path = Path(source)
+        name = str(path)
+        try:
+            text = path.read_text(encoding="utf-8")
+        except OSError as e:
+            raise ThinFilmError(f"{name}: cannot read the {what} file ({e.strerror or e})") from None
+        base = path.resolve().parent
+    elif isinstance(source, str):
+        text = source
+    else:
+        raise ThinFilmError(f"{what}: expected a file path, a YAML string or a dict, got {source!r}")
+    try:
+        return yaml.safe_load(text), base, name
+    except yaml.YAMLError as e:
+        raise ThinFilmError(f"{name}: not valid YAML ({' '.join(str(e).split())})") from None
+
+
 def load_problem(source: Any) -> Problem:
     """A :class:`Problem` from a targets file path, a YAML string or a dict."""
-    base = None
-    name = "targets"
-    if isinstance(source, dict):
-        doc = source
-    else:
-        import yaml
-
-        text = None
-        if isinstance(source, os.PathLike) or (isinstance(source, str) and "\n" not in source
-                                               and source.strip().lower().endswith((".yml", ".yaml"))):
-            path = Path(source)
-            name = str(path)
-            try:
-                text = path.read_text(encoding="utf-8")
-            except OSError as e:
-                raise ThinFilmError(f"{name}: cannot read the targets file ({e.strerror or e})") from None
-            base = path.resolve().parent
-        elif isinstance(source, str):
-            text = source
-        else:
-            raise ThinFilmError(f"targets: expected a file path, a YAML string or a dict, got {source!r}")
-        try:
-            doc = yaml.safe_load(text)
-        except yaml.YAMLError as e:
-            raise ThinFilmError(f"{name}: not valid YAML ({' '.join(str(e).split())})") from None
+    doc, base, name = read_yaml(source, "targets")
     try:
         return _problem(doc, base, name)
     except ThinFilmError as e:
@@ -425,43 +430,43 @@ def load_problem(source: Any) -> Problem:
 
 def _problem(doc: Any, base: Path | None, name: str) -> Problem:
     if not isinstance(doc, dict):
-        _fail("targets file", f"expected a mapping with substrate, materials and targets, got {doc!r}")
+        fail("targets file", f"expected a mapping with substrate, materials and targets, got {doc!r}")
     unknown = [k for k in doc if k not in _TOP_KEYS]
     if unknown:
-        _fail(str(unknown[0]), f"unknown key; expected {', '.join(_TOP_KEYS)}")
+        fail(str(unknown[0]), f"unknown key; expected {', '.join(_TOP_KEYS)}")
     for key in ("substrate", "materials", "targets"):
         if key not in doc:
-            _fail(key, "missing")
+            fail(key, "missing")
     ambient_spec = doc.get("ambient", 1.0)
-    ambient = _resolve(ambient_spec, "ambient", base)
-    substrate = _resolve(doc["substrate"], "substrate", base)
+    ambient = resolve_material(ambient_spec, "ambient", base)
+    substrate = resolve_material(doc["substrate"], "substrate", base)
     if ambient.constant is not None:
         ambient_k = ambient.constant.imag
     else:
         lo, hi = ambient.wavelength_range
         ambient_k = float(np.max(ambient.index(np.linspace(max(lo, 360.0), min(hi, 830.0), 95)).imag))
     if ambient_k > AMBIENT_K_TOL:
-        _fail("ambient", f"the medium the light comes from must not absorb, got {ambient.name} (k = {ambient_k:.3g})")
+        fail("ambient", f"the medium the light comes from must not absorb, got {ambient.name} (k = {ambient_k:.3g})")
     mats = doc["materials"]
     if not isinstance(mats, (list, tuple)) or not mats:
-        _fail("materials", f"expected a list of film materials, e.g. [\"1.38\", \"2.35\"], got {mats!r}")
+        fail("materials", f"expected a list of film materials, e.g. [\"1.38\", \"2.35\"], got {mats!r}")
     materials = [_material_entry(m, f"materials[{i}]", base) for i, m in enumerate(mats)]
     max_layers = doc.get("max_layers", 8)
     if isinstance(max_layers, bool) or not isinstance(max_layers, int) or not 1 <= max_layers <= MAX_FILMS:
-        _fail("max_layers", f"expected an integer in [1, {MAX_FILMS}], got {max_layers!r}")
+        fail("max_layers", f"expected an integer in [1, {MAX_FILMS}], got {max_layers!r}")
     seeds, seed = doc.get("seeds", 6), doc.get("seed", 0)
     if isinstance(seeds, bool) or not isinstance(seeds, int) or not 1 <= seeds <= 1000:
-        _fail("seeds", f"expected an integer in [1, 1000], got {seeds!r}")
+        fail("seeds", f"expected an integer in [1, 1000], got {seeds!r}")
     if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-        _fail("seed", f"expected an integer >= 0, got {seed!r}")
+        fail("seed", f"expected an integer >= 0, got {seed!r}")
     start, start_n = None, {}
     if doc.get("start") is not None:
         start, start_n = films_from_layers(materials, doc["start"], base, "start")
         if len(start) > max_layers:
-            _fail("start", f"{len(start)} films, more than max_layers = {max_layers}")
+            fail("start", f"{len(start)} films, more than max_layers = {max_layers}")
     targets = doc["targets"]
     if not isinstance(targets, (list, tuple)) or not targets:
-        _fail("targets", "expected a list of targets")
+        fail("targets", "expected a list of targets")
     media = [("ambient", ambient), ("substrate", substrate)] + \
             [(f"materials[{i}]", m.material) for i, m in enumerate(materials)]
     sub_k = substrate.constant.imag if substrate.constant is not None else None
@@ -474,5 +479,5 @@ def _problem(doc: Any, base: Path | None, name: str) -> Problem:
             back_ok = f"the substrate {substrate.name} absorbs (k = {sub_k:.3g})"
     parsed = [_target(t, i, media, back_ok) for i, t in enumerate(targets)]
     return Problem(ambient, substrate, materials, parsed, max_layers, start, seeds, seed, name,
-                   str(_locate(ambient_spec, base)).strip(), str(_locate(doc["substrate"], base)).strip(), base,
+                   str(locate_file(ambient_spec, base)).strip(), str(locate_file(doc["substrate"], base)).strip(), base,
                    start_n)

@@ -23,7 +23,7 @@ from thinfilm_mi.design.colourmath import delta_e2000
 from thinfilm_mi.design.merit import Design, Merit
 from thinfilm_mi.errors import ThinFilmError
 
-__all__ = ["ToleranceSpec", "parse_tolerance", "ToleranceResult", "tolerance_analysis"]
+__all__ = ["ToleranceSpec", "parse_tolerance", "ToleranceResult", "tolerance_analysis", "draw_thicknesses"]
 
 _SPEC = re.compile(r"^\s*(?P<sigma>[0-9.eE+\-]+)\s*(?P<unit>%|nm)\s*(?::\s*(?P<n>\d+))?"
                    r"\s*(?::\s*(?P<dist>normal|uniform))?\s*$", re.IGNORECASE)
@@ -114,16 +114,23 @@ class ToleranceResult:
         return "\n".join(lines)
 
 
+def draw_thicknesses(d, spec: ToleranceSpec, seed: int = 0) -> np.ndarray:
+    """``spec.draws`` perturbed copies of the thicknesses ``d`` (nm), (films, draws),
+    clipped at 0 (``numpy.random.default_rng(seed)``)."""
+    rng = np.random.default_rng(seed)
+    d = np.asarray(d, dtype=np.float64)
+    shape = (d.size, spec.draws)
+    eps = rng.standard_normal(shape) if spec.distribution == "normal" else rng.uniform(-1.0, 1.0, shape)
+    return np.maximum(d[:, None] * (1.0 + spec.sigma * eps) if spec.relative else d[:, None] + spec.sigma * eps,
+                      0.0)
+
+
 def tolerance_analysis(merit: Merit, design: Design, spec: ToleranceSpec | str, seed: int = 0,
                        chunk: int = 100) -> ToleranceResult:
     """Evaluate ``spec.draws`` perturbed copies of ``design`` (see the module docstring)."""
     if not isinstance(spec, ToleranceSpec):
         spec = parse_tolerance(spec)
-    rng = np.random.default_rng(seed)
-    d = np.asarray(design.d, dtype=np.float64)
-    shape = (d.size, spec.draws)
-    eps = rng.standard_normal(shape) if spec.distribution == "normal" else rng.uniform(-1.0, 1.0, shape)
-    D = np.maximum(d[:, None] * (1.0 + spec.sigma * eps) if spec.relative else d[:, None] + spec.sigma * eps, 0.0)
+    D = draw_thicknesses(design.d, spec, seed)
     nominal_e, _, nominal = merit.evaluate(design, jac=False, report=True)
     nominal_merit = float(np.sqrt(nominal_e @ nominal_e / merit.points))
     sums = np.zeros(spec.draws)
