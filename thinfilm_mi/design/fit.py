@@ -42,39 +42,56 @@ CORRELATION_WARNING = 0.95
 #: residuals' scale, 1 with σ, χ²/dof without) is warned about: the data hardly
 #: prefer the best (Δχ² = 9 is a 3σ likelihood-ratio difference for one parameter).
 IDENTIFIABILITY_DELTA = 9.0
+#: Random starts screened (by χ², no Jacobian) per start that is descended from.
+SCREEN_PER_START = 8
+#: The size of the optimiser's first steps, relative to each parameter's start (see ``_solve``).
+FIRST_STEP = 0.02
 
 
 def _starts(model: FitModel, count: int, spread: float, seed: int) -> list[np.ndarray]:
+    """The nominal start, and the ``count - 1`` best by χ² of :data:`SCREEN_PER_START`
+    times as many random ones (each parameter off by a uniform ``±spread``)."""
     params = model.m.parameters
     x0 = model.x0
+    if count == 1:
+        return [x0]
     lo = np.array([p.lower for p in params])
     hi = np.array([p.upper for p in params])
     rng = np.random.default_rng(seed)
-    out = [x0]
     width = np.where([p.relative for p in params], np.abs(x0), hi - lo)
-    for _ in range(count - 1):
-        out.append(np.clip(x0 + spread * width * rng.uniform(-1.0, 1.0, x0.size), lo, hi))
-    return out
+    trials = np.clip(x0 + spread * width * rng.uniform(-1.0, 1.0, (SCREEN_PER_START * (count - 1), x0.size)),
+                     lo, hi)
+    cost = [float(e @ e) for e in (model.residuals(x, jac=False)[0] for x in trials)]
+    return [x0] + [trials[i] for i in np.argsort(cost)[:count - 1]]
 
 
 def _solve(model: FitModel, x0: np.ndarray, max_nfev: int) -> tuple[np.ndarray, float, int]:
+    """A local minimum from ``x0``. The optimiser works on the offsets from
+    ``x0`` in units of :data:`FIRST_STEP` of each parameter, so that its first trust
+    region (of radius 1 at a zero start) is a few per cent of the start: with the
+    default radius (the start's own size) a first step may leap over the
+    fringes into another minimum."""
     from scipy.optimize import least_squares
 
     params = model.m.parameters
     lo = np.array([p.lower for p in params])
     hi = np.array([p.upper for p in params])
+    x0 = np.clip(x0, lo, hi)
+    unit = FIRST_STEP * np.maximum(np.abs(x0), np.where(np.isfinite(hi - lo), hi - lo, 0.0) / 10 + 1e-6)
     cache: dict = {}
 
-    def at(x):
-        key = x.tobytes()
+    def at(y):
+        key = y.tobytes()
         if key not in cache:
             cache.clear()
-            cache[key] = model.residuals(x)
+            e, J = model.residuals(x0 + unit * y)
+            cache[key] = (e, J * unit)
         return cache[key]
 
-    res = least_squares(lambda x: at(x)[0], np.clip(x0, lo, hi), jac=lambda x: at(x)[1], bounds=(lo, hi),
-                        method="trf", x_scale="jac", ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_nfev)
-    x = np.clip(res.x, lo, hi)
+    res = least_squares(lambda y: at(y)[0], np.zeros_like(x0), jac=lambda y: at(y)[1],
+                        bounds=((lo - x0) / unit, (hi - x0) / unit), method="trf",
+                        ftol=1e-10, xtol=1e-10, gtol=1e-10, max_nfev=max_nfev)
+    x = np.clip(x0 + unit * res.x, lo, hi)
     e, _ = model.residuals(x, jac=False)
     return x, float(e @ e), int(res.nfev)
 

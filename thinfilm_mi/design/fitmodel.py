@@ -40,7 +40,7 @@ import math
 import numpy as np
 
 from thinfilm_mi.design.fitfile import POLARIZATIONS, QUANTITIES, Measurement
-from thinfilm_mi.design.matrices import film_index_response, normal_index
+from thinfilm_mi.design.matrices import film_index_response, normal_index, stack_response
 
 __all__ = ["FitModel", "BANDWIDTH_NODES", "CONE_RINGS", "CONE_AZIMUTHS"]
 
@@ -167,8 +167,11 @@ class FitModel:
         order = slice(None, None, -1) if reverse else slice(None)
         out = []
         for der in (r.dR, r.dT):
-            dt, dre, dim = der[:, :L][:, order], der[:, L:2 * L][:, order], der[:, 2 * L:][:, order]
-            total = dt @ dd
+            total = der[:, :L][:, order] @ dd
+            if der.shape[1] == L:         # no index derivatives: no film's index is fitted
+                out.append(total)
+                continue
+            dre, dim = der[:, L:2 * L][:, order], der[:, 2 * L:][:, order]
             for j, (_, dnj) in enumerate(dn):
                 if dnj is not None:
                     total = total + dre[:, j:j + 1] * dnj.real + dim[:, j:j + 1] * dnj.imag
@@ -181,17 +184,24 @@ class FitModel:
         ns = [n for n, _ in films]
         L = len(ns)
         n_amb = g.n_amb.astype(np.complex128)
+        fitted = jac and any(dn is not None for _, dn in films)
+
+        def response(n_in, n_out, films_, d_):
+            if fitted:
+                return film_index_response(n_in, n_out, films_, d_, g.wl, g.beta2, pol)
+            return stack_response(n_in, n_out, films_, d_, g.wl, g.beta2, pol, derivatives=jac)
+
         out = {}
         for pol in sorted(g.pols):
-            f = film_index_response(g.n_amb.real, g.n_sub, ns, d, g.wl, g.beta2, pol)
+            f = response(g.n_amb.real, g.n_sub, ns, d)
             R, T = f.R, f.T
             dR, dT = self._chain(f, L, dd, films) if jac else (None, None)
             if self.m.substrate_thickness_mm is not None:
                 if pol not in g.back:
-                    b = film_index_response(g.n_sub.real, n_amb, [], [], g.wl, g.beta2, pol)
+                    b = stack_response(g.n_sub.real, n_amb, [], [], g.wl, g.beta2, pol, derivatives=False)
                     g.back[pol] = (b.R, b.T)
                 R2, T2 = g.back[pol]
-                b = film_index_response(g.n_sub.real, n_amb, ns[::-1], d[::-1], g.wl, g.beta2, pol)
+                b = response(g.n_sub.real, n_amb, ns[::-1], d[::-1])
                 Y = R2 * g.P ** 2
                 den = 1.0 - b.R * Y
                 R = f.R + f.T * b.T * Y / den
