@@ -26,7 +26,8 @@ from thinfilm_mi.cli.parser import failure, report_error
 from thinfilm_mi.cli.render import summary
 from thinfilm_mi.errors import RenderError, ThinFilmError, UsageError, require_extra
 
-__all__ = ["add_parser", "cmd_design", "design_scene", "render_design", "ProgressBar"]
+__all__ = ["add_parser", "cmd_design", "design_scene", "render_design", "ProgressBar", "check_output_options",
+           "write_outputs", "add_output_options", "run_with_progress"]
 
 PROG = "python -m thinfilm_mi design"
 RENDER_SIZE = "320x213"
@@ -113,30 +114,56 @@ def render_design(result, output: str | Path, size: str = RENDER_SIZE, spp: int 
 def cmd_design(args: argparse.Namespace) -> int:
     """Run the ``design`` subcommand; a failure is reported in one line
     (:func:`thinfilm_mi.cli.parser.report_error`)."""
-    bar = None
-    try:
+
+    def work(tolerance, progress):
         from thinfilm_mi import design as dz
 
-        if args.plot:
-            require_extra("matplotlib", "plot", "--plot")
-        tolerance = dz.parse_tolerance(args.tolerance) if args.tolerance else None
-        if args.spp < 1:
-            raise UsageError(f"--spp must be >= 1, got {args.spp}")
-        batch_scene.parse_size(args.size)
-        if args.render and Path(args.render).suffix.lower() not in (".png", ".exr"):
-            raise UsageError(f"--render {args.render!r}: expected an .png (or .exr) file name")
         if args.evaluate is not None:
-            result = dz.evaluate(args.targets, args.evaluate, tolerance=tolerance, tolerance_seed=args.seed or 0)
-        else:
-            bar = None if args.quiet else ProgressBar(sys.stderr)
-            result = dz.design(args.targets, start=args.start, max_layers=args.max_layers, seeds=args.seeds,
-                               seed=args.seed, time_limit=args.time_limit, tolerance=tolerance,
-                               tolerance_seed=args.seed or 0, progress=bar)
+            return dz.evaluate(args.targets, args.evaluate, tolerance=tolerance, tolerance_seed=args.seed or 0)
+        return dz.design(args.targets, start=args.start, max_layers=args.max_layers, seeds=args.seeds,
+                         seed=args.seed, time_limit=args.time_limit, tolerance=tolerance,
+                         tolerance_seed=args.seed or 0, progress=progress)
+
+    result, status = run_with_progress(PROG, args, "design", work, bar=args.evaluate is None)
+    return status if result is None else write_outputs(PROG, args, result)
+
+
+def run_with_progress(prog: str, args: argparse.Namespace, desc: str, work, bar: bool = True):
+    """``(work(tolerance, progress), None)``, after :func:`check_output_options`,
+    with a :class:`ProgressBar` (unless ``--quiet`` or not ``bar``); on an error
+    ``(None, exit status)``, the error reported in one line."""
+    progress = None
+    try:
+        tolerance = check_output_options(args)
+        progress = ProgressBar(sys.stderr, desc) if bar and not args.quiet else None
+        return work(tolerance, progress), None
     except (RenderError, ThinFilmError, ValueError) as e:
-        return report_error(PROG, e, args.verbose)
+        return None, report_error(prog, e, args.verbose)
     finally:
-        if bar is not None:
-            bar.close()
+        if progress is not None:
+            progress.close()
+
+
+def check_output_options(args: argparse.Namespace):
+    """Check the output options that ``design`` and ``fit`` share (before the
+    work, so that a bad one fails first); returns the parsed ``--tolerance``."""
+    from thinfilm_mi.design import parse_tolerance
+
+    if args.plot:
+        require_extra("matplotlib", "plot", "--plot")
+    tolerance = parse_tolerance(args.tolerance) if args.tolerance else None
+    if args.spp < 1:
+        raise UsageError(f"--spp must be >= 1, got {args.spp}")
+    batch_scene.parse_size(args.size)
+    if args.render and Path(args.render).suffix.lower() not in (".png", ".exr"):
+        raise UsageError(f"--render {args.render!r}: expected an .png (or .exr) file name")
+    return tolerance
+
+
+def write_outputs(prog: str, args: argparse.Namespace, result, rendered_stack=None) -> int:
+    """Print ``result``'s table (or ``--json``), write ``--plot`` (its ``figure()``)
+    and ``--render`` (:func:`render_design` of ``rendered_stack``, default the
+    result: anything with ``layers`` and ``problem``); return the exit status."""
     print(result.to_json(indent=1) if args.json else result.table())
     if args.plot:
         try:
@@ -145,16 +172,31 @@ def cmd_design(args: argparse.Namespace) -> int:
             path.parent.mkdir(parents=True, exist_ok=True)
             fig.savefig(path)
         except Exception as e:
-            return report_error(PROG, failure(e, f"cannot write --plot {args.plot}: {e}"), args.verbose)
-        print(f"{PROG}: wrote {path}", file=sys.stderr)
+            return report_error(prog, failure(e, f"cannot write --plot {args.plot}: {e}"), args.verbose)
+        print(f"{prog}: wrote {path}", file=sys.stderr)
     if args.render:
         try:
-            rendered = render_design(result, args.render, size=args.size, spp=args.spp,
-                                     variant=args.variant, progress=None if args.quiet else sys.stderr)
+            rendered = render_design(result if rendered_stack is None else rendered_stack, args.render,
+                                     size=args.size, spp=args.spp, variant=args.variant,
+                                     progress=None if args.quiet else sys.stderr)
         except RenderError as e:
-            return report_error(PROG, e, args.verbose)
+            return report_error(prog, e, args.verbose)
         print(summary(rendered), file=sys.stderr)
     return 0
+
+
+def add_output_options(p: argparse.ArgumentParser, json_help: str, plot_help: str, tolerance_help: str) -> None:
+    """The options of :func:`check_output_options` and :func:`write_outputs`."""
+    p.add_argument("--tolerance", metavar="SIGMA[:DRAWS][:DIST]", help=tolerance_help)
+    p.add_argument("--json", action="store_true", help=json_help)
+    p.add_argument("--plot", metavar="FIG.png", help=plot_help)
+    p.add_argument("--render", metavar="OUT.png", help="render the stack on a sphere of the substrate "
+                                                       "(also writes OUT.xml and OUT.exr)")
+    p.add_argument("--size", default=RENDER_SIZE, metavar="WxH", help=f"render size (default {RENDER_SIZE})")
+    p.add_argument("--spp", type=int, default=RENDER_SPP, help=f"render samples per pixel (default {RENDER_SPP})")
+    p.add_argument("--variant", default=batch_scene.DEFAULT_VARIANT, help="Mitsuba variant of the render")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--verbose", action="store_true")
 
 
 def add_parser(sub) -> argparse.ArgumentParser:
@@ -172,17 +214,9 @@ def add_parser(sub) -> argparse.ArgumentParser:
     p.add_argument("--seeds", type=int, help="seed stacks tried without a start (default: the file's, else 6)")
     p.add_argument("--seed", type=int, help="random seed of the seeds and the tolerance draws (default 0)")
     p.add_argument("--time-limit", type=float, metavar="SECONDS", help="start no new seed after this")
-    p.add_argument("--tolerance", metavar="SIGMA[:DRAWS][:DIST]",
-                   help="Monte-Carlo thickness errors, e.g. 1%%:200 (relative), 2nm:500 (absolute), "
-                        "1%%:200:uniform (±1 %%); normal by default")
-    p.add_argument("--json", action="store_true", help="print JSON (layers, merit, seconds, targets, tolerance)")
-    p.add_argument("--plot", metavar="FIG.png", help="draw spectra, colour against angle and tolerance spread")
-    p.add_argument("--render", metavar="OUT.png", help="render the stack on a sphere of the substrate "
-                                                       "(also writes OUT.xml and OUT.exr)")
-    p.add_argument("--size", default=RENDER_SIZE, metavar="WxH", help=f"render size (default {RENDER_SIZE})")
-    p.add_argument("--spp", type=int, default=RENDER_SPP, help=f"render samples per pixel (default {RENDER_SPP})")
-    p.add_argument("--variant", default=batch_scene.DEFAULT_VARIANT, help="Mitsuba variant of the render")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.add_argument("--verbose", action="store_true")
+    add_output_options(p, "print JSON (layers, merit, seconds, targets, tolerance)",
+                       "draw spectra, colour against angle and tolerance spread",
+                       "Monte-Carlo thickness errors, e.g. 1%%:200 (relative), 2nm:500 (absolute), "
+                       "1%%:200:uniform (±1 %%); normal by default")
     p.set_defaults(func=cmd_design)
     return p

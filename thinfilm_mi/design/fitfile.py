@@ -46,6 +46,7 @@ import numpy as np
 
 from thinfilm_mi.design.dispersion import DispersionModel, model_class
 from thinfilm_mi.design.targets import (
+    check_keys,
     fail,
     locate_file,
     parse_choice,
@@ -362,14 +363,7 @@ def _instrument(doc: Any) -> tuple[float, float]:
 
 
 def _measurement(doc: Any, base: Path | None, name: str) -> Measurement:
-    if not isinstance(doc, dict):
-        fail("measurements file", f"expected a mapping with substrate, layers and data, got {doc!r}")
-    unknown = [k for k in doc if k not in _TOP_KEYS]
-    if unknown:
-        fail(str(unknown[0]), f"unknown key; expected {', '.join(_TOP_KEYS)}")
-    for key in ("substrate", "layers", "data"):
-        if key not in doc:
-            fail(key, "missing")
+    check_keys(doc, _TOP_KEYS, ("substrate", "layers", "data"), "measurements file")
     ambient_spec = doc.get("ambient", 1.0)
     ambient = resolve_material(ambient_spec, "ambient", base)
     if ambient.constant is None or ambient.constant.imag > AMBIENT_K_TOL:

@@ -428,15 +428,20 @@ def load_problem(source: Any) -> Problem:
         raise ThinFilmError(f"{name}: {e}") from None
 
 
-def _problem(doc: Any, base: Path | None, name: str) -> Problem:
+def check_keys(doc: Any, allowed: tuple[str, ...], required: tuple[str, ...], what: str) -> None:
+    """:class:`ThinFilmError` unless ``doc`` is a mapping of ``allowed`` keys holding every ``required`` one."""
     if not isinstance(doc, dict):
-        fail("targets file", f"expected a mapping with substrate, materials and targets, got {doc!r}")
-    unknown = [k for k in doc if k not in _TOP_KEYS]
+        fail(what, f"expected a mapping with {', '.join(required[:-1])} and {required[-1]}, got {doc!r}")
+    unknown = [k for k in doc if k not in allowed]
     if unknown:
-        fail(str(unknown[0]), f"unknown key; expected {', '.join(_TOP_KEYS)}")
-    for key in ("substrate", "materials", "targets"):
+        fail(str(unknown[0]), f"unknown key; expected {', '.join(allowed)}")
+    for key in required:
         if key not in doc:
             fail(key, "missing")
+
+
+def _problem(doc: Any, base: Path | None, name: str) -> Problem:
+    check_keys(doc, _TOP_KEYS, ("substrate", "materials", "targets"), "targets file")
     ambient_spec = doc.get("ambient", 1.0)
     ambient = resolve_material(ambient_spec, "ambient", base)
     substrate = resolve_material(doc["substrate"], "substrate", base)
