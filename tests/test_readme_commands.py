@@ -305,6 +305,22 @@ def check_design_decorative(proc, root, command):
     assert (root / "out" / "decorative.png").stat().st_size > 0
 
 
+def check_fit(proc, root, command):
+    # the stack as built (examples/fit/make_data.py): each fitted value within 3 standard errors
+    truth = {"d[0]": 14.2, "d[1]": 33.5, "d[2]": 118.0, "d[3]": 93.7, "H.A": 2.25, "H.B": 0.03,
+             "data[2].scale": 0.98}
+    rows = {}
+    for line in proc.stdout.splitlines():              # the parameter table comes before the correlations
+        if line.strip() and line.split()[0] in truth:
+            rows.setdefault(line.split()[0], line.split()[1:3])
+    assert set(rows) == set(truth), proc.stdout
+    for name, value in truth.items():
+        fitted, se = map(float, rows[name])
+        assert abs(fitted - value) <= 3 * se, (name, fitted, se, value)
+    assert (root / "out" / "fit_spectra.png").stat().st_size > 0
+    assert (root / "out" / "fit.png").stat().st_size > 0 and (root / "out" / "fit_H.csv").is_file()
+
+
 #: README command -> the check of what it produced, ``check(proc, workdir, command)``
 CHECKS = {
     "make demo": check_make_demo,
@@ -327,6 +343,8 @@ CHECKS = {
     "python -m thinfilm_mi design examples/design/decorative.yml --plot "
     "out/decorative_design.png --render out/decorative.png --size 160x106 --spp 8":
         check_design_decorative,
+    "python -m thinfilm_mi fit examples/fit/measurements.yml --plot out/fit_spectra.png --render out/fit.png "
+    "--size 160x106 --spp 8": check_fit,
 }
 
 
