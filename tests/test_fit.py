@@ -252,6 +252,10 @@ BAD = {
                       "materials.H: unknown model 'drude'; expected one of constant, cauchy"),
     "parameter in no data": ("unused", "wavelength,value\n500,0.1\n510,0.1\n",
                              "materials.X: appears in no film of layers, so in no data"),
+    "unknown bound": ("bounds", "wavelength,value\n500,0.1\n510,0.1\n",
+                      "bounds.x: not a free parameter; free parameters: d[0], d[1], H.A"),
+    "sigma on some data only": ("mixed", "wavelength,value\n500,0.1\n510,0.1\n",
+                                "data[1] (d.csv): either every data set carries sigma"),
     "parameter without effect": ("zero", "wavelength,value\n500,0.1\n510,0.1\n520,0.1\n",
                                  "H.A: appears in no data"),
 }
@@ -271,6 +275,10 @@ def test_bad_files_give_one_clear_error(tmp_path, case):
         doc["materials"]["H"]["model"] = "drude"
     elif what == "unused":
         doc["materials"]["X"] = {"model": "constant", "n": 1.4}
+    elif what == "bounds":
+        doc["bounds"] = {"x": [0, 1]}
+    elif what == "mixed":
+        doc["data"].append({"file": "d.csv", "quantity": "T", "sigma": 0.01})
     elif what == "zero":
         # the index of a film of no thickness (and none fitted) changes nothing
         doc["layers"], doc["thickness"] = "H 0; 1.46 80", "fixed"
@@ -308,8 +316,9 @@ def test_errors_scale_with_chi2_without_sigma_and_warnings(tmp_path):
 
 
 def test_command_json_materials_and_progress(tmp_path):
-    """The command: --json holds the parameters and residuals; --materials writes the fitted
-    dispersive material as a table that a layers string reads back; the bar runs on stderr."""
+    """The command: --json holds the parameters, residuals and --tolerance's draws (1 % thickness
+    errors can only fit worse than the optimum); --materials writes the fitted dispersive material
+    as a table that a layers string reads back; the bar runs on stderr."""
     from thinfilm_mi import Stack
 
     A, d = 1.7, 200.0
@@ -323,9 +332,12 @@ def test_command_json_materials_and_progress(tmp_path):
 
     (tmp_path / "m.yml").write_text(yaml.safe_dump(doc))
     proc = subprocess.run([sys.executable, "-m", "thinfilm_mi", "fit", str(tmp_path / "m.yml"), "--json",
-                           "--materials", str(tmp_path / "mat")], capture_output=True, text=True)
+                           "--materials", str(tmp_path / "mat"), "--tolerance", "1%:20"],
+                          capture_output=True, text=True)
     assert proc.returncode == 0, proc.stderr
     out = json.loads(proc.stdout)
+    tol = out["tolerance"]
+    assert tol["draws"] == 20 and tol["reduced_chi2"]["mean"] > out["reduced_chi2"]
     assert [p["name"] for p in out["parameters"]] == ["d[0]", "F.A"]
     assert out["layers"].startswith("fit_F.csv ") and len(out["datasets"][0]["residuals"]) == wl.size
     assert "fit:" in proc.stderr            # the progress bar

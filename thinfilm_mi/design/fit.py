@@ -30,18 +30,12 @@ import numpy as np
 
 from thinfilm_mi.design.fitfile import Measurement, load_measurements
 from thinfilm_mi.design.fitmodel import FitModel
-from thinfilm_mi.design.fitresult import FitResult, Minimum
+from thinfilm_mi.design.fitresult import CORRELATION_WARNING, IDENTIFIABILITY_DELTA, FitResult, Minimum
 from thinfilm_mi.design.tolerance import ToleranceSpec, parse_tolerance
 from thinfilm_mi.errors import ThinFilmError
 
 __all__ = ["fit", "fit_model", "CORRELATION_WARNING", "IDENTIFIABILITY_DELTA"]
 
-#: A correlation between two parameters above this (in magnitude) is warned about.
-CORRELATION_WARNING = 0.95
-#: A distinct minimum whose χ² exceeds the best's by less than this (times the
-#: residuals' scale, 1 with σ, χ²/dof without) is warned about: the data hardly
-#: prefer the best (Δχ² = 9 is a 3σ likelihood-ratio difference for one parameter).
-IDENTIFIABILITY_DELTA = 9.0
 #: Random starts screened (by χ², no Jacobian) per start that is descended from.
 SCREEN_PER_START = 8
 #: The size of the optimiser's first steps, relative to each parameter's start (see ``_solve``).

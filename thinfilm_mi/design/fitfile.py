@@ -197,7 +197,6 @@ class Measurement:
     substrate_spec: str = ""
     base: Path | None = None
     sigma_given: bool = False
-    notes: list[str] = field(default_factory=list)
 
 
 def _read_csv(path: Path, where: str) -> dict[str, np.ndarray]:
@@ -410,14 +409,13 @@ def _measurement(doc: Any, base: Path | None, name: str) -> Measurement:
                for d, free in parsed if free]
     _bounds(params, doc.get("bounds"))
     bw, cone = _instrument(doc.get("instrument"))
-    m = Measurement(ambient, substrate, films, materials, datasets, params, mode, thick, bw, cone,
-                    _integer(doc, "starts", 8, 1), 0.1, _integer(doc, "seed", 0, 0), name,
-                    str(locate_file(ambient_spec, base)).strip(), str(locate_file(doc["substrate"], base)).strip(),
-                    base, all(given))
     spread = parse_number(doc.get("spread", 0.1), "spread", "spread")
     if not 0 <= spread < 1:
         fail("spread", f"expected a fraction in [0, 1), got {spread:g}")
-    m.spread = spread
+    m = Measurement(ambient, substrate, films, materials, datasets, params, mode, thick, bw, cone,
+                    _integer(doc, "starts", 8, 1), spread, _integer(doc, "seed", 0, 0), name,
+                    str(locate_file(ambient_spec, base)).strip(), str(locate_file(doc["substrate"], base)).strip(),
+                    base, all(given))
     if not params:
         fail("measurements file", "no free parameter (thickness: fixed and no free dispersion or scale)")
     _check_reach(m)

@@ -15,7 +15,14 @@ from thinfilm_mi.design.result import format_index, format_nm, json_list
 from thinfilm_mi.design.tolerance import ToleranceSpec, draw_thicknesses, parse_tolerance
 from thinfilm_mi.materials import save_material
 
-__all__ = ["FitResult", "Minimum"]
+__all__ = ["FitResult", "Minimum", "CORRELATION_WARNING", "IDENTIFIABILITY_DELTA"]
+
+#: A correlation between two parameters above this (in magnitude) is warned about.
+CORRELATION_WARNING = 0.95
+#: A distinct minimum whose χ² exceeds the best's by less than this (times the
+#: residuals' scale, 1 with σ, χ²/dof without) is warned about: the data hardly
+#: prefer the best (Δχ² = 9 is a 3σ likelihood-ratio difference for one parameter).
+IDENTIFIABILITY_DELTA = 9.0
 
 
 @dataclass
@@ -93,8 +100,6 @@ class FitResult:
         return self.minima[1] if len(self.minima) > 1 else None
 
     def warnings(self) -> list[str]:
-        from thinfilm_mi.design.fit import CORRELATION_WARNING, IDENTIFIABILITY_DELTA
-
         out = []
         rho = self.correlation
         names = self.names
