@@ -75,14 +75,16 @@ def _random_stack(rng):
 
 def test_uncertainties_are_calibrated(tmp_path):
     """Issue 43, check 1: 100 random stacks, R 0°/45° s/p and T 0° by coh_tmm with noise σ 0.002,
-    fitted from starts 10 % off in every thickness (the sign of each at random)."""
+    fitted from starts 10 % off in every thickness (the sign of each at random), 3 starts each
+    (the nominal one and two screened around it: with these the stacks seeded 1, 7 and 11 all
+    reach their global minimum; with one start alone, one of the 100 stacks seeded 7 does not)."""
     rng = np.random.default_rng(1)
     z = []
     for s in range(100):
         specs, d = _random_stack(rng)
         start = d * (1 + 0.1 * rng.choice([-1.0, 1.0], d.size))
         doc = {"substrate": "BK7", "layers": "; ".join(f"{m} {x}" for m, x in zip(specs, start)),
-               "data": _data(tmp_path, _coh(specs, d), rng, tag=f"{s}_"), "starts": 4}
+               "data": _data(tmp_path, _coh(specs, d), rng, tag=f"{s}_"), "starts": 3}
         r = fit(doc)
         z += list((r.x - d) / r.se)
     z = np.array(z)
