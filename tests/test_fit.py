@@ -258,6 +258,8 @@ BAD = {
                       "bounds.x: not a free parameter; free parameters: d[0], d[1], H.A"),
     "sigma on some data only": ("mixed", "wavelength,value\n500,0.1\n510,0.1\n",
                                 "data[1] (d.csv): either every data set carries sigma"),
+    "no index at the start": ("pole", "wavelength,value\n300,0.1\n510,0.1\n",
+                              "materials.H: its sellmeier parameters"),
     "parameter without effect": ("zero", "wavelength,value\n500,0.1\n510,0.1\n520,0.1\n",
                                  "H.A: appears in no data"),
 }
@@ -281,6 +283,9 @@ def test_bad_files_give_one_clear_error(tmp_path, case):
         doc["bounds"] = {"x": [0, 1]}
     elif what == "mixed":
         doc["data"].append({"file": "d.csv", "quantity": "T", "sigma": 0.01})
+    elif what == "pole":
+        # a resonance at 400 nm (C1 = 0.16 µm²): n² < 0 just below it
+        doc["materials"]["H"] = {"model": "sellmeier", "B1": 1.0, "C1": 0.16, "free": ["B1"]}
     elif what == "zero":
         # the index of a film of no thickness (and none fitted) changes nothing
         doc["layers"], doc["thickness"] = "H 0; 1.46 80", "fixed"

@@ -63,7 +63,8 @@ class DispersionModel:
         return ()
 
     def index_and_derivatives(self, wl: np.ndarray, params: dict) -> tuple[np.ndarray, np.ndarray]:
-        """``(n + ik (P,), d(n + ik)/d parameter (P, len(parameters)))`` at ``wl`` nm."""
+        """``(n + ik (P,), d(n + ik)/d parameter (P, len(parameters)))`` at ``wl`` nm
+        (NaN where the parameters give no index)."""
         raise NotImplementedError
 
     def index(self, wl: np.ndarray, params: dict | None = None) -> np.ndarray:
@@ -126,10 +127,9 @@ class Sellmeier(DispersionModel):
             b, c = params[f"B{i}"], params[f"C{i}"]
             eps = eps + b * l2 / (l2 - c)
             der += [l2 / (l2 - c), b * l2 / (l2 - c) ** 2]
-        if np.any(eps <= 0):
-            raise ThinFilmError(f"sellmeier: n² = {float(eps.min()):.4g} <= 0 at some wavelength "
-                                f"(parameters {params})")
-        n = np.sqrt(eps)
+        # n² <= 0 (a wavelength at or inside a resonance) has no real n: NaN, which the fit's
+        # optimiser answers with a shorter step, and which the file's start is checked against
+        n = np.sqrt(np.where(eps > 0, eps, np.nan))
         return n + 0j, np.stack(der, axis=-1) / (2.0 * n[:, None]) + 0j
 
 

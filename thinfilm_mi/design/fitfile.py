@@ -55,7 +55,7 @@ from thinfilm_mi.design.targets import (
     resolve_material,
 )
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials import Material
+from thinfilm_mi.materials import MIN_INDEX, Material
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL, parse_layers
 
 __all__ = ["Dataset", "FitMaterial", "Parameter", "Measurement", "load_measurements", "QUANTITIES",
@@ -438,6 +438,16 @@ def _check_reach(m: Measurement):
             if lo < a * (1 - 1e-9) or hi > b * (1 + 1e-9):
                 bad = lo if lo < a * (1 - 1e-9) else hi
                 fail(d.name, f"wavelength {bad:g} nm is out of reach: {what} has data for {a:g}-{b:g} nm only")
+        for key, f in m.materials.items():
+            if f.model is None:
+                continue
+            wl = np.linspace(max(lo, 1.0), hi, 64)
+            n = f.model.index(wl)
+            ok = np.isfinite(n) & (n.real >= MIN_INDEX) & (n.imag >= 0)
+            if not np.all(ok):
+                bad = int(np.argmin(ok))
+                fail(f"materials.{key}", f"its {f.model.name} parameters {f.model.values} give n = "
+                                         f"{complex(n[bad]):.4g} at {wl[bad]:g} nm, where {d.name} needs an index")
 
 
 def load_measurements(source: Any) -> Measurement:
