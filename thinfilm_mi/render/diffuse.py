@@ -21,10 +21,11 @@ import numpy as np
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.optics.core import Cx, film_attenuation
-from thinfilm_mi.render.colour import GradientSampler, index_on_wavelengths
-from thinfilm_mi.render.kernel import side_rt
+from thinfilm_mi.render.colour import GradientSampler, index_on_wavelengths, with_absorbing
+from thinfilm_mi.render.kernel import KernelStack, side_data
 from thinfilm_mi.render.params import ALBEDO_SLACK
 from thinfilm_mi.render.textures import checked_texture, mitsuba_module, regular, scalar, uniform
+from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.diffuse_scale import exact_hemispherical, paper_hemispherical
 from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable, hemispherical_factors, r_dh_partials
 
@@ -214,3 +215,21 @@ def colour_estimate(coating, film_n, film_n_thickness, r_dh_at, with_derivatives
                             lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)
     channels = [sampler.estimate(wl, product * g(c, r_dh))[c] for c in range(dr.size_v(mi.Spectrum))]
     return mi.Spectrum(*channels)
+
+
+def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.ndarray,
+            scale: float = 1.0):
+    """Exact float64 ``(R, T)`` of the planned side ``inside`` of ``stack`` at every
+    angle ``cos`` and wavelength (shape ``(len cos, len wavelengths)`` each), as
+    the colour tables see it (spectral values of every medium), every film's
+    thickness times ``scale``."""
+    side = stack.plan[inside]
+    data = with_absorbing(side_data(side, True))
+    wl = np.asarray(wavelengths, np.float64)
+    rows = np.tile(np.arange(wl.size), cos.size)
+    points = np.repeat(cos, wl.size)
+    out = tabulate_base.evaluate_side(data, points, rows, wl, tabulate_base.side_indices(data, wl),
+                                      None if scale == 1.0 else np.full(points.size, float(scale)))
+    out = out.reshape(cos.size, wl.size, 2)
+    T = np.zeros_like(out[..., 0]) if side.opaque else out[..., 1]
+    return out[..., 0], T

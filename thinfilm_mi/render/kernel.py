@@ -34,10 +34,10 @@ from thinfilm_mi.render.colour import (
     colour_table,
     index_on_wavelengths,
     prepare_gradients,
-    with_absorbing,
 )
 from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.media import SpectralIndex
+from thinfilm_mi.render.mirror import either_side, mirror_applies, mirrored_rt
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 from thinfilm_mi.tabulate import band as _band_tables
 from thinfilm_mi.tabulate import base as tabulate_base
@@ -81,8 +81,6 @@ OPAQUE_AMPLITUDE = 1e-9
 #: (``optics.stack_rt_loop_real``) and is faster than the unrolled films from
 #: one film on (benchmarks/SPEED.md).
 REAL_LOOP_MIN_FILMS = 1
-
-
 
 
 class _Side:
@@ -195,7 +193,11 @@ class KernelStack:
                 zip(self.indices, self.thickness, self._thickness_values()) if dv > 0]
         films = [(ix, d, dv > self.coherence_thickness) for ix, d, dv in kept]
         opaque = [self._opaque(ix, dv) for ix, _, dv in kept]
-        self.plan = {inside: self._side(inside, t, films, opaque)
+        # Both sides of a lossless stack from the ambient side's table of R (render.mirror)
+        polarized = mitsuba_module().is_polarized
+        self.mirrored = (set(self.sides) == {False, True} and colour_channels() is None
+                         and not polarized and mirror_applies(self.ambient, films, self.substrate))
+        self.plan = {inside: self._side(inside, t and not self.mirrored, films, opaque)
                      for inside, t in self.sides.items()}
         self.table_failed = []
         if colour_channels() is not None:
@@ -208,7 +210,6 @@ class KernelStack:
         # Polarized variants read tables of the Mueller components
         # (thinfilm_mi.tabulate.mueller) or evaluate the complex amplitudes
         # (thinfilm_mi.render.amplitudes; their film loop has no real-amplitude form)
-        polarized = mitsuba_module().is_polarized
         quantity = MUELLER if polarized else None
         self._plan_tables(quantity)
         reflection_channels = quantity.channels(False) if quantity else 1
@@ -217,8 +218,9 @@ class KernelStack:
                 # A side whose table serves the calls its plan is for (R, and T
                 # where the plan asks for it) does not evaluate its films: no
                 # buffers for it (other calls fall back to the unrolled films).
-                served = side.table is not None and (side.table.channels > reflection_channels
-                                                     or side.opaque or not side.transmission)
+                served = (side.table is not None and (side.table.channels > reflection_channels
+                                                      or side.opaque or not side.transmission)
+                          ) or self.mirror_table(side) is not None
                 if (not served and len(side.films) >= min(LOOP_MIN_FILMS, REAL_LOOP_MIN_FILMS)
                         and not any(side.incoherent)
                         and all(ix.knots is not None for ix, _, _ in side.films)):
@@ -243,7 +245,11 @@ class KernelStack:
             # optimisation loop spends no time in builds.
             return
         for inside, side in self.plan.items():
-            if side.films and not (self.tabulate == "auto" and inside in self._gave_up):
+            if inside and self.mirrored and self.plan[False].table is None:
+                # no table to mirror: this side is planned (and tabulated) on its own
+                self.mirrored, side.transmission = False, self.sides[True]
+            if side.films and not (self.tabulate == "auto" and inside in self._gave_up) \
+                    and self.mirror_table(side) is None:
                 side.table = _tables_cache(self, side, quantity)
                 if side.table is None:
                     self.table_failed.append(inside)
@@ -262,10 +268,17 @@ class KernelStack:
 
     def mode(self) -> str:
         """``"table"`` if every planned side reads a table, ``"exact"`` if none, else ``"mixed"``."""
-        tabled = [s.table is not None for s in self.plan.values() if s.films]
+        tabled = [s.table is not None or self.mirror_table(s) is not None
+                  for s in self.plan.values() if s.films]
         if tabled and all(tabled):
             return "table"
         return "mixed" if any(tabled) else "exact"
+
+    def mirror_table(self, side: _Side):
+        """The table that serves ``side`` lit from the substrate through the ambient
+        side's (:mod:`thinfilm_mi.render.mirror`), or ``None``."""
+        outside = self.plan.get(False)
+        return outside.table if self.mirrored and side is self.plan.get(True) else None
 
     def describe(self) -> str:
         films = "; ".join(f"{ix.label} {scalar(d):g} nm"
@@ -329,8 +342,9 @@ class KernelStack:
             side = self._full_side(inside, transmission)
         return side
 
-    def _eval_side(self, inside: bool, si, cos_theta, active, transmission: bool,
+    def side_response(self, inside: bool, si, cos_theta, active, transmission: bool,
                    thickness_scale):
+        """The planned side ``inside`` at the hit: its table, else its films exactly."""
         mi = mitsuba_module()
         # RGB/mono variants come here only for a side without films (no phase):
         # any wavelength will do for the Fresnel terms
@@ -395,7 +409,7 @@ class KernelStack:
                 raise ThinFilmError(f"{self.plugin}: internal error: the side lit from the "
                                     f"{'substrate' if flag else 'ambient'} was not planned")
             if plan.colour is None:
-                return self._eval_side(flag, si, cos_theta, active, transmission, None)
+                return self.side_response(flag, si, cos_theta, active, transmission, None)
             R, T = plan.colour.lookup(cos_theta, scale, active)
             if transmission and T is None:
                 T = mitsuba_module().Spectrum(0.0)
@@ -411,7 +425,7 @@ class KernelStack:
                     R = attach_gradient(R, sampler.estimate(wl, exact))
             return (R, T) if transmission else R
 
-        return _either_side(side, inside, transmission)
+        return either_side(side, inside, transmission)
 
     def colour_gradients(self, si, active=True) -> bool:
         """Whether a film thickness or an index of this stack carries gradients
@@ -432,21 +446,16 @@ class KernelStack:
         """
         if thickness_scale is None:
             thickness_scale = self.thickness_scale_at(si, active)
+        if (self.mirrored and thickness_scale is None and self.evaluation_side(
+                False, False, self.index_gradients(si, active)) is self.plan[False]):
+            out = mirrored_rt(self, si, cos_theta, inside, active, transmission)
+            if out is not None:
+                return out
 
         def side(flag: bool):
-            return self._eval_side(flag, si, cos_theta, active, transmission, thickness_scale)
+            return self.side_response(flag, si, cos_theta, active, transmission, thickness_scale)
 
-        return _either_side(side, inside, transmission)
-
-
-def _either_side(side, inside, transmission: bool):
-    """``side(inside)`` for a Python bool; for a mask both sides, blended."""
-    if isinstance(inside, bool):
-        return side(inside)
-    out_r, in_r = side(False), side(True)
-    if transmission:
-        return (dr.select(inside, in_r[0], out_r[0]), dr.select(inside, in_r[1], out_r[1]))
-    return dr.select(inside, in_r, out_r)
+        return either_side(side, inside, transmission)
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
@@ -581,20 +590,3 @@ def side_data(side: _Side, transmission: bool, channel: dict | None = None,
         kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
 
-
-def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.ndarray,
-            scale: float = 1.0):
-    """Exact float64 ``(R, T)`` of the planned side ``inside`` of ``stack`` at every
-    angle ``cos`` and wavelength (shape ``(len cos, len wavelengths)`` each), as
-    the colour tables see it (spectral values of every medium), every film's
-    thickness times ``scale``."""
-    side = stack.plan[inside]
-    data = with_absorbing(side_data(side, True))
-    wl = np.asarray(wavelengths, np.float64)
-    rows = np.tile(np.arange(wl.size), cos.size)
-    points = np.repeat(cos, wl.size)
-    out = tabulate_base.evaluate_side(data, points, rows, wl, tabulate_base.side_indices(data, wl),
-                                      None if scale == 1.0 else np.full(points.size, float(scale)))
-    out = out.reshape(cos.size, wl.size, 2)
-    T = np.zeros_like(out[..., 0]) if side.opaque else out[..., 1]
-    return out[..., 0], T

@@ -399,33 +399,39 @@ class Table:
             x = x + dr.select(x > self._split, 2.0 * GHOST, 0.0)
         return (x + self._offset) * self._inv_u
 
-    def lookup(self, cos_i, n0, n_exit, wavelengths, active=True):
+    def lookup(self, cos_i, n0, n_exit, wavelengths, active=True, sin_i=None):
         """``[R]`` or ``[R, T]`` as spectra: one lookup per wavelength.
 
         ``cos_i`` (>= 0) is a Float; ``n0``, ``n_exit`` (real parts) and
         ``wavelengths`` are ``mi.Spectrum``. A cubic lookup may overshoot
         between nodes: ``R`` is clamped to ``[0, 1]`` and ``T`` to ``[0, 1 - R]``.
         """
-        res = self.lookup_channels(cos_i, n0, n_exit, wavelengths, active)
+        res = self.lookup_channels(cos_i, n0, n_exit, wavelengths, active, sin_i)
         res[0] = dr.clip(res[0], 0.0, 1.0)
         if self.channels > 1:
             res[1] = dr.clip(res[1], 0.0, 1.0 - res[0])
         return res
 
-    def lookup_channels(self, cos_i, n0, n_exit, wavelengths, active=True) -> list:
+    def lookup_channels(self, cos_i, n0, n_exit, wavelengths, active=True, sin_i=None) -> list:
         """Every channel as a spectrum, as interpolated (unclamped); arguments as
-        :meth:`lookup`."""
+        :meth:`lookup`, or (not a split table) ``cos_i`` and ``sin_i`` one direction
+        per wavelength (lists; :func:`thinfilm_mi.render.mirror.mirrored_rt`)."""
         import mitsuba as mi
 
-        cos_i = dr.clip(cos_i, 0.0, 1.0)
-        sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
+        each = isinstance(cos_i, list)
+        if not each:
+            cos_i = dr.clip(cos_i, 0.0, 1.0)
+            sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
         out = [[] for _ in range(self.channels)]
-        if self.kind != "tir":
+        if self.kind != "tir" and not each:
             u = self._u(cos_i, sin_i, 1.0, 1.0)
-        factor = self.shear.factor(sin_i) if self.shear is not None else None
+        factor = self.shear.factor(sin_i) if self.shear is not None and not each else None
         for i in range(len(wavelengths)):
             if self.kind == "tir":
                 u = self._u(cos_i, sin_i, n0[i], n_exit[i])
+            elif each:
+                u = self._u(cos_i[i], sin_i[i], 1.0, 1.0)
+                factor = self.shear.factor(sin_i[i]) if self.shear is not None else None
             t = (v_texel(wavelengths[i], self._nv) if factor is None
                  else (SIGMA_MAX - factor / wavelengths[i]) * self._v_scale)
             v = (t + self._offset) * self._inv_v

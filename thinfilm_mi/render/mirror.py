@@ -1,0 +1,113 @@
+"""Both sides of a lossless stack from one table of ``R``.
+
+A stack between real media whose films do not absorb conserves energy
+(``R + T = 1`` from either side) and its ``T`` is reciprocal (the same for light
+crossing it either way along one path). So ``R`` seen from the substrate at
+``θ_s`` is ``R`` seen from the ambient at ``θ_a`` with ``n_a sin θ_a = n_s sin θ_s``
+(Snell's law through the films; beyond the critical angle ``R = 1``), and
+``T = 1 - R`` on both sides. :class:`~thinfilm_mi.render.kernel.KernelStack` plans
+such a stack (a ``thinfilm_dielectric`` or ``thinfilm_roughdielectric`` lit from
+both sides, spectral variants, the substrate's index at least the ambient's) with
+one table of ``R`` lit from the ambient (one channel instead of two, one side
+instead of two), and :func:`mirrored_rt` reads it for every lane: one cubic lookup
+per wavelength where two sides of ``R`` and ``T`` took four, with no per-side
+branch. Evaluated exactly, such a stack runs the ambient side's recursion (``R``
+only) for every lane at the mapped angle, where both sides' were run. The table's
+verified error bound holds over its whole angle axis, so the mapped lookups and
+``1 - R`` stay within ``table_error``.
+
+Other stacks lit from either side per lane (:func:`either_side`) evaluate each side
+under a symbolic conditional: a SIMD packet whose lanes all arrive on one side runs
+that side's lookups or recursion only (Dr.Jit skips a branch no lane of a packet
+takes), where both were computed for every lane and selected.
+"""
+from __future__ import annotations
+
+from typing import Any
+
+import drjit as dr
+import numpy as np
+
+from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
+
+
+def real_on_grid(index) -> bool:
+    """Whether a :class:`~thinfilm_mi.render.media.SpectralIndex` has no absorption
+    over 360-830 nm (on the 1 nm grid)."""
+    n = index.spectral_values(GRID)
+    k = n.imag if n is not None else texture_on_grid(index.k)
+    return not np.any(k)
+
+
+def mirror_applies(ambient, films: list, substrate) -> bool:
+    """Whether both sides of these films (``(index, thickness, incoherent)``) may be
+    read from the ambient side's table of ``R``: every medium lossless and the
+    substrate's index nowhere below the ambient's (the ambient side then never
+    totally reflects, and its table has one angle segment)."""
+    if not films or not all(real_on_grid(ix) for ix, _, _ in films):
+        return False
+    if not (real_on_grid(ambient) and real_on_grid(substrate)):
+        return False
+    n_a, n_s = texture_on_grid(ambient.eta), texture_on_grid(substrate.eta)
+    return bool(np.all(n_s >= n_a))
+
+
+def mirrored_rt(stack, si, cos_theta, inside: bool | Any, active, transmission: bool):
+    """``R`` (and ``T = 1 - R``) at ``si.wavelengths`` for light at ``cos_theta`` on the
+    side ``inside`` (a bool or a mask) of a stack planned as mirrored (see the module
+    docstring): one lookup per wavelength of the ambient side's table, or without a
+    table one exact evaluation of the ambient side (when neither medium is dispersive:
+    one mapped angle per lane). ``None`` where neither applies."""
+    mi = mitsuba_module()
+    side = stack.plan[False]
+    wl = si.wavelengths
+    constant = all(ix.knots is not None and ix.knots.size == 0 for ix in (side.n0, side.exit))
+    if side.table is None and not constant:
+        return None
+    if inside is False:
+        cos_a = sin_a = tir = None
+    else:
+        cos = dr.clip(cos_theta, 0.0, 1.0)
+        sin = dr.safe_sqrt((1.0 - cos) * (1.0 + cos))
+        n_a = side.n0.eval_real(si, active)
+        n_s = side.exit.eval_real(si, active)
+        cos_a, sin_a, tir = [], [], []
+        for i in range(1 if side.table is None else len(wl)):
+            beta = n_s[i] * sin                        # n_a sin θ_a
+            d2 = (n_a[i] - beta) * (n_a[i] + beta)     # (n_a cos θ_a)^2
+            inv = dr.rcp(n_a[i])
+            c, s = dr.sqrt(dr.maximum(d2, 0.0)) * inv, dr.minimum(beta * inv, 1.0)
+            if inside is True:
+                cos_a.append(c), sin_a.append(s), tir.append(d2 <= 0)
+            else:
+                cos_a.append(dr.select(inside, c, cos))
+                sin_a.append(dr.select(inside, s, sin))
+                tir.append(inside & (d2 <= 0))
+    if side.table is not None:
+        R = side.table.lookup(cos_theta if cos_a is None else cos_a, None, None, wl, active,
+                              sin_i=sin_a)[0]
+        if tir is not None:
+            R = dr.select(dr.mask_t(mi.UnpolarizedSpectrum)(*tir), 1.0, R)
+    else:
+        R = mi.UnpolarizedSpectrum(stack.side_response(False, si, cos_theta if cos_a is None
+                                                    else cos_a[0], active, False, None))
+        if tir is not None:
+            R = dr.select(tir[0], 1.0, R)
+    return (R, 1.0 - R) if transmission else R
+
+
+def either_side(side, inside, transmission: bool):
+    """``side(inside)`` for a Python bool; for a mask, ``side(True)`` where it is set
+    and ``side(False)`` elsewhere, each under a symbolic conditional (see the module
+    docstring); ``transmission``: whether ``side`` returns ``(R, T)``."""
+    if isinstance(inside, bool):
+        return side(inside)
+    out = dr.if_stmt(args=(), cond=inside, true_fn=lambda: _pair(side(True), transmission),
+                     false_fn=lambda: _pair(side(False), transmission))
+    return out if transmission else out[0]
+
+
+def _pair(res, transmission: bool):
+    """``res`` as a tuple of ``mi.UnpolarizedSpectrum`` (both branches' types must agree)."""
+    U = mitsuba_module().UnpolarizedSpectrum
+    return tuple(U(x) for x in (res if transmission else (res,)))
