@@ -1,20 +1,12 @@
-"""Mitsuba-side plumbing shared by the thin-film BSDFs (no plugin classes here).
-
-* :class:`SpectralIndex` — a complex index ``n + ik`` as two Mitsuba textures
-  evaluated at ``si.wavelengths`` (a ``uniform`` spectrum for a constant, a
-  ``irregular`` spectrum on the dataset's knots and a 1 nm grid for a dataset,
-  or the user's own ``eta``/``k`` textures). Evaluation is Mitsuba's C++
-  texture code: no Python per call in LLVM variants, and the values are opaque
-  kernel inputs, so editing them through ``mi.traverse`` does not recompile.
-* :class:`KernelStack` — films (index and opaque thickness) between an ambient
-  index and a substrate index, evaluated with the optics core on ``mi.Spectrum``
-  (all wavelengths of a path at once) in float32 inside the render kernel:
-  from a table, unrolled film by film (fewer than :data:`LOOP_MIN_FILMS`), or
-  as a loop over buffers of the films (:class:`LoopFilms`; at any depth when
-  every film has a real index above the ambient's, :data:`REAL_LOOP_MIN_FILMS`).
-* :func:`stack_from_props` — reads ``layers`` / ``thin_film_ior`` +
-  ``thin_film_thickness`` / ``ext_ior`` from a plugin's ``mi.Properties`` and
-  validates them at scene load time.
+"""Mitsuba-side plumbing shared by the thin-film BSDFs (no plugin classes here):
+:class:`KernelStack`, films (index and opaque thickness) between an ambient index
+and a substrate index (:class:`~thinfilm_mi.render.media.SpectralIndex`), evaluated
+with the optics core on ``mi.Spectrum`` (all wavelengths of a path at once) in
+float32 inside the render kernel: from a table, unrolled film by film (fewer than
+:data:`LOOP_MIN_FILMS`), or as a loop over buffers of the films (:class:`LoopFilms`;
+at any depth when every film has a real index above the ambient's,
+:data:`REAL_LOOP_MIN_FILMS`); both sides of a lossless stack through one side
+(:mod:`thinfilm_mi.render.mirror`).
 """
 from __future__ import annotations
 
@@ -27,6 +19,7 @@ import numpy as np
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
+from thinfilm_mi.render import mirror
 from thinfilm_mi.render.colour import (
     GradientSampler,
     attach_gradient,
@@ -37,7 +30,6 @@ from thinfilm_mi.render.colour import (
 )
 from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.media import SpectralIndex
-from thinfilm_mi.render.mirror import either_side, mirror_applies, mirrored_rt
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 from thinfilm_mi.tabulate import band as _band_tables
 from thinfilm_mi.tabulate import base as tabulate_base
@@ -96,6 +88,8 @@ class _Side:
                  opaque: bool, transmission: bool):
         self.n0 = n0
         self.films = films
+        #: non-absorbing films under a real incidence medium: T = 1 - R (tables hold R)
+        self.lossless = False
         self.exit = exit_
         self.exit_real = exit_real
         self.opaque = opaque
@@ -193,12 +187,18 @@ class KernelStack:
                 zip(self.indices, self.thickness, self._thickness_values()) if dv > 0]
         films = [(ix, d, dv > self.coherence_thickness) for ix, d, dv in kept]
         opaque = [self._opaque(ix, dv) for ix, _, dv in kept]
-        # Both sides of a lossless stack from the ambient side's table of R (render.mirror)
+        # Spectral variants: lossless films need no T (1 - R); both sides of a lossless
+        # stack come from the ambient side's table of R or recursion (render.mirror)
         polarized = mitsuba_module().is_polarized
-        self.mirrored = (set(self.sides) == {False, True} and colour_channels() is None
-                         and not polarized and mirror_applies(self.ambient, films, self.substrate))
-        self.plan = {inside: self._side(inside, t and not self.mirrored, films, opaque)
+        spectral = colour_channels() is None and not polarized
+        real = spectral and bool(films) and all(mirror.real_on_grid(ix) for ix, _, _ in films)
+        lossless = {i: real and (not i or mirror.real_on_grid(self.substrate)) for i in self.sides}
+        self.mirrored = (set(self.sides) == {False, True} and spectral
+                         and mirror.mirror_applies(self.ambient, films, self.substrate))
+        self.plan = {inside: self._side(inside, t and not lossless[inside], films, opaque)
                      for inside, t in self.sides.items()}
+        for inside, side in self.plan.items():
+            side.lossless = lossless[inside]
         self.table_failed = []
         if colour_channels() is not None:
             # RGB and mono variants read integrated colour tables (thinfilm_mi.tabulate.colour)
@@ -219,7 +219,8 @@ class KernelStack:
                 # where the plan asks for it) does not evaluate its films: no
                 # buffers for it (other calls fall back to the unrolled films).
                 served = (side.table is not None and (side.table.channels > reflection_channels
-                                                      or side.opaque or not side.transmission)
+                                                      or side.opaque or not side.transmission
+                                                      or side.lossless)
                           ) or self.mirror_table(side) is not None
                 if (not served and len(side.films) >= min(LOOP_MIN_FILMS, REAL_LOOP_MIN_FILMS)
                         and not any(side.incoherent)
@@ -234,6 +235,8 @@ class KernelStack:
         # call is Python anyway and the load-time build would dominate.
         # ``quantity``: what the tables hold (None: the powers; tabulate.mueller.MUELLER)
         min_films = quantity.auto_min_films if quantity else AUTO_MIN_FILMS
+        if self.mirrored and mirror.exact_mirrors(self.ambient, self.substrate):
+            min_films = mirror.AUTO_MIN_FILMS
         want = self.tabulate is True or (
             self.tabulate == "auto" and self.thickness_texture is None
             and dr.is_jit_v(mitsuba_module().Float)
@@ -247,7 +250,8 @@ class KernelStack:
         for inside, side in self.plan.items():
             if inside and self.mirrored and self.plan[False].table is None:
                 # no table to mirror: this side is planned (and tabulated) on its own
-                self.mirrored, side.transmission = False, self.sides[True]
+                self.mirrored = False
+                side.transmission = self.sides[True] and not side.lossless
             if side.films and not (self.tabulate == "auto" and inside in self._gave_up) \
                     and self.mirror_table(side) is None:
                 side.table = _tables_cache(self, side, quantity)
@@ -346,18 +350,19 @@ class KernelStack:
                    thickness_scale):
         """The planned side ``inside`` at the hit: its table, else its films exactly."""
         mi = mitsuba_module()
-        # RGB/mono variants come here only for a side without films (no phase):
-        # any wavelength will do for the Fresnel terms
+        # RGB/mono variants come here only for a side without films: any wavelength will do
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
         side = self.evaluation_side(inside, transmission, self.index_gradients(si, active))
         n0 = side.n0.eval_real(si, active)
         table = side.table
         if table is not None and thickness_scale is None and (
-                not transmission or side.opaque or table.channels > 1):
+                not transmission or side.opaque or table.channels > 1 or side.lossless):
             n_exit = side.exit.eval_real(si, active) if table.kind == "tir" else None
             res = table.lookup(cos_theta, n0, n_exit, wl, active)
             if not transmission:
                 return res[0]
+            if side.lossless and table.channels == 1:
+                return res[0], 1.0 - res[0]
             return res[0], (mi.UnpolarizedSpectrum(0.0) if side.opaque else res[1])
         exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
             else side.exit.eval(si, active)
@@ -425,7 +430,7 @@ class KernelStack:
                     R = attach_gradient(R, sampler.estimate(wl, exact))
             return (R, T) if transmission else R
 
-        return either_side(side, inside, transmission)
+        return mirror.either_side(side, inside, transmission)
 
     def colour_gradients(self, si, active=True) -> bool:
         """Whether a film thickness or an index of this stack carries gradients
@@ -448,14 +453,14 @@ class KernelStack:
             thickness_scale = self.thickness_scale_at(si, active)
         if (self.mirrored and thickness_scale is None and self.evaluation_side(
                 False, False, self.index_gradients(si, active)) is self.plan[False]):
-            out = mirrored_rt(self, si, cos_theta, inside, active, transmission)
+            out = mirror.mirrored_rt(self, si, cos_theta, inside, active, transmission)
             if out is not None:
                 return out
 
         def side(flag: bool):
             return self.side_response(flag, si, cos_theta, active, transmission, thickness_scale)
 
-        return either_side(side, inside, transmission)
+        return mirror.either_side(side, inside, transmission)
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):

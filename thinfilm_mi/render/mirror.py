@@ -30,6 +30,14 @@ import numpy as np
 
 from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
 
+#: ``tabulate="auto"`` tabulates a mirrored stack between media of constant index
+#: (exactly: one evaluation of real amplitudes per lane, no branch) from this many films. A
+#: cubic lookup costs a dielectric's render about what ~5 films do there (issue 44,
+#: the sphere of benchmarks/plugin_bench.py against Mitsuba's ``dielectric``, one run:
+#: 1 film 0.93x exact against 1.63x tabulated; 3 films 1.37x against 1.54x; 10 films
+#: 1.98x against 1.90x; 30 films 3.69x against 2.06x).
+AUTO_MIN_FILMS = 10
+
 
 def real_on_grid(index) -> bool:
     """Whether a :class:`~thinfilm_mi.render.media.SpectralIndex` has no absorption
@@ -52,6 +60,12 @@ def mirror_applies(ambient, films: list, substrate) -> bool:
     return bool(np.all(n_s >= n_a))
 
 
+def exact_mirrors(ambient, substrate) -> bool:
+    """Whether :func:`mirrored_rt` evaluates a mirrored stack between these media
+    exactly (neither is dispersive: one mapped angle serves every wavelength)."""
+    return all(ix.knots is not None and ix.knots.size == 0 for ix in (ambient, substrate))
+
+
 def mirrored_rt(stack, si, cos_theta, inside: bool | Any, active, transmission: bool):
     """``R`` (and ``T = 1 - R``) at ``si.wavelengths`` for light at ``cos_theta`` on the
     side ``inside`` (a bool or a mask) of a stack planned as mirrored (see the module
@@ -61,7 +75,7 @@ def mirrored_rt(stack, si, cos_theta, inside: bool | Any, active, transmission: 
     mi = mitsuba_module()
     side = stack.plan[False]
     wl = si.wavelengths
-    constant = all(ix.knots is not None and ix.knots.size == 0 for ix in (side.n0, side.exit))
+    constant = exact_mirrors(side.n0, side.exit)
     if side.table is None and not constant:
         return None
     if inside is False:
