@@ -124,12 +124,13 @@ def test_conductor_reads_the_loop_and_matches_float64(llvm, layers, uniform, rea
 
 def test_loop_and_unrolled_kernels_agree(llvm, monkeypatch):
     """The same BSDF evaluated through the loop and through the unrolled films
-    (LOOP_MIN_FILMS raised): both float32, different operation order."""
+    (the loops' thresholds raised): both float32, different operation order."""
     spec = {"type": "thinfilm_conductor", "layers": DISPERSIVE, "material": "Au",
             "tabulate": False}
     cos, wls = points(3000, seed=4)
     looped = mi.load_dict(spec)
     monkeypatch.setattr(K, "LOOP_MIN_FILMS", 1000)
+    monkeypatch.setattr(K, "REAL_LOOP_MIN_FILMS", 1000)
     unrolled = mi.load_dict(spec)
     assert looped.stack.plan[False].loop is not None
     assert unrolled.stack.plan[False].loop is None
