@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import importlib
 
+from thinfilm_mi.render import gc_guard
+
 #: plugin name -> (module in thinfilm_mi.plugins, class name)
 PLUGINS = {
     "thinfilm_conductor": ("thinfilm_conductor", "ThinFilmConductor"),
@@ -57,9 +59,13 @@ def _on_variant_change(old, new) -> None:
 
 def register() -> list[str]:
     """Register the plugins for the current variant (if one is set) and for every
-    later variant. Returns the names registered now. Safe to call repeatedly."""
+    later variant, and install :mod:`.gc_guard` (no cyclic garbage collection
+    while Dr.Jit traces a symbolic call). Returns the names registered now. Safe
+    to call repeatedly."""
     global _callback_installed
     import mitsuba as mi
+
+    gc_guard.install()
 
     if not _callback_installed:
         mi.detail.add_variant_callback(_on_variant_change)
