@@ -236,8 +236,8 @@ class KernelStack:
         # call is Python anyway and the load-time build would dominate.
         # ``quantity``: what the tables hold (None: the powers; tabulate.mueller.MUELLER)
         min_films = quantity.auto_min_films if quantity else AUTO_MIN_FILMS
-        if self.mirrored and mirror.exact_mirrors(self.ambient, self.substrate):
-            min_films = mirror.AUTO_MIN_FILMS
+        if quantity is None and len(self.sides) == 2:   # lit from both sides (render.mirror)
+            min_films = mirror.auto_min_films(self)
         want = self.tabulate is True or (
             self.tabulate == "auto" and self.thickness_texture is None
             and dr.is_jit_v(mitsuba_module().Float)

@@ -29,6 +29,10 @@ class LoopFilms:
     the grid size and whether the films absorb are baked in.
     """
 
+    #: Knots a wavelength may lie beyond its whole nanometre's first cell (the cell
+    #: search's steps, in place of a binary search over the union of the knots)
+    SKIP = 2
+
     def __init__(self, films: list, n0: SpectralIndex):
         mi = mitsuba_module()
         from thinfilm_mi.optics.backend import aligned_array
@@ -60,6 +64,17 @@ class LoopFilms:
             cols = [eta[:, :-1], k[:, :-1], eta[:, 1:], k[:, 1:]]
         self.buffer = aligned_array(np.stack(cols, axis=-1), np.float32, mi.Float)
         self.grid = aligned_array(grid, np.float32, mi.Float)
+        # A non-uniform grid (the 1 nm grid and the datasets' knots): the first cell of
+        # each whole nanometre, from which a wavelength is at most SKIP knots further
+        # (checked here; else a binary search).
+        g32 = grid.astype(np.float32)
+        whole = np.floor(g32[0]) + np.arange(int(np.ceil(g32[-1] - np.floor(g32[0]))) + 1)
+        first = np.clip(np.searchsorted(g32, whole, side="right") - 1, 0, self.cells - 1)
+        ahead = np.searchsorted(g32, whole + 1.0, side="left") - 1 - first
+        self.start = None
+        if not self.uniform and ahead.max(initial=0) <= self.SKIP:
+            self.w0 = float(whole[0])
+            self.start = aligned_array(first, np.uint32, mi.UInt32)
         self.thickness = aligned_array([scalar(d) for _, d, _ in films], np.float32, mi.Float)
         self.n_films = len(films)
         self.count = mi.UInt32(len(films))
@@ -73,8 +88,14 @@ class LoopFilms:
         if self.uniform:   # knots 1 nm apart from an integer start: exact arithmetic
             i = mi.UInt32(dr.clip(dr.floor(w - self.g0), 0.0, float(self.cells - 1)))
             return i, dr.clip(w - (self.g0 + mi.Float(i)), 0.0, 1.0)
-        i = dr.binary_search(0, self.cells - 1,
-                             lambda c: dr.gather(mi.Float, self.grid, c + 1) <= w)
+        if self.start is not None:
+            last = float(dr.width(self.start) - 1)
+            i = dr.gather(mi.UInt32, self.start, mi.UInt32(dr.clip(dr.floor(w - self.w0), 0.0, last)))
+            for _ in range(self.SKIP):
+                i += mi.UInt32((i < self.cells - 1) & (dr.gather(mi.Float, self.grid, i + 1) <= w))
+        else:
+            i = dr.binary_search(0, self.cells - 1,
+                                 lambda c: dr.gather(mi.Float, self.grid, c + 1) <= w)
         lo = dr.gather(mi.Float, self.grid, i)
         hi = dr.gather(mi.Float, self.grid, i + 1)
         return i, dr.clip((w - lo) / (hi - lo), 0.0, 1.0)
