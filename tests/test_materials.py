@@ -6,6 +6,7 @@ back from this package's own files.
 from __future__ import annotations
 
 import math
+import re
 import socket
 import warnings
 
@@ -307,6 +308,49 @@ def test_csv_variants(tmp_path):
     swapped = tmp_path / "swapped.csv"
     swapped.write_text("k;n;wl_nm\n0.1;2;350\n0.1;2;850\n")
     assert M.resolve(str(swapped)).index(500.0) == 2 + 0.1j
+
+
+@pytest.mark.parametrize("suffix, text, line, first", [
+    # issue 39: rows 400,1.5,0 and 400,2.5,0 made n step from 1.5 to 2.5 at 400 nm
+    (".csv", "wavelength,n,k\n360,1.5,0\n400,1.5,0\n400,2.5,0\n830,2.5,0\n", 4, 3),
+    (".spd", "# n\n360 1.5\n400 1.5\n400 2.5\n830 2.5\n", 4, 3),
+    (".yml", "DATA:\n  - type: tabulated nk\n    data: |\n        0.36 1.5 0\n        0.40 1.5 0\n"
+             "        0.40 2.5 0\n        0.83 2.5 0\n", 3, 2),
+])
+def test_a_file_that_repeats_a_wavelength_is_refused_naming_the_line(tmp_path, suffix, text, line, first):
+    p = tmp_path / f"film{suffix}"
+    p.write_text(text)
+    with pytest.raises(MaterialError, match=rf"film{re.escape(suffix)}.*line {line} .*repeats the wavelength "
+                                            rf"400 nm \(first on line {first}\)"):
+        M.resolve(str(p))
+
+
+def test_wavelengths_may_decrease_but_not_turn_back(tmp_path):
+    down = tmp_path / "down.csv"
+    down.write_text("830 1.6 0\n600 1.5 0\n360 1.4 0\n")   # as some spectrometers write
+    assert abs(M.resolve(str(down)).index(480.0) - 1.45) < 1e-12
+    back = tmp_path / "back.csv"
+    back.write_text("360 1.5 0\n600 1.5 0\n500 1.6 0\n830 1.6 0\n")
+    with pytest.raises(MaterialError, match=r"back.csv.*line 3 .*turns back to 500 nm after 600 nm"):
+        M.resolve(str(back))
+
+
+def test_layers_quote_a_path_with_a_semicolon_and_a_space(tmp_path):
+    plain = tmp_path / "glass.csv"
+    plain.write_text("360,1.7,0\n830,1.6,0\n")
+    odd = tmp_path / "my films" / "a;b.csv"
+    odd.parent.mkdir()
+    odd.write_text(plain.read_text())
+    text = tf.materials.stack.format_layers([(str(odd), 120.0), ("SiO2", 80.25)])
+    assert text == f'"{odd}" 120; SiO2 80.25'
+    assert tf.parse_layers(text) == [(str(odd), 120.0), ("SiO2", 80.25)]
+    assert tf.parse_layers(f"'{odd}' 120") == [(str(odd), 120.0)]
+    wl = np.linspace(360.0, 830.0, 11)
+    R = tf.Stack(layers=text, substrate=1.5).rt(wavelength=wl, theta=0.3).R
+    np.testing.assert_array_equal(R, tf.Stack(layers=f"{plain} 120; SiO2 80.25", substrate=1.5)
+                                  .rt(wavelength=wl, theta=0.3).R)
+    with pytest.raises(tf.ThinFilmError, match=r"thickness must be a number of nm, got 'films/a' .*goes in quotes"):
+        tf.parse_layers(f"{odd} 120")
 
 
 @pytest.mark.parametrize("text, words", [

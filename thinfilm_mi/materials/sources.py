@@ -12,7 +12,7 @@ import json
 import re
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -68,12 +68,33 @@ def _strip_html(text: str) -> str:
     return re.sub(r"[ \t]+", " ", text).strip()
 
 
-def _parse_rii_table(data: str, where: str) -> np.ndarray:
-    rows = []
-    for line in str(data).splitlines():
+def _check_wavelengths(wl: np.ndarray, lines: Sequence[int], where: str, what: str) -> None:
+    """Refuse a table whose wavelengths repeat or turn back: each wavelength has one
+    value, and the rows run one way (increasing, or decreasing as some spectrometers
+    write them). ``lines[i]`` is the line of row ``i`` in ``what`` (a file, or a table
+    in one). A repeated wavelength with two values would make n step there."""
+    step = np.diff(wl)
+    if len(step) == 0:
+        return
+    direction = 1.0 if step[0] > 0 else -1.0
+    bad = np.flatnonzero(step * direction <= 0)
+    if len(bad):
+        i = int(bad[0]) + 1
+        if wl[i] == wl[i - 1] or wl[i] in wl[:i]:
+            first = lines[int(np.flatnonzero(wl[:i] == wl[i])[0])]
+            raise MaterialError(f"{where}: line {lines[i]} of {what} repeats the wavelength {wl[i]:g} nm "
+                                f"(first on line {first}); give one value per wavelength")
+        raise MaterialError(f"{where}: line {lines[i]} of {what} turns back to {wl[i]:g} nm after "
+                            f"{wl[i - 1]:g} nm; the wavelengths must increase (or decrease) row by row")
+
+
+def _parse_rii_table(data: str, where: str, user_file: bool) -> np.ndarray:
+    rows, lines = [], []
+    for lineno, line in enumerate(str(data).splitlines(), 1):
         parts = line.split()
         if not parts:
             continue
+        lines.append(lineno)
         try:
             rows.append([float(p) for p in parts])
         except ValueError:
@@ -83,11 +104,18 @@ def _parse_rii_table(data: str, where: str) -> np.ndarray:
     width = {len(r) for r in rows}
     if len(width) != 1:
         raise MaterialError(f"{where}: table rows have different numbers of columns")
-    return np.array(rows, dtype=np.float64)
+    table = np.array(rows, dtype=np.float64)
+    if user_file:
+        # (46 of the refractiveindex.info database's ~4000 pages repeat or reverse a
+        # wavelength where two data sets meet; they stay readable, sorted as before)
+        _check_wavelengths(table[:, 0] * 1000.0, lines, where, "its data")
+    return table
 
 
-def _material_from_rii(doc: Any, name: str, where: str, source: str) -> DispersiveMaterial:
-    """A material from a parsed refractiveindex.info YAML document (λ in µm)."""
+def _material_from_rii(doc: Any, name: str, where: str, source: str,
+                       user_file: bool = False) -> DispersiveMaterial:
+    """A material from a parsed refractiveindex.info YAML document (λ in µm); a user's
+    file (``user_file``) must give one value per wavelength (:func:`_check_wavelengths`)."""
     if not isinstance(doc, dict) or not isinstance(doc.get("DATA"), list):
         raise MaterialError(f"{where}: not a refractiveindex.info material file (no DATA list)")
     n_part = k_part = None
@@ -97,7 +125,7 @@ def _material_from_rii(doc: Any, name: str, where: str, source: str) -> Dispersi
         kind = str(entry["type"]).split()
         here = f"{where} DATA[{i}] ({entry['type']})"
         if kind[0] == "tabulated" and len(kind) == 2 and kind[1] in ("n", "k", "nk"):
-            table = _parse_rii_table(entry.get("data", ""), here)
+            table = _parse_rii_table(entry.get("data", ""), here, user_file)
             need = 3 if kind[1] == "nk" else 2
             if table.shape[1] != need:
                 raise MaterialError(f"{here}: expected {need} columns, got {table.shape[1]}")
@@ -295,12 +323,12 @@ MITSUBA_SWAPPED = {"TiO2": "extraordinary", "TiO2_palik": "extraordinary",
 
 def read_spd(path: Path, where: str) -> tuple[np.ndarray, np.ndarray]:
     """A Mitsuba ``.spd`` file: lines ``wavelength_nm value``; ``#`` starts a comment."""
-    rows = []
+    rows, lines = [], []
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise MaterialError(f"{where}: cannot read {path} ({exc.strerror})") from None
-    for line in text.splitlines():
+    for lineno, line in enumerate(text.splitlines(), 1):
         line = line.split("#", 1)[0].strip()
         if not line:
             continue
@@ -311,9 +339,11 @@ def read_spd(path: Path, where: str) -> tuple[np.ndarray, np.ndarray]:
             raise MaterialError(f"{where}: cannot read the line {line!r} of {path} "
                                 "(expected 'wavelength_nm value')") from None
         rows.append((wl, val))
+        lines.append(lineno)
     if not rows:
         raise MaterialError(f"{where}: {path} holds no data")
     arr = np.array(rows)
+    _check_wavelengths(arr[:, 0], lines, where, str(path))
     return arr[:, 0], arr[:, 1]
 
 
@@ -364,14 +394,15 @@ def _load_csv(path: Path, where: str) -> DispersiveMaterial:
     An optional header names the columns (``wavelength``/``wl``/``lambda``,
     ``n``, ``k``) and may give the wavelength unit (``nm`` default, ``um``/
     ``µm``/``micron``). Without a header the columns are λ (nm), n, k. Lines
-    starting with ``#`` are comments.
+    starting with ``#`` are comments. Each wavelength appears once, the rows in
+    increasing (or decreasing) order (:func:`_check_wavelengths`).
     """
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()
     except OSError as exc:
         raise MaterialError(f"{where}: cannot read {path} ({exc.strerror})") from None
     header = None
-    rows = []
+    rows, row_lines = [], []
     for lineno, line in enumerate(lines, 1):
         s = line.strip()
         if not s or s.startswith("#"):
@@ -380,6 +411,7 @@ def _load_csv(path: Path, where: str) -> DispersiveMaterial:
         cells = [c.strip() for c in re.split(sep, s) if c.strip()]
         try:
             rows.append([float(c) for c in cells])
+            row_lines.append(lineno)
         except ValueError:
             if header is None and not rows:
                 header = [c.lower() for c in cells]
@@ -415,6 +447,7 @@ def _load_csv(path: Path, where: str) -> DispersiveMaterial:
     if scale == 1.0 and wl.max() < 50.0:
         raise MaterialError(f"{where}: wavelengths in {path} look like µm (max {wl.max():g}); "
                             "give them in nm or say 'wavelength_um' in a header")
+    _check_wavelengths(wl, row_lines, where, str(path))
     k_part = TabulatedIndex(wl, arr[:, cols["k"]]) if cols["k"] is not None else None
     return DispersiveMaterial(path.name, TabulatedIndex(wl, arr[:, cols["n"]]), k_part,
                               reference=f"user file {path}", source=str(path))
@@ -444,5 +477,5 @@ def load_file(path: Path) -> Material:
         raise MaterialError(f"{where}: no such file")
     if name.endswith((".yml", ".yaml")):
         doc = _yaml_load(path, where)
-        return _material_from_rii(doc, path.stem, where, source=str(path))
+        return _material_from_rii(doc, path.stem, where, source=str(path), user_file=True)
     return _load_csv(path, where)
