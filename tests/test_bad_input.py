@@ -151,6 +151,13 @@ CASES = [
      LAYERS_OK),
     ("layers-comma-inside", {"layers": "1.46,100"}, ["layers[0]", "'1.46,100'",
                                                      "missing thickness"], LAYERS_OK),
+    # a file name cut at ';' or a space: the message says to quote it (issue 39)
+    ("layers-unquoted-path-with-semicolon", {"layers": "films/a;b.csv 100"},
+     ["layers[0]", "'films/a'", "missing thickness", "goes in quotes"], LAYERS_OK),
+    ("layers-unquoted-path-with-space", {"layers": "my films/a.csv 100"},
+     ["layers[0]", "3 tokens", "goes in quotes"], LAYERS_OK),
+    ("layers-unclosed-quote", {"layers": '"films/a.csv 100'}, ["layers", "unclosed quote", "goes in quotes"],
+     LAYERS_OK),
     ("layers-empty-layer", {"layers": "1.46 100;; 2.0 50"}, ["layers[1]", "empty layer"],
      LAYERS_OK),
     ("layers-and-shorthand", {"layers": "1.46 100", "thin_film_ior": 1.4,
@@ -168,6 +175,13 @@ CASES = [
     ("k-negative-spectrum", {"eta": 0.2, "k": {"type": "uniform", "value": -2.0}},
      ["'k'", "-2.0"], {"eta": 0.2, "k": 3.0}),
     ("eta-non-positive-float", {"eta": 0.0, "k": 2.0}, ["'eta'", "0.0"], {"eta": 0.2, "k": 3.0}),
+    # a spectrum over 400-700 nm only is 0 elsewhere: refused, saying what it covers (issue 39)
+    ("eta-spectrum-not-covering", {"eta": {"type": "irregular", "wavelengths": "400, 550, 700",
+                                           "values": "0.3, 0.2, 0.1"}, "k": 3.0},
+     ["'eta'", "400-700 nm", "does not cover", "360-830 nm"], {"eta": 0.2, "k": 3.0}),
+    ("k-spectrum-not-covering", {"eta": 0.2, "k": {"type": "irregular", "wavelengths": "400, 550, 700",
+                                                   "values": "0.1, 0.3, 0.2"}},
+     ["'k'", "400-700 nm", "does not cover", "360-830 nm"], {"eta": 0.2, "k": 3.0}),
     ("eta-negative-spectrum", {"eta": {"type": "uniform", "value": -1.5}, "k": 2.0},
      ["'eta'", "-1.5"], {"eta": 0.2, "k": 3.0}),
     ("eta-nan", {"eta": float("nan"), "k": 2.0}, ["'eta'", "nan"], {"eta": 0.2, "k": 3.0}),
@@ -332,6 +346,30 @@ def test_dataset_not_covering_360_830_is_refused(plugin, make, needles, valid, f
     _skip_unless_takes(plugin, valid)
     path = narrow_files[fmt]
     check_raises(plugin, make(path), how, [*needles, path, "400-700 nm", "360-830"])
+
+
+@pytest.mark.parametrize("how", HOW)
+def test_a_quoted_path_with_a_semicolon_and_a_space_loads_as_the_same_file(tmp_path, how):
+    """issue 39: ``layers`` quotes a material path that holds ';' or white space."""
+    plain = tmp_path / "glass.csv"
+    plain.write_text("360,1.7,0\n830,1.6,0\n")
+    odd = tmp_path / "my films" / "a;b.csv"
+    odd.parent.mkdir()
+    odd.write_text(plain.read_text())
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    si.wi = mi.Vector3f(0.6, 0.0, 0.8)
+    si.wavelengths = mi.UnpolarizedSpectrum(450.0, 520.0, 600.0, 700.0)
+    wo = mi.Vector3f(-0.6, 0.0, 0.8)
+    values = []
+    for layers in (f"SiO2 80; {plain} 120", f'SiO2 80; "{odd}" 120', f"SiO2 80; '{odd}' 120"):
+        if how == "dict":
+            bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "tabulate": "false"})
+        else:   # the plugin alone, as a scene's <bsdf> element writes it
+            bsdf = mi.load_string(f'<bsdf version="3.0.0" type="thinfilm_conductor">'
+                                  f'{_xml_value("layers", layers)}{_xml_value("tabulate", "false")}</bsdf>')
+        values.append(np.array(bsdf.eval(mi.BSDFContext(), si, wo)))
+    np.testing.assert_array_equal(values[1], values[0])   # the same file, read the same way
+    np.testing.assert_array_equal(values[2], values[0])
 
 
 # ---------------------------------------------------------------------------

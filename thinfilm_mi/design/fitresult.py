@@ -11,9 +11,10 @@ import numpy as np
 
 from thinfilm_mi.design.fitfile import Measurement
 from thinfilm_mi.design.fitmodel import FitModel
-from thinfilm_mi.design.result import format_index, format_nm, json_list
+from thinfilm_mi.design.result import format_index, json_list
 from thinfilm_mi.design.tolerance import ToleranceSpec, draw_thicknesses, parse_tolerance
 from thinfilm_mi.materials import save_material
+from thinfilm_mi.materials.stack import format_layers
 
 __all__ = ["FitResult", "Minimum", "CORRELATION_WARNING", "IDENTIFIABILITY_DELTA"]
 
@@ -164,14 +165,14 @@ class FitResult:
         a table ``fit_NAME.csv`` written into ``folder`` (and named by its path),
         or only named when ``folder`` is ``None``."""
         specs = self._material_specs(None if folder is None else Path(folder), self.x, "fit")
-        return "; ".join(f"{s} {format_nm(d)}" for s, d in zip(specs, self.thicknesses()))
+        return format_layers(zip(specs, self.thicknesses()))
 
     def nominal_layers_in(self, folder: str | Path | None = None) -> str:
         """The nominal stack (the file's start values) as :meth:`layers_in` writes
         the fitted one (its tables ``nominal_NAME.csv``)."""
         x0 = self.model.x0
         specs = self._material_specs(None if folder is None else Path(folder), x0, "nominal")
-        return "; ".join(f"{s} {format_nm(d)}" for s, d in zip(specs, self.model.thicknesses(x0)[0]))
+        return format_layers(zip(specs, self.model.thicknesses(x0)[0]))
 
     @property
     def layers(self) -> str:

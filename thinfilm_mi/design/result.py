@@ -10,8 +10,9 @@ import numpy as np
 
 from thinfilm_mi.design.merit import Design, Merit, TargetValues
 from thinfilm_mi.design.targets import Problem, Target
+from thinfilm_mi.materials.stack import format_layers
 
-__all__ = ["DesignResult", "format_layers", "film_specs", "format_index", "format_nm", "json_list"]
+__all__ = ["DesignResult", "design_layers", "film_specs", "format_index", "json_list"]
 
 
 def format_index(z: complex) -> str:
@@ -30,14 +31,9 @@ def film_specs(problem: Problem, design: Design) -> list[str]:
     return out
 
 
-def format_layers(problem: Problem, design: Design) -> str:
+def design_layers(problem: Problem, design: Design) -> str:
     """``"MATERIAL NM; ..."`` (thicknesses to 0.1 pm): what every plugin's ``layers`` accepts."""
-    return "; ".join(f"{spec} {format_nm(d)}" for spec, d in zip(film_specs(problem, design), design.d))
-
-
-def format_nm(d: float) -> str:
-    """A thickness in nm as a ``layers`` string writes it (to 0.1 pm)."""
-    return f"{d:.4f}".rstrip("0").rstrip(".") or "0"
+    return format_layers(zip(film_specs(problem, design), design.d))
 
 
 def json_list(a) -> Any:
@@ -75,7 +71,7 @@ class DesignResult:
 
     @property
     def layers(self) -> str:
-        return format_layers(self.problem, self.design)
+        return design_layers(self.problem, self.design)
 
     @property
     def films(self) -> list[tuple[str, float]]:

@@ -25,7 +25,8 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.materials.model import SPECTRAL_RANGE, Material
 
-__all__ = ["Layer", "Stack", "RTResult", "parse_layers", "check_thickness"]
+__all__ = ["Layer", "Stack", "RTResult", "parse_layers", "format_layers", "format_nm", "quote_material",
+           "check_thickness"]
 
 #: Largest extinction coefficient k accepted for a medium that light comes *from*
 #: (the ambient, or the substrate of a reversed stack). Real glasses and water
@@ -71,38 +72,94 @@ class Layer:
         return f"{self.material.name} {self.thickness:g}"
 
 
-_SEPARATOR = re.compile(r"[;\n]")
+#: one token of a layer: a quoted material ("..." or '...', which may hold ';', spaces
+#: and the other quote) or a run of characters other than white space, ';' and quotes
+_TOKEN = re.compile(r"""\s*(?:"([^"]*)"|'([^']*)'|([^\s;"']+))""")
+#: what ends a layer outside quotes
+_SEPARATORS = ";\n"
+_QUOTING = ("a material name or file path that holds ';', spaces or quotes goes in quotes, "
+            """e.g. '"my films/a;b.csv" 100' (in scene XML: value='"my films/a;b.csv" 100')""")
+
+
+def _split_layers(text: str, name: str) -> list[list[str]]:
+    """The layers of ``text``, each a list of its tokens, quotes removed."""
+    layers, tokens, pos = [], [], 0
+    while pos < len(text):
+        if text[pos] in _SEPARATORS:
+            layers.append(tokens)
+            tokens, pos = [], pos + 1
+            continue
+        if text[pos].isspace():
+            pos += 1
+            continue
+        m = _TOKEN.match(text, pos)
+        if m is None:   # an unclosed quote
+            raise ThinFilmError(f"{name}: unclosed quote {text[pos]} at character {pos + 1} of {text!r}; "
+                                f"{_QUOTING}")
+        tokens.append(next(g for g in m.groups() if g is not None))
+        pos = m.end()
+        if pos < len(text) and not (text[pos].isspace() or text[pos] in _SEPARATORS):
+            raise ThinFilmError(f"{name}: {text[m.start():pos + 1].strip()!r} in {text!r}: a quoted name "
+                                f"must be followed by white space or ';'; {_QUOTING}")
+    layers.append(tokens)
+    return layers
+
+
+def quote_material(spec: str) -> str:
+    """``spec`` as a ``layers`` string writes it: in quotes where it holds ';', white
+    space or a quote (a file path, say), as it is otherwise."""
+    if spec and not re.search(r"""[\s;"']""", spec):
+        return spec
+    return f"'{spec}'" if '"' in spec else f'"{spec}"'
+
+
+def format_nm(d: float) -> str:
+    """A thickness in nm as a ``layers`` string writes it (to 0.1 pm)."""
+    return f"{d:.4f}".rstrip("0").rstrip(".") or "0"
+
+
+def format_layers(films) -> str:
+    """``"MATERIAL NM; ..."`` from ``(material spec, thickness nm)`` pairs: what
+    :func:`parse_layers` reads back and every plugin's ``layers`` accepts."""
+    return "; ".join(f"{quote_material(spec)} {format_nm(d)}" for spec, d in films)
 
 
 def parse_layers(text: str, name: str = "layers") -> list[tuple[Any, float]]:
     """Parse ``"MATERIAL THICKNESS_NM; ..."`` (outside in) into ``[(material, nm), ...]``.
 
     Layers are separated by ``;`` or new lines; each holds a material
-    specification and a thickness in nm separated by white space. The empty
+    specification and a thickness in nm separated by white space. A material
+    that holds ``;``, white space or a quote (a file path) is written in double
+    or single quotes: ``'"my films/a;b.csv" 100; SiO2 50'``. The empty
     string (or only white space) means no films. Materials are returned as
-    written (strings); :class:`Stack` resolves them.
+    written (strings, quotes removed); :class:`Stack` resolves them.
     """
     if not isinstance(text, str):
         raise ThinFilmError(f"{name}: expected a string 'MATERIAL THICKNESS_NM; ...', got {text!r}")
     out = []
-    stripped = text.strip()
-    if not stripped:
+    if not text.strip():
         return out
-    parts = _SEPARATOR.split(stripped)
-    for i, part in enumerate(parts):
-        tokens = part.split()
-        where = f"{name}[{i}] ({part.strip()!r} in {text!r})"
+    parts = _split_layers(text.strip(), name)
+    for i, tokens in enumerate(parts):
+        where = f"{name}[{i}] ({' '.join(tokens)!r} in {text!r})"
         if not tokens:
             if i == len(parts) - 1:  # a trailing separator is harmless
                 continue
             raise ThinFilmError(f"{where}: empty layer; separate layers with ';' as in 'SiO2 500; Au 20'")
         if len(tokens) == 1:
-            raise ThinFilmError(f"{where}: missing thickness; write 'MATERIAL THICKNESS_NM', e.g. 'SiO2 500'")
+            raise ThinFilmError(f"{where}: missing thickness; write 'MATERIAL THICKNESS_NM', e.g. 'SiO2 500'; "
+                                f"{_QUOTING}")
         if len(tokens) > 2:
             raise ThinFilmError(
                 f"{where}: expected 'MATERIAL THICKNESS_NM', got {len(tokens)} tokens; "
-                "separate layers with ';'"
+                f"separate layers with ';'; {_QUOTING}"
             )
+        try:
+            float(tokens[1])
+        except ValueError:
+            # most often a name cut at a space or ';' ("my films/a;b.csv 100")
+            raise ThinFilmError(f"{where}: thickness must be a number of nm, got {tokens[1]!r} after "
+                                f"{tokens[0]!r}; {_QUOTING}") from None
         out.append((tokens[0], check_thickness(tokens[1], f"{name}[{i}] thickness")))
         check_film_count(len(out), name)
     return out
