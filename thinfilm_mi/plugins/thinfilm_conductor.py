@@ -162,9 +162,10 @@ def substrate_from_props(props, plugin: str) -> SpectralIndex:
                 except Exception as e:
                     raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
                                         f"spectrum/texture, got {v!r} ({e})") from None
-            # the range of every index (thinfilm_mi.materials.catalog.MIN_INDEX/MAX_INDEX)
+            # the range of every index (thinfilm_mi.materials.catalog.MIN_INDEX/MAX_INDEX),
+            # over all of Mitsuba's wavelengths
             check_texture_range(v, f"{plugin}: '{name}'", MIN_INDEX if name == "eta" else 0.0,
-                                MAX_INDEX)
+                                MAX_INDEX, cover=True)
             values[name] = v
         return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
     return SpectralIndex.from_material(props.get("material", "Au"), "material")

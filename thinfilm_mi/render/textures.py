@@ -23,7 +23,7 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.model import GRID
+from thinfilm_mi.materials.model import GRID, SPECTRAL_RANGE
 
 
 def mitsuba_module():
@@ -226,25 +226,50 @@ def texture_range(tex, mono: bool = False):
 
 
 def checked_texture(props, name: str, plugin: str, want: str, what: str, lo: float = -math.inf,
-                    hi: float = math.inf, *, mono: bool = False, strict: bool = False):
+                    hi: float = math.inf, *, mono: bool = False, strict: bool = False, cover: bool = False):
     """The plugin property ``name`` as a Mitsuba texture (``props.get_texture``), refused
     with a :class:`ThinFilmError` saying it must be ``want`` where Mitsuba cannot make one
     of it, and its values checked at load by :func:`check_texture_range` (``what``,
-    ``lo``, ``hi``, ``mono``, ``strict``)."""
+    ``lo``, ``hi``, ``mono``, ``strict``, ``cover``)."""
     value = props.get(name)
     try:
         tex = props.get_texture(name)
     except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
         raise ThinFilmError(f"{plugin}: '{name}' must be {want}, got {value!r} ({e})") from None
-    check_texture_range(tex, what, lo, hi, mono=mono, strict=strict)
+    check_texture_range(tex, what, lo, hi, mono=mono, strict=strict, cover=cover)
     return tex
 
 
+def _spectrum_span(tex):
+    """In a spectral variant, the wavelengths (nm) a spectrum is given over where they
+    do not cover Mitsuba's :data:`SPECTRAL_RANGE` (Mitsuba's ``irregular`` and
+    ``regular`` spectra are 0 outside theirs), else ``None``."""
+    if not mitsuba_module().is_spectral:
+        return None
+    try:
+        lo, hi = (float(x) for x in tex.wavelength_range())
+    except Exception:  # noqa: BLE001 - a texture without a wavelength range
+        return None
+    return (lo, hi) if lo > SPECTRAL_RANGE[0] or hi < SPECTRAL_RANGE[1] else None
+
+
+def _uncovered(what: str, span) -> str:
+    return (f"{what} is a spectrum over {span[0]:g}-{span[1]:g} nm, which does not cover Mitsuba's "
+            f"{SPECTRAL_RANGE[0]:g}-{SPECTRAL_RANGE[1]:g} nm (outside its range it is 0)")
+
+
 def check_texture_range(tex, what: str, lo: float = -math.inf, hi: float = math.inf, *,
-                        mono: bool = False, strict: bool = False) -> None:
+                        mono: bool = False, strict: bool = False, cover: bool = False) -> None:
     """Raise :class:`ThinFilmError` naming ``what`` unless the texture's values
     (:func:`texture_range`) are finite and within ``[lo, hi]`` (``lo`` excluded
-    with ``strict``)."""
+    with ``strict``). With ``cover`` (an optical constant, which has no sensible
+    value of 0 outside the data) a spectrum must also be given over all of
+    Mitsuba's 360-830 nm; a spectrum refused for its values that does not cover
+    them is said to."""
+    span = _spectrum_span(tex)
+    if cover and span is not None:
+        raise ThinFilmError(f"{_uncovered(what, span)}; give its values over "
+                            f"{SPECTRAL_RANGE[0]:g}-{SPECTRAL_RANGE[1]:g} nm")
     rng = texture_range(tex, mono)
     if rng is None:
         found = _bitmap(tex)
@@ -261,4 +286,5 @@ def check_texture_range(tex, what: str, lo: float = -math.inf, hi: float = math.
         high = f"<= {hi:g}" if math.isfinite(hi) else ""
         want = " and ".join(x for x in (low, high) if x) or "finite"
         raise ThinFilmError(f"{what} must be finite and {want} everywhere, got a texture with "
-                            f"values in [{vmin!r}, {vmax!r}]")
+                            f"values in [{vmin!r}, {vmax!r}]"
+                            + (f" ({_uncovered('it', span)})" if span is not None else ""))
