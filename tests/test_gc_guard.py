@@ -91,3 +91,22 @@ def test_the_guard_is_installed_by_importing_the_package():
     assert gc_guard.installed()
     gc_guard.install()   # idempotent
     assert sum(cb is gc_guard._guard for cb in gc.callbacks) == 1
+
+
+def test_a_forked_child_starts_its_own_watcher():
+    """A child made by fork has no watcher thread: the guard must not think it has one
+    (it would owe collections that nobody asks the main thread for)."""
+    import os
+
+    from thinfilm_mi.render import gc_guard
+
+    guard = gc_guard._guard
+    saved, guard.watcher = guard.watcher, object()   # as after a first deferred pass
+    try:
+        pid = os.fork()
+        if pid == 0:
+            os._exit(0 if guard.watcher is None else 1)
+        _, status = os.waitpid(pid, 0)
+        assert os.waitstatus_to_exitcode(status) == 0
+    finally:
+        guard.watcher = saved

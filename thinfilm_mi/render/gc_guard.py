@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import ctypes
 import gc
+import os
 import threading
 import time
 
@@ -102,6 +103,9 @@ class _Guard:
                 self.watcher = threading.Thread(target=self._watch, name="thinfilm_mi-gc-guard", daemon=True)
                 self.watcher.start()
 
+    def forget_watcher(self) -> None:
+        self.watcher = None
+
     def _watch(self) -> None:
         """While a collection is owed, ask the main thread for it every :data:`POLL` s.
         (Only the main thread can tell whether it is inside a symbolic scope: the
@@ -137,6 +141,8 @@ def install() -> None:
         if _guard is None:
             _guard = _Guard(drjit)
             gc.callbacks.append(_guard)
+            # a forked child has no watcher thread: it starts its own when it needs one
+            os.register_at_fork(after_in_child=_guard.forget_watcher)
 
 
 def installed() -> bool:
