@@ -18,7 +18,7 @@ The defect (Mitsuba 3.9.1, Dr.Jit 1.5; upstream, not ours):
   ``BSDF::eval_pdf_sample`` or ``BlendBSDF::eval_pdf``. A pass during the
   trace of a *live* scene's BSDF is harmless. Related upstream: mitsuba3 #771
   (a dropped Python emitter still traced) and PR #776 (the lifetime of Python
-  plugin references). ``tests/render/test_gc_guard.py`` holds a reproducer
+  plugin references). ``tests/test_gc_guard.py`` runs a reproducer
   without this package: a plain Python BSDF, a dropped scene in a cycle, a
   render of another scene.
 
@@ -30,7 +30,8 @@ generation, so that this pass examines nothing and frees nothing. A watcher
 thread then asks the main thread, with ``Py_AddPendingCall`` every 20 ms, to
 run :func:`gc.unfreeze` and a full :func:`gc.collect` at its next safe point
 between two bytecodes, once it is outside the symbolic scope (the flag is per
-thread, so only the main thread can tell). Without that collection, the deferred
+thread, so only the main thread can tell); a pass that starts on the main
+thread outside a scope (a user's ``gc.collect()`` included) unfreezes first. Without that collection, the deferred
 garbage would wait indefinitely: the passes that froze it never count toward
 the growth that makes Python collect the oldest generation, where unfreezing
 puts it, and a loop whose allocations all happen inside traces would keep
