@@ -76,7 +76,8 @@ def bsdf_dict(config: str) -> dict:
             "tabulate": mode == "table"}
 
 
-def scene_dict(config: str, res=256, spp=16) -> dict:
+def scene_dict(config: str, res=256, spp=16, bsdf: dict | None = None) -> dict:
+    """The sphere scene with the BSDF of ``config`` (:func:`bsdf_dict`), or ``bsdf``."""
     import mitsuba as mi
     return {
         "type": "scene",
@@ -89,7 +90,7 @@ def scene_dict(config: str, res=256, spp=16) -> dict:
                             "rfilter": {"type": "box"}}},
         "emitter": {"type": "constant", "radiance": {"type": "rgb", "value": [0.8, 0.85, 1.0]}},
         "sphere": {"type": "sphere", "center": [0, 0.2, 0], "radius": 1.0,
-                   "bsdf": bsdf_dict(config)},
+                   "bsdf": bsdf if bsdf is not None else bsdf_dict(config)},
         "floor": {"type": "rectangle",
                   "to_world": mi.ScalarTransform4f().translate([0, -0.8, 0])
                   .rotate([1, 0, 0], -90).scale(6),
