@@ -7,7 +7,8 @@ numbers: a value and its derivatives with respect to the three components of
 XYZ. The formulas are the CIE's (L*a*b* with the linear segment below
 ``(6/29)^3``; CIEDE2000 as in Sharma, Wu & Dalal 2005, the test data set of
 which colour-science also follows); tests/test_design.py compares both with
-colour-science.
+colour-science. A CIEDE2000 without derivatives is
+:func:`thinfilm_mi.colour.cie.delta_e2000`.
 
 A CIEDE2000 difference is returned as three residuals whose squares sum to
 ``dE00^2`` (the rotation term folded in, see :func:`delta_e2000_residuals`): a
@@ -19,6 +20,10 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+
+# CIEDE2000 of plain numbers (no derivatives) is the colour layer's; it is named here too
+# for the callers that import it from here (benchmarks/design_bench.py, notebook 06).
+from thinfilm_mi.colour.cie import delta_e2000
 
 __all__ = ["Dual", "colour_weights", "lab", "delta_e2000_residuals", "delta_e2000", "xy_of"]
 
@@ -198,13 +203,6 @@ def delta_e2000_residuals(Lab2: Dual, Lab1: np.ndarray) -> Dual:
     e1 = c + RT * h * 0.5
     e2 = (1.0 - RT * RT * 0.25).sqrt() * h
     return Dual(np.stack([l.val, e1.val, e2.val], axis=-1), np.stack([l.der, e1.der, e2.der], axis=-2))
-
-
-def delta_e2000(Lab1, Lab2) -> np.ndarray:
-    """CIEDE2000 between two arrays of L*a*b* (plain numbers, no derivatives)."""
-    Lab2 = np.asarray(Lab2, dtype=np.float64)
-    e = delta_e2000_residuals(Dual(Lab2, np.zeros(Lab2.shape + (1,))), Lab1).val
-    return np.sqrt(np.sum(e * e, axis=-1))
 
 
 def xy_of(XYZ: Dual) -> Dual:

@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from thinfilm_mi.design.colourmath import delta_e2000
+from thinfilm_mi.colour.cie import delta_e2000
 from thinfilm_mi.design.merit import Design, Merit
 from thinfilm_mi.errors import ThinFilmError
 
