@@ -289,6 +289,24 @@ def test_file_round_trip(tmp_path, suffix):
         assert M.resolve(tmp_path / "Au.eta.spd").index(550.0) == M.resolve(str(tmp_path / "Au.spd")).index(550.0)
 
 
+def test_material_file_formats_are_one_registry(tmp_path):
+    """Each suffix belongs to one format object of ``sources.MATERIAL_FILES``, which reads
+    it (``resolve`` knows a file by it, any case) and, but for ``.txt``, writes it."""
+    formats = {s: f for f in sources.MATERIAL_FILES for s in f.suffixes}
+    assert sorted(formats) == sorted(sources.FILE_SUFFIXES) == [".csv", ".spd", ".txt", ".yaml", ".yml"]
+    assert len(formats) == len(sources.FILE_SUFFIXES)                       # no suffix in two formats
+    for suffix, fmt in formats.items():
+        assert sources.file_format(f" Dir/Film{suffix.upper()} ") is fmt
+        assert sources.is_material_file(f"film{suffix}")
+    assert sources.file_format("film.eta.spd") is sources.SPD and sources.file_format("SiO2") is None
+    assert not sources.is_material_file("film.dat")
+    assert [s for s, f in formats.items() if not f.writable] == [".txt"]
+    with pytest.raises(MaterialError, match=r"unknown format for .*film\.txt.* \(use \.csv, \.yml or \.spd\)"):
+        M.save_material("SiO2", tmp_path / "film.txt")
+    assert sources.SPD.pair(tmp_path / "Au.k.spd") == (tmp_path / "Au.eta.spd", tmp_path / "Au.k.spd")
+    assert sources.SPD.pair(tmp_path / "a.b.SPD") == (tmp_path / "a.b.eta.spd", tmp_path / "a.b.k.spd")
+
+
 def test_mitsuba_spd_file_equals_preset():
     d = sources.mitsuba_ior_dir()
     assert d is not None

@@ -70,6 +70,7 @@ import numpy as np
 from thinfilm_mi import materials as _materials
 from thinfilm_mi.colour.report import integration_wavelengths, resolve_illuminant, resolve_observer
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.materials.sources import is_material_file
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL, MAX_FILMS, parse_layers
 
 __all__ = ["DesignMaterial", "Target", "Problem", "load_problem", "films_from_layers", "QUANTITIES", "KINDS"]
@@ -225,8 +226,7 @@ def parse_choice(value: Any, options: tuple[str, ...], where: str, what: str, al
 
 def locate_file(spec: Any, base: Path | None) -> Any:
     """A material file named relative to the targets file, as a path beside it."""
-    if isinstance(spec, str) and base is not None and spec.strip().lower().endswith(
-            (".csv", ".spd", ".yml", ".yaml", ".txt")):
+    if isinstance(spec, str) and base is not None and is_material_file(spec):
         candidate = base / spec.strip()
         if not Path(spec.strip()).is_absolute() and candidate.exists():
             return str(candidate)

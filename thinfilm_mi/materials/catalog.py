@@ -54,9 +54,11 @@ import numpy as np
 from thinfilm_mi.errors import MaterialError
 from thinfilm_mi.materials.model import RANGE_RTOL, SPECTRAL_RANGE, ConstantMaterial, Material
 from thinfilm_mi.materials.sources import (
-    FILE_SUFFIXES,
     MITSUBA_SWAPPED,
+    SPD,
     builtin_registry,
+    file_format,
+    is_material_file,
     load_builtin,
     load_file,
     load_mitsuba,
@@ -68,6 +70,7 @@ from thinfilm_mi.materials.sources import (
     read_spd,
     ri_database_version,
     short_names,
+    short_reference,
 )
 
 # ---------------------------------------------------------------------------
@@ -109,7 +112,7 @@ def _resolve_string(text: str) -> Material:
     s = text.strip()
     if s.lower().startswith("mitsuba:"):
         return load_mitsuba(s.split(":", 1)[1].strip())
-    if s.lower().endswith(FILE_SUFFIXES):
+    if is_material_file(s):
         return load_file(Path(s).expanduser())
     canon = short_names().get(normalise_name(s))
     if canon is not None:
@@ -122,7 +125,7 @@ def _resolve_string(text: str) -> Material:
 
 
 def _cache_key(spec: Any):
-    if isinstance(spec, os.PathLike) or spec.strip().lower().endswith(FILE_SUFFIXES):
+    if isinstance(spec, os.PathLike) or is_material_file(spec):
         path = Path(os.fspath(spec).strip()).expanduser()
         try:
             st = path.stat()
@@ -210,8 +213,9 @@ def list_materials(include_mitsuba: bool = True) -> list[dict]:
     if include_mitsuba:
         d = mitsuba_ior_dir()
         for p in mitsuba_presets():
-            wl, _ = read_spd(d / f"{p}.eta.spd", p)
-            wlk, _ = read_spd(d / f"{p}.k.spd", p)
+            eta, kpath = SPD.pair(d / f"{p}.spd")
+            wl, _ = read_spd(eta, p)
+            wlk, _ = read_spd(kpath, p)
             rng = (max(wl.min(), wlk.min()), min(wl.max(), wlk.max()))
             note = f"; labels swapped: holds the {MITSUBA_SWAPPED[p]} index" if p in MITSUBA_SWAPPED else ""
             out.append({"name": f"mitsuba:{p}", "aliases": [], "dataset": f"mitsuba/data/ior/{p}.*.spd",
@@ -238,7 +242,7 @@ def format_material_table() -> str:
              ""]
     head = ("name", "aliases", "dataset (refractiveindex.info)", "range nm", "reference")
     table = [head] + [(r["name"], ", ".join(r["aliases"]), r["dataset"], _fmt_range(r["wavelength_range"]),
-                       _short_reference(r["reference"])) for r in builtin]
+                       short_reference(r["reference"])) for r in builtin]
     widths = [max(len(row[i]) for row in table) for i in range(4)]
     for row in table:
         lines.append("  ".join(c.ljust(w) for c, w in zip(row[:4], widths)) + "  " + row[4])
@@ -269,11 +273,6 @@ def format_material_table() -> str:
     return "\n".join(lines)
 
 
-def _short_reference(ref: str) -> str:
-    first = ref.strip().splitlines()[0] if ref.strip() else ""
-    return first.rstrip(".")
-
-
 def save_material(material: Any, path: str | os.PathLike, wavelength_nm=None) -> Path:
     """Write ``material``'s ``n, k`` at ``wavelength_nm`` (default: 360-830 nm every 5 nm) to a file.
 
@@ -289,39 +288,7 @@ def save_material(material: Any, path: str | os.PathLike, wavelength_nm=None) ->
     wl = np.atleast_1d(wl)
     idx = mat.index(wl)
     path = Path(path)
-    lower = path.name.lower()
-    if lower.endswith(".csv"):
-        with open(path, "w", encoding="utf-8") as f:
-            f.write(f"# {mat.name}: {_short_reference(mat.reference)}\n")
-            f.write("wavelength_nm,n,k\n")
-            for w, z in zip(wl, idx):
-                f.write(f"{w:.10g},{z.real:.10g},{z.imag:.10g}\n")
-        return path
-    if lower.endswith((".yml", ".yaml")):
-        import yaml
-
-        table = "".join(f"{w / 1000.0:.10g} {z.real:.10g} {z.imag:.10g}\n" for w, z in zip(wl, idx))
-        doc = {"REFERENCES": f"{mat.reference or mat.name}\n", "COMMENTS": f"exported by thinfilm_mi from {mat.name}\n",
-               "DATA": [{"type": "tabulated nk", "data": table}]}
-
-        class _Literal(str):
-            pass
-
-        dumper = yaml.SafeDumper
-        dumper.add_representer(_Literal, lambda d, s: d.represent_scalar("tag:yaml.org,2002:str", s, style="|"))
-        doc = {k: (_Literal(v) if isinstance(v, str) else v) for k, v in doc.items()}
-        doc["DATA"][0]["data"] = _Literal(table)
-        with open(path, "w", encoding="utf-8") as f:
-            yaml.dump(doc, f, Dumper=dumper, sort_keys=False, allow_unicode=True)
-        return path
-    if lower.endswith(".spd"):
-        stem = path.name[: -len(".eta.spd")] if lower.endswith(".eta.spd") else (
-            path.name[: -len(".k.spd")] if lower.endswith(".k.spd") else path.name[: -len(".spd")])
-        eta, kpath = path.with_name(stem + ".eta.spd"), path.with_name(stem + ".k.spd")
-        for p, vals, what in ((eta, idx.real, "n"), (kpath, idx.imag, "k")):
-            with open(p, "w", encoding="utf-8") as f:
-                f.write(f"# {mat.name} ({what}); wavelength_nm value\n")
-                for w, v in zip(wl, vals):
-                    f.write(f"{w:.10g} {v:.10g}\n")
-        return eta
+    fmt = file_format(path.name)
+    if fmt is not None and fmt.writable:
+        return fmt.write(path, mat, wl, idx)
     raise MaterialError(f"save_material: unknown format for {str(path)!r} (use .csv, .yml or .spd)")

@@ -310,8 +310,7 @@ def mitsuba_presets() -> list[str]:
     d = mitsuba_ior_dir()
     if d is None:
         return []
-    return sorted(p.name[: -len(".eta.spd")] for p in d.glob("*.eta.spd")
-                  if (d / (p.name[: -len(".eta.spd")] + ".k.spd")).is_file())
+    return sorted(p.name[: -len(SPD.ETA)] for p in d.glob("*" + SPD.ETA) if SPD.pair(p)[1].is_file())
 
 
 #: Mitsuba's TiO2 presets: their files are labelled the wrong way round (checked
@@ -379,7 +378,7 @@ def load_mitsuba(preset: str) -> Material:
         other = MITSUBA_SWAPPED[p]
         warnings.warn(f"Mitsuba preset {p!r} holds rutile TiO2's {other} index "
                       "(Mitsuba's TiO2 / TiO2-e labels are swapped)", UserWarning, stacklevel=3)
-    mat = _load_spd_pair(d / f"{p}.eta.spd", d / f"{p}.k.spd", f"mitsuba:{p}", f"material 'mitsuba:{p}'", ref)
+    mat = _load_spd_pair(*SPD.pair(d / f"{p}.spd"), f"mitsuba:{p}", f"material 'mitsuba:{p}'", ref)
     mat.reference = ref
     mat.dataset = f"mitsuba:{p}"
     return mat
@@ -453,29 +452,143 @@ def _load_csv(path: Path, where: str) -> DispersiveMaterial:
                               reference=f"user file {path}", source=str(path))
 
 
-FILE_SUFFIXES = (".csv", ".spd", ".yml", ".yaml", ".txt")
+# ---------------------------------------------------------------------------
+# user files: one format per suffix (MATERIAL_FILES)
+# ---------------------------------------------------------------------------
+def short_reference(ref: str) -> str:
+    """The first line of a reference, without its final full stop."""
+    first = ref.strip().splitlines()[0] if ref.strip() else ""
+    return first.rstrip(".")
+
+
+def _existing(path: Path, where: str) -> Path:
+    if not path.is_file():
+        raise MaterialError(f"{where}: no such file")
+    return path
+
+
+class MaterialFile:
+    """A format of material files: the suffixes it is known by (lower case), how a file
+    is read and, where :attr:`writable`, written (``n, k`` at the wavelengths ``wl``, nm)."""
+
+    suffixes: tuple[str, ...] = ()
+    writable = True
+
+    def read(self, path: Path, where: str) -> Material:
+        raise NotImplementedError
+
+    def write(self, path: Path, material: Material, wl: np.ndarray, index: np.ndarray) -> Path:
+        raise NotImplementedError
+
+
+class CsvFile(MaterialFile):
+    """Columns wavelength, n[, k] (:func:`_load_csv`); written as ``wavelength_nm,n,k``."""
+
+    suffixes = (".csv",)
+
+    def read(self, path, where):
+        return _load_csv(_existing(path, where), where)
+
+    def write(self, path, material, wl, index):
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(f"# {material.name}: {short_reference(material.reference)}\n")
+            f.write("wavelength_nm,n,k\n")
+            for w, z in zip(wl, index):
+                f.write(f"{w:.10g},{z.real:.10g},{z.imag:.10g}\n")
+        return path
+
+
+class TextFile(CsvFile):
+    """A ``.txt`` table, read as a CSV file (not written)."""
+
+    suffixes = (".txt",)
+    writable = False
+
+
+class SpdFile(MaterialFile):
+    """Mitsuba's ``.spd`` (``wavelength_nm value`` lines): ``STEM.eta.spd`` holds ``n``
+    and ``STEM.k.spd`` ``k``; either one, or ``STEM.spd``, names the pair. A lone
+    ``STEM.spd`` that exists is ``n`` alone."""
+
+    suffixes = (".spd",)
+    ETA, K = ".eta.spd", ".k.spd"
+
+    def pair(self, path: Path) -> tuple[Path, Path]:
+        """``(STEM.eta.spd, STEM.k.spd)`` beside ``path`` (any of the three names)."""
+        part = next(p for p in (self.ETA, self.K) + self.suffixes if path.name.lower().endswith(p))
+        stem = path.name[: -len(part)]
+        return path.with_name(stem + self.ETA), path.with_name(stem + self.K)
+
+    def read(self, path, where):
+        eta, k = self.pair(path)
+        if path.name.lower().endswith((self.ETA, self.K)):
+            if not eta.is_file():
+                raise MaterialError(f"{where}: the n part {eta.name!r} is missing beside it")
+            return _load_spd_pair(eta, k if k.is_file() else None, eta.name[: -len(self.ETA)], where,
+                                  f"user file {eta}")
+        if not path.is_file() and eta.is_file():
+            return _load_spd_pair(eta, k if k.is_file() else None, path.stem, where, f"user file {eta}")
+        return _load_spd_pair(path, None, path.stem, where, f"user file {path}")
+
+    def write(self, path, material, wl, index):
+        eta, kpath = self.pair(path)
+        for p, vals, what in ((eta, index.real, "n"), (kpath, index.imag, "k")):
+            with open(p, "w", encoding="utf-8") as f:
+                f.write(f"# {material.name} ({what}); wavelength_nm value\n")
+                for w, v in zip(wl, vals):
+                    f.write(f"{w:.10g} {v:.10g}\n")
+        return eta
+
+
+class RiiFile(MaterialFile):
+    """A refractiveindex.info page (YAML); written as ``tabulated nk`` with λ in µm."""
+
+    suffixes = (".yml", ".yaml")
+
+    def read(self, path, where):
+        doc = _yaml_load(_existing(path, where), where)
+        return _material_from_rii(doc, path.stem, where, source=str(path), user_file=True)
+
+    def write(self, path, material, wl, index):
+        import yaml
+
+        table = "".join(f"{w / 1000.0:.10g} {z.real:.10g} {z.imag:.10g}\n" for w, z in zip(wl, index))
+        doc = {"REFERENCES": f"{material.reference or material.name}\n",
+               "COMMENTS": f"exported by thinfilm_mi from {material.name}\n",
+               "DATA": [{"type": "tabulated nk", "data": table}]}
+
+        class _Literal(str):
+            pass
+
+        dumper = yaml.SafeDumper
+        dumper.add_representer(_Literal, lambda d, s: d.represent_scalar("tag:yaml.org,2002:str", s, style="|"))
+        doc = {k: (_Literal(v) if isinstance(v, str) else v) for k, v in doc.items()}
+        doc["DATA"][0]["data"] = _Literal(table)
+        with open(path, "w", encoding="utf-8") as f:
+            yaml.dump(doc, f, Dumper=dumper, sort_keys=False, allow_unicode=True)
+        return path
+
+
+SPD = SpdFile()
+#: The material file formats, one object each: a new format is one entry here.
+MATERIAL_FILES: tuple[MaterialFile, ...] = (CsvFile(), TextFile(), SPD, RiiFile())
+#: Every suffix a material file may have (lower case).
+FILE_SUFFIXES = tuple(s for f in MATERIAL_FILES for s in f.suffixes)
+
+
+def file_format(path: str | Path) -> MaterialFile | None:
+    """The format of a material file named ``path`` (by its suffix, any case), or ``None``."""
+    name = str(path).strip().lower()
+    return next((f for f in MATERIAL_FILES if name.endswith(f.suffixes)), None)
+
+
+def is_material_file(spec: str | Path) -> bool:
+    """Whether ``spec`` names a material file (its suffix is one of :data:`FILE_SUFFIXES`)."""
+    return file_format(spec) is not None
 
 
 def load_file(path: Path) -> Material:
+    """The material in the file ``path``, read by its format (a file of another suffix,
+    passed as a path object, is read as a CSV table)."""
     where = f"material file {str(path)!r}"
-    name = path.name.lower()
-    if name.endswith(".spd"):
-        if name.endswith(".eta.spd") or name.endswith(".k.spd"):
-            stem = path.name[: -len(".eta.spd")] if name.endswith(".eta.spd") else path.name[: -len(".k.spd")]
-            eta, k = path.with_name(stem + ".eta.spd"), path.with_name(stem + ".k.spd")
-            if not eta.is_file():
-                raise MaterialError(f"{where}: the n part {eta.name!r} is missing beside it")
-            mat = _load_spd_pair(eta, k if k.is_file() else None, stem, where, f"user file {eta}")
-        else:
-            if not path.is_file():
-                eta, k = path.with_suffix(".eta.spd"), path.with_suffix(".k.spd")
-                if eta.is_file():
-                    return _load_spd_pair(eta, k if k.is_file() else None, path.stem, where, f"user file {eta}")
-            mat = _load_spd_pair(path, None, path.stem, where, f"user file {path}")
-        return mat
-    if not path.is_file():
-        raise MaterialError(f"{where}: no such file")
-    if name.endswith((".yml", ".yaml")):
-        doc = _yaml_load(path, where)
-        return _material_from_rii(doc, path.stem, where, source=str(path), user_file=True)
-    return _load_csv(path, where)
+    return (file_format(path.name) or MATERIAL_FILES[0]).read(path, where)
