@@ -18,7 +18,6 @@ from __future__ import annotations
 import os
 import warnings
 
-KNOWN_BAD = (15, 16)
 TESTED = 19
 
 FIX = (

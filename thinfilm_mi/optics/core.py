@@ -257,15 +257,6 @@ def cmul(a: Cx, b: Cx) -> Cx:
     return Cx(a.re * b.re - a.im * b.im, a.re * b.im + a.im * b.re)
 
 
-def _exp_i(delta: Cx) -> Cx:
-    """``exp(i delta)`` for ``Im delta >= 0``: modulus ``exp(-Im delta) <= 1``."""
-    s, c = dr.sincos(delta.re)
-    if is_zero(delta.im):
-        return Cx(c, s)
-    mag = dr.exp(-delta.im)
-    return Cx(mag * c, mag * s)
-
-
 # sin(2 pi g) = g * P(g^2) and cos(2 pi g) = Q(g^2) for |g| <= 1/8 (a least-squares
 # fit on 20001 points, done for this module; largest error 2.4e-8 and 7.9e-9 with
 # the float32 coefficients, below float32's half ulp of 1).
