@@ -20,6 +20,11 @@ from __future__ import annotations
 import importlib
 from types import ModuleType
 
+__all__ = [
+    "ThinFilmError", "MaterialError", "RenderError", "UsageError", "RenderFailure", "MissingExtra",
+    "require_extra",
+]
+
 
 class ThinFilmError(ValueError):
     """Bad thin-film input (stack, layer list, parameter)."""

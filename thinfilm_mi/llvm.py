@@ -18,6 +18,8 @@ from __future__ import annotations
 import os
 import warnings
 
+__all__ = ["TESTED", "FIX", "LLVMVersionError", "llvm_version", "check_version", "require_llvm"]
+
 TESTED = 19
 
 FIX = (

@@ -37,6 +37,13 @@ from thinfilm_mi.cli import render as render_command
 from thinfilm_mi.cli.parser import ArgumentParser, failure, report_error
 from thinfilm_mi.errors import RenderError, ThinFilmError, UsageError, require_extra
 
+__all__ = [
+    "PROG", "DEMO_LAYERS", "DEMO_SUBSTRATE", "DEMO_DESCRIPTION", "cmd_materials", "MAX_GRID_POINTS",
+    "parse_angles", "parse_wavelengths", "spectrum_table", "format_spectrum", "plot_spectrum", "cmd_spectrum",
+    "cmd_colour", "find_demo_scene", "reflectance_colours", "write_reflectance_image", "cmd_demo", "build_parser",
+    "main",
+]
+
 PROG = "python -m thinfilm_mi"
 
 #: The demo stack of the README: a 500 nm SiO2-like film over 20 nm of an

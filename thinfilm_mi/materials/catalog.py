@@ -73,6 +73,8 @@ from thinfilm_mi.materials.sources import (
     short_reference,
 )
 
+__all__ = ["resolve", "refractive_index", "list_materials", "format_material_table", "save_material"]
+
 # ---------------------------------------------------------------------------
 # resolve()
 # ---------------------------------------------------------------------------

@@ -15,6 +15,11 @@ import numpy as np
 
 from thinfilm_mi.errors import MaterialError
 
+__all__ = [
+    "SPECTRAL_RANGE", "RANGE_RTOL", "DATA_DIR", "MIN_INDEX", "MAX_INDEX", "check_index_range", "Material",
+    "ConstantMaterial", "TabulatedIndex", "DispersionFormula", "DispersiveMaterial", "GRID",
+]
+
 #: Mitsuba 3's spectral range (nm): every dataset used for rendering must cover it.
 SPECTRAL_RANGE = (360.0, 830.0)
 

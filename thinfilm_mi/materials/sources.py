@@ -26,6 +26,13 @@ from thinfilm_mi.materials.model import (
     TabulatedIndex,
 )
 
+__all__ = [
+    "normalise_name", "builtin_registry", "short_names", "load_builtin", "ri_database_version", "load_ri_page",
+    "mitsuba_ior_dir", "mitsuba_presets", "MITSUBA_SWAPPED", "read_spd", "mitsuba_reference", "load_mitsuba",
+    "short_reference", "MaterialFile", "CsvFile", "TextFile", "SpdFile", "RiiFile", "SPD", "MATERIAL_FILES",
+    "FILE_SUFFIXES", "file_format", "is_material_file", "load_file",
+]
+
 
 # ---------------------------------------------------------------------------
 # refractiveindex.info YAML format
@@ -506,9 +513,8 @@ class TextFile(CsvFile):
 
 
 class SpdFile(MaterialFile):
-    """Mitsuba's ``.spd`` (``wavelength_nm value`` lines): ``STEM.eta.spd`` holds ``n``
-    and ``STEM.k.spd`` ``k``; either one, or ``STEM.spd``, names the pair. A lone
-    ``STEM.spd`` that exists is ``n`` alone."""
+    """Mitsuba's ``.spd``: ``STEM.eta.spd`` holds ``n`` and ``STEM.k.spd`` ``k``; either
+    one, or ``STEM.spd``, names the pair (a lone ``STEM.spd`` that exists is ``n`` alone)."""
 
     suffixes = (".spd",)
     ETA, K = ".eta.spd", ".k.spd"
@@ -588,7 +594,6 @@ def is_material_file(spec: str | Path) -> bool:
 
 
 def load_file(path: Path) -> Material:
-    """The material in the file ``path``, read by its format (a file of another suffix,
-    passed as a path object, is read as a CSV table)."""
+    """The material in the file ``path``, read by its format (another suffix: as CSV)."""
     where = f"material file {str(path)!r}"
     return (file_format(path.name) or MATERIAL_FILES[0]).read(path, where)

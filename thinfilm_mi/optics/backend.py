@@ -13,6 +13,8 @@ from drjit.llvm import Float64
 from thinfilm_mi.llvm import require_llvm
 from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
 
+__all__ = ["aligned_array", "float64_array", "repeated", "to_drjit", "to_numpy", "to_inputs", "reference_rt"]
+
 #: Alignment (bytes) of the buffers handed to Dr.Jit, see :func:`float64_array`.
 _ALIGN = 128
 

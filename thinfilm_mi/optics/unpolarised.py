@@ -20,6 +20,8 @@ from thinfilm_mi.optics.core import (
     transmittance_factor_s,
 )
 
+__all__ = ["LOOP_MIN_FILMS", "unpolarised_rt", "unpolarised_powers", "unpolarised_rt_loop"]
+
 #: Exact evaluation of a side with at least this many films runs the recursion
 #: as a symbolic Dr.Jit loop over buffers of the films (the render kernel's film loop,
 #: :func:`unpolarised_rt_loop` in table builds):
