@@ -26,6 +26,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.optics.core import film_attenuation
 from thinfilm_mi.render.diffuse import DiffuseFactors, grid_spectrum, with_derivatives
+from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.textures import mitsuba_module, scalar, texture_range
 from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.diffuse import ColourDiffuse
@@ -97,6 +98,12 @@ class SpectralTerms:
     def __init__(self, factors, texture=None, plugin: str = "thinfilm_diffuse", old=None):
         self.table = None
         self.r_dh = self.t_hemi = None
+        #: film N's index as a film-loop buffer (its textures' binary searches cost
+        #: the "single" model more than its coating's table: issue 44)
+        film_n = getattr(factors, "film_n", None)
+        self.film_n = None
+        if film_n is not None and film_n.knots is not None and dr.is_jit_v(mitsuba_module().Float):
+            self.film_n = LoopFilms([(film_n, 0.0, False)], factors.coating.ambient)
         if factors is not None and texture is not None:
             s_max = scale_bounds(texture, plugin)
             self.table = ScaleTable(lambda s: factors.hemispherical_scales(GRID, s), s_max)
@@ -140,8 +147,12 @@ def coating_transmission(bsdf, si, cos_theta, k_t, active):
     if bsdf.film_n is not None:
         scale = bsdf.coating.thickness_scale_at(si, active)
         d = bsdf.film_n_thickness if scale is None else bsdf.film_n_thickness * scale
-        k_t = k_t * film_attenuation(n0, cos_theta, bsdf.film_n.eval(si, active), d,
-                                     si.wavelengths)
+        grid = bsdf.terms.film_n if bsdf.terms is not None else None
+        if grid is None or bsdf.film_n.carries_gradients(si, active):
+            n_film = bsdf.film_n.eval(si, active)
+        else:
+            n_film = grid.index(si.wavelengths)
+        k_t = k_t * film_attenuation(n0, cos_theta, n_film, d, si.wavelengths)
     if bsdf.base_ratio:
         k_t = k_t * n0 / bsdf.coating.substrate.eval_real(si, active)
     # (the polarized amplitudes of a scaled stack come back as plain Array4f)

@@ -120,21 +120,35 @@ class LoopFilms:
         vec = mi.Vector2f if self.real else mi.Vector4f
 
         def film(j):
-            base = j * self.cells
-            eta, k = [], []
-            for i, t in cells:
-                v = dr.gather(vec, self.buffer, base + i)
-                if self.real:
-                    eta.append(dr.lerp(v[0], v[1], t))
-                else:
-                    eta.append(dr.lerp(v[0], v[2], t))
-                    k.append(dr.lerp(v[1], v[3], t))
-            U = mi.UnpolarizedSpectrum
-            index = Cx(U(*eta), 0.0 if self.real else U(*k))
             d = dr.gather(mi.Float, self.thickness, j)
-            return index, (d if thickness_scale is None else d * thickness_scale)
+            return (self._index(cells, vec, j),
+                    d if thickness_scale is None else d * thickness_scale)
 
         return self._rt(film, n0, cos_theta, exit_, wl, transmission, evaluator)
+
+    def _index(self, cells, vec, j):
+        mi = mitsuba_module()
+        base = j * self.cells
+        eta, k = [], []
+        for i, t in cells:
+            v = dr.gather(vec, self.buffer, base + i)
+            if self.real:
+                eta.append(dr.lerp(v[0], v[1], t))
+            else:
+                eta.append(dr.lerp(v[0], v[2], t))
+                k.append(dr.lerp(v[1], v[3], t))
+        U = mi.UnpolarizedSpectrum
+        return Cx(U(*eta), 0.0 if self.real else U(*k))
+
+    def index(self, wl, j=0) -> Cx:
+        """Film ``j``'s index at the wavelengths ``wl`` (one search per wavelength, one
+        gather per film and wavelength), what its textures give up to float32 rounding:
+        e.g. ``thinfilm_diffuse``'s absorbing film ``N`` (``render/diffuse_exact.py``)."""
+        mi = mitsuba_module()
+        if self.constant:
+            return Cx(mi.UnpolarizedSpectrum(dr.gather(mi.Float, self.buffer, mi.UInt32(j))), 0.0)
+        return self._index([self._cell(wl[c]) for c in range(len(wl))],
+                           mi.Vector2f if self.real else mi.Vector4f, j)
 
     def _rt(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool, evaluator):
         return evaluator(n0, cos_theta, self.count, film, exit_, wl, transmission,
