@@ -1,18 +1,20 @@
 # The two set-up commands of the README: `make demo` and `make test`.
 # Both create .venv on first use, install the package with the extras the test
-# suite needs ([test], [sweep]: Dask, [plot]: matplotlib), and make sure Dr.Jit
-# loads an LLVM it can compile with (scripts/ensure_llvm.py).
+# suite needs ([test], [sweep]: Dask, [plot]: matplotlib, [docs]: Sphinx, which
+# the suite runs as `make docs`), and make sure Dr.Jit loads an LLVM it can
+# compile with (scripts/ensure_llvm.py). `make docs` builds docs/_build/html with
+# warnings as errors.
 PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: demo test venv clean
+.PHONY: demo test docs venv clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
-	$(PY) -m pip install -q -e '.[test,sweep,plot]'
+	$(PY) -m pip install -q -e '.[test,sweep,plot,docs]'
 	$(PY) scripts/ensure_llvm.py
 	touch $(STAMP)
 
@@ -24,5 +26,8 @@ demo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m pytest -q
 
+docs: $(STAMP)
+	$(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
+
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) out docs/_build docs/plugins/*.rst

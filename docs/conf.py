@@ -1,0 +1,46 @@
+"""Sphinx configuration of the thinfilm-mi documentation (``make docs``).
+
+Lean on purpose: the test suite builds this site with ``-W`` (tests/test_readme_commands.py
+runs ``make docs``), so no intersphinx (no network), no autosummary stub pages, and the
+notebooks are not rendered.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE / "_ext"))
+
+from thinfilm_plugins import RST_PROLOG  # noqa: E402
+
+from thinfilm_mi.version import __version__  # noqa: E402
+
+project = "thinfilm-mi"
+author = "the thinfilm-mi authors"
+copyright = "the thinfilm-mi authors, BSD-3-Clause"
+release = version = __version__
+
+extensions = [
+    "myst_parser",
+    "sphinx.ext.autodoc",
+    "sphinx.ext.mathjax",
+    "thinfilm_plugins",
+]
+source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+exclude_patterns = ["_build"]
+root_doc = "index"
+rst_prolog = RST_PROLOG
+myst_enable_extensions = ["dollarmath", "colon_fence"]
+myst_heading_anchors = 3
+
+autodoc_member_order = "bysource"
+autodoc_typehints = "description"
+autodoc_default_options = {"members": True, "undoc-members": False}
+
+html_theme = "furo"
+html_title = f"thinfilm-mi {release}"
+html_static_path = ["_static"]
+html_css_files = ["plugins.css"]
+html_copy_source = False
+html_show_sourcelink = False
