@@ -1,15 +1,20 @@
-"""Every shell command the README prints runs, exactly as printed (issue 30).
+"""Every shell command the README and the documentation print runs, exactly as printed
+(issues 30 and 41).
 
-The commands are read from README.md: its shell code blocks (indented blocks
+The commands are read from README.md and from the Markdown pages of the documentation
+site (``docs/**/*.md``; not the files they ``{include}``, such as benchmarks/README.md,
+whose benchmark runs take minutes): their shell code blocks (indented blocks
 and ``sh``/``bash``/``console`` fences whose first line is a command; a line
 ``$ CMD`` is a command whose printed output follows it). Each one is either
 run here, by ``bash -c`` on its printed text (comment and all), and its outputs
 checked (:data:`CHECKS`), or named in :data:`NOT_RUN` with the reason it cannot
 be; a command in neither fails :func:`test_every_readme_command_is_run_or_listed`,
-so a command added to the README must come with its test.
+so a command added to the README or the docs must come with its test. A command
+printed in several places (the same text and printed output) runs once.
 
 The commands run in a temporary copy of what they read (``scenes/``, the
-Makefile, ``pyproject.toml``, ``scripts/``, and ``.venv`` as a link), so their
+Makefile, ``pyproject.toml``, ``scripts/``, ``examples/``, ``docs/`` and the
+``benchmarks/README.md`` it includes, and ``.venv`` as a link), so their
 ``out/`` folder is not the checkout's. ``thinfilm-render`` is the console script
 of the interpreter running the tests and ``python`` that interpreter (both put
 first on ``PATH``), as in the activated virtual environment the README assumes.
@@ -37,6 +42,9 @@ from thinfilm_mi.batch.exr import read_exr  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 README = REPO / "README.md"
+DOCS = REPO / "docs"
+#: the documentation's Markdown pages (not its build, nor the generated plugin pages)
+DOC_PAGES = sorted(p for p in DOCS.rglob("*.md") if "_build" not in p.relative_to(DOCS).parts)
 TIMEOUT = 600  # seconds, per command (they take 1-20 s)
 
 #: a line of a code block is a shell command when it starts like one
@@ -48,8 +56,9 @@ SHELL_FENCES = {"", "sh", "bash", "shell", "console"}
 @dataclass(frozen=True)
 class Command:
     text: str                       # as printed, continuation lines joined
-    line: int                       # in README.md
+    line: int                       # in its source
     output: tuple[str, ...] = ()    # the output printed under a `$ CMD` line
+    source: str = "README.md"       # the file that prints it, relative to the repository
 
     @property
     def key(self) -> str:
@@ -95,8 +104,8 @@ def _blocks(lines: list[str]):
         i += 1
 
 
-def readme_commands(text: str) -> list[Command]:
-    """The shell commands of a README (see the module docstring)."""
+def readme_commands(text: str, source: str = "README.md") -> list[Command]:
+    """The shell commands of a README or a docs page (see the module docstring)."""
     commands: list[Command] = []
     for start, block in _blocks(text.splitlines()):
         body = [x for x in block if x.strip()]
@@ -118,11 +127,20 @@ def readme_commands(text: str) -> list[Command]:
                 while i < len(block) and block[i].strip() and not block[i].startswith("$ "):
                     output.append(block[i].rstrip())
                     i += 1
-            commands.append(Command(text, number, tuple(output)))
+            commands.append(Command(text, number, tuple(output), source))
     return commands
 
 
-COMMANDS = readme_commands(README.read_text(encoding="utf-8"))
+def printed_commands() -> list[Command]:
+    """The commands of README.md and of every docs page, each (text and output) once."""
+    found: dict[tuple, Command] = {}
+    for path in [README, *DOC_PAGES]:
+        for c in readme_commands(path.read_text(encoding="utf-8"), str(path.relative_to(REPO))):
+            found.setdefault((c.key, c.output), c)
+    return list(found.values())
+
+
+COMMANDS = printed_commands()
 
 #: README commands that a test cannot run, and why
 NOT_RUN = {
@@ -148,6 +166,10 @@ def workdir(tmp_path_factory) -> Path:
     shutil.copytree(REPO / "scenes", root / "scenes")
     shutil.copytree(REPO / "scripts", root / "scripts")
     shutil.copytree(REPO / "examples", root / "examples")
+    shutil.copytree(DOCS, root / "docs", ignore=lambda folder, names: [
+        n for n in names if n == "_build" or (Path(folder).name == "plugins" and n.endswith(".rst"))])
+    (root / "benchmarks").mkdir()
+    shutil.copy2(REPO / "benchmarks" / "README.md", root / "benchmarks" / "README.md")
     for name in ("Makefile", "pyproject.toml"):
         shutil.copy2(REPO / name, root / name)  # mtimes kept: make compares them
     if (REPO / ".venv").is_dir():
@@ -170,7 +192,7 @@ def env(tmp_path_factory) -> dict[str, str]:
 def run(command: Command, workdir: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
     proc = subprocess.run(["bash", "-c", command.text], cwd=workdir, env=env, capture_output=True,
                           text=True, timeout=TIMEOUT)
-    assert proc.returncode == 0, (f"README.md line {command.line}: `{command.text}` exited "
+    assert proc.returncode == 0, (f"{command.source} line {command.line}: `{command.text}` exited "
                                   f"{proc.returncode}:\n{proc.stderr[-4000:]}")
     return proc
 
@@ -194,6 +216,28 @@ def _render(exr: Path, size: tuple[int, int], spp: int, variant: str = "llvm_ad_
 def check_make_demo(proc, root, command):
     # "`make demo` renders at the scene's size (400×266) with 64 samples per pixel"
     _render(root / "out" / "demo.exr", (400, 266), 64)
+
+
+def check_make_docs(proc, root, command):
+    # the site, built with warnings as errors: a page per plugin, generated from its doc
+    # block, with an anchor for every parameter the block lists (docs/_ext/thinfilm_plugins.py)
+    sys.path.insert(0, str(DOCS / "_ext"))
+    try:
+        import thinfilm_plugins as ext
+    finally:
+        sys.path.pop(0)
+    html = root / "docs" / "_build" / "html"
+    for path in ext.plugin_files():
+        page = (html / "plugins" / f"{path.stem}.html").read_text(encoding="utf-8")
+        for name in ext.documented_parameters(ext.doc_block(path)):
+            assert f'id="{path.stem}-{name}"'.replace("_", "-") in page, (path.stem, name)
+        assert "XML (scene file)" in page and "Python (dictionary for mi.load_dict)" in page, path.stem
+    api = (html / "api.html").read_text(encoding="utf-8")
+    for name in ("thinfilm_mi.Stack", "thinfilm_mi.resolve_material", "thinfilm_mi.colour.report.colour_report",
+                 "thinfilm_mi.design.design", "thinfilm_mi.design.fit", "thinfilm_mi.batch.sweeps.sweep"):
+        assert f'id="{name}"' in api, name
+    for page in ("getting-started", "limitations", "physics", "benchmarks", "upstream_gc_during_symbolic_call"):
+        assert (html / f"{page}.html").is_file(), page
 
 
 def check_fig8a(proc, root, command):
@@ -324,6 +368,7 @@ def check_fit(proc, root, command):
 #: README command -> the check of what it produced, ``check(proc, workdir, command)``
 CHECKS = {
     "make demo": check_make_demo,
+    "make docs": check_make_docs,
     "thinfilm-render scenes/fig8a_si_sio2.xml --spp 16 --size 400x266 -D thickness=480": check_fig8a,
     "thinfilm-render scenes/*.xml --size 200x133 --spp 4 --out-dir out/all": check_all_scenes,
     'python -m thinfilm_mi spectrum --layers "SiO2 500; Au 20" --substrate 1.6 --angles 0,45,70':
@@ -354,12 +399,12 @@ CHECKS = {
 
 def test_every_readme_command_is_run_or_listed():
     keys = [c.key for c in COMMANDS]
-    unknown = [f"line {c.line}: {c.key}" for c in COMMANDS if c.key not in CHECKS and c.key not in NOT_RUN]
-    assert not unknown, ("README commands with no test: add each to CHECKS (with a check of "
+    unknown = [f"{c.source} line {c.line}: {c.key}" for c in COMMANDS if c.key not in CHECKS and c.key not in NOT_RUN]
+    assert not unknown, ("README/docs commands with no test: add each to CHECKS (with a check of "
                          "its output) or, if a test cannot run it, to NOT_RUN with the reason:\n"
                          + "\n".join(unknown))
     stale = sorted((set(CHECKS) | set(NOT_RUN)) - set(keys))
-    assert not stale, f"no longer in the README: {stale}"
+    assert not stale, f"no longer in the README or the docs: {stale}"
     assert not set(CHECKS) & set(NOT_RUN)
 
 
