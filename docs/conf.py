@@ -24,6 +24,7 @@ release = version = __version__
 extensions = [
     "myst_parser",
     "sphinx.ext.autodoc",
+    "sphinx.ext.napoleon",      # the numpy-style "Parameters" sections of the docstrings
     "sphinx.ext.mathjax",
     "thinfilm_plugins",
 ]
@@ -36,6 +37,8 @@ myst_heading_anchors = 3
 
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"
+autodoc_typehints_description_target = "documented"
+napoleon_google_docstring = False
 autodoc_default_options = {"members": True, "undoc-members": False}
 
 html_theme = "furo"

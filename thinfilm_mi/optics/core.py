@@ -583,6 +583,8 @@ def stack_amplitudes(
     transmission : bool
         Whether to carry the transmission amplitude (skipped: ``ts = tp = None``).
 
+    Notes
+    -----
     The recursion is the paper's eq. 1-4: starting from the innermost interface,
     ``gamma <- (r_j + gamma E_j) / (1 + r_j gamma E_j)`` and
     ``tau <- t_j tau sqrt(E_j) / (1 + r_j gamma E_j)`` with
