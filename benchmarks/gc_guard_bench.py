@@ -12,7 +12,8 @@
    the exit status (a crash is -11), the dropped BSDFs alive at most at an iteration's
    start and after a final collection, and the seconds (mostly kernel compilations: each
    iteration traces another set of instances). The plain-BSDF reproducer without the
-   package (must crash) and with the guard (must not) run first.
+   package and our plugins with the guard taken out (both must crash), and the plain BSDF
+   with the guard (must not) run first.
 2. The cost: one process, ``llvm_ad_spectral``, the demo's glass sphere
    (``thinfilm_dielectric`` "SiO2 500; Au 20; Al 10" on 1.5) on a diffuse floor, 128x128,
    4 spp: ``mi.render`` + ``dr.eval`` with the hook in ``gc.callbacks`` and with it taken
@@ -45,13 +46,14 @@ def _child(variant, iterations, threshold, kind):
 
 
 def matrix(iterations):
-    print(f"{'variant':28s} {'gc':8s} {'kind':12s} {'status':>6s}  result{'':26s} seconds")
-    runs = [("llvm_ad_rgb", "default", "plain", 30), ("llvm_ad_rgb", "default", "plain+guard", iterations),
+    print(f"{'variant':28s} {'gc':8s} {'kind':18s} {'status':>6s}  result{'':26s} seconds")
+    runs = [("llvm_ad_rgb", "default", "plain", 30), ("llvm_ad_rgb", "default", "thinfilm-unguarded", 26),
+            ("llvm_ad_rgb", "default", "plain+guard", iterations),
             ("llvm_ad_rgb", "1", "plain+guard", iterations)]
     runs += [(v, g, "thinfilm", iterations) for v in VARIANTS for g in ("default", "1")]
     for variant, threshold, kind, n in runs:
         rc, last, seconds = _child(variant, n, threshold, kind)
-        print(f"{variant:28s} {threshold:8s} {kind:12s} {rc:6d}  {last if rc == 0 else 'crashed':32s} "
+        print(f"{variant:28s} {threshold:8s} {kind:18s} {rc:6d}  {last if rc == 0 else 'crashed':32s} "
               f"{seconds:7.1f}", flush=True)
 
 

@@ -16,6 +16,7 @@ collector may run.
   crash (the test's proof that it can fail).
 * ``plain+guard``: the same, with :func:`thinfilm_mi.render.gc_guard.install` (and so
   ``thinfilm_mi``) imported.
+* ``thinfilm-unguarded``: ``thinfilm`` with the guard taken out of ``gc.callbacks``.
 
 ``GC`` is ``default`` or ``1`` (``gc.set_threshold(1, 1, 1)``: a pass at every
 allocation). On success it prints one line: ``ok ITERATIONS alive=N max_alive=M``,
@@ -159,6 +160,9 @@ def main():
         from thinfilm_mi.render.registry import PLUGINS  # importing thinfilm_mi installs the guard
         _register_counted({name: getattr(importlib.import_module(f"thinfilm_mi.plugins.{module}"), cls)
                            for name, (module, cls) in PLUGINS.items()}, alive)
+        if kind == "thinfilm-unguarded":   # the guard taken out: what it protects against
+            from thinfilm_mi.render import gc_guard
+            gc.callbacks.remove(gc_guard._guard)
     if threshold != "default":
         gc.set_threshold(int(threshold), 1, 1)
     bsdfs = list(_bsdfs(kind).values())

@@ -6,7 +6,8 @@ that every later render traces the BSDFs of scenes that only reference cycles ke
 while Python code that allocates runs inside the trace.
 
 * The defect is Mitsuba's, and the test can fail: a plain Python BSDF, in a process
-  that does not import ``thinfilm_mi``, crashes (SIGSEGV) within a few iterations.
+  that does not import ``thinfilm_mi``, crashes (SIGSEGV) within a few iterations; so
+  do our plugins with the guard taken out of ``gc.callbacks``.
 * With the guard, the same plain BSDF survives the loop with the default collector and
   with a pass at every allocation (``gc.set_threshold(1, 1, 1)``), and the dropped
   BSDFs are collected as the loop goes (at most a few alive at any iteration, none
@@ -62,6 +63,13 @@ def _survived(result, iterations):
 def test_the_defect_crashes_a_plain_python_bsdf_without_the_guard(variant):
     rc, out, err = _run(variant, 30, "default", "plain")
     assert rc == -signal.SIGSEGV, f"expected a segfault (Mitsuba 3.9's defect), got {rc}: {out} {err}"
+
+
+def test_our_plugins_crash_with_the_guard_taken_out():
+    """The guard is what protects our plugins: without it the loop over every plugin
+    dies (SIGSEGV) within a few iterations (measured: the second or third)."""
+    rc, out, err = _run("llvm_ad_rgb", 26, "default", "thinfilm-unguarded")
+    assert rc == -signal.SIGSEGV, f"expected a segfault without the guard, got {rc}: {out} {err}"
 
 
 @pytest.mark.parametrize("threshold", ["default", "1"])
