@@ -26,7 +26,8 @@ polarized variants, and the demo scene against its native twin.
    --first-repeats runs alternating, the median of each.
 
 ``--write-readme`` writes the tables between ``<!-- plugins:begin -->`` and
-``<!-- plugins:end -->`` in README.md (generated, never copied by hand).
+``<!-- plugins:end -->`` in README.md (generated, never copied by hand); ``--from-json
+FILE`` takes a run's figures from the JSON line it wrote to stderr instead of measuring.
 """
 from __future__ import annotations
 
@@ -260,6 +261,9 @@ def main():
     ap.add_argument("--skip-demo", action="store_true")
     ap.add_argument("--skip-first", action="store_true")
     ap.add_argument("--write-readme", action="store_true")
+    ap.add_argument("--from-json", help="the JSON line a run wrote to stderr: print (and with "
+                    "--write-readme write) its tables without measuring again; the other "
+                    "options must be the run's")
     ap.add_argument("--plugins-child")
     ap.add_argument("--demo-first-child")
     ap.add_argument("--demo-steady-child", action="store_true")
@@ -271,6 +275,11 @@ def main():
     if args.demo_steady_child:
         return demo_steady_child(args.demo_repeats, args.demo_size, args.demo_spp)
     plugins, demo = {}, {}
+    if args.from_json:
+        with open(args.from_json, encoding="utf-8") as f:
+            data = json.loads(f.read().strip().splitlines()[-1])
+        plugins, demo = data["plugins"], data["demo"]
+        args.skip_plugins = args.skip_demo = True
     if not args.skip_plugins:
         for v in args.variants.split(","):
             plugins[v] = child("--plugins-child", v, "--repeats", str(args.repeats),

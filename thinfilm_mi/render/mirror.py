@@ -125,12 +125,18 @@ def mirrored_rt(stack, si, cos_theta, inside: bool | Any, active, transmission: 
     return (R, 1.0 - R) if transmission else R
 
 
-def either_side(side, inside, transmission: bool):
+def either_side(side, inside, transmission: bool, films: bool = True):
     """``side(inside)`` for a Python bool; for a mask, ``side(True)`` where it is set
     and ``side(False)`` elsewhere, each under a symbolic conditional (see the module
-    docstring); ``transmission``: whether ``side`` returns ``(R, T)``."""
+    docstring; without ``films``, a bare interface's Fresnel terms, both are computed and
+    selected: cheaper than the branch); ``transmission``: whether ``side`` returns
+    ``(R, T)``."""
     if isinstance(inside, bool):
         return side(inside)
+    if not films:
+        out = tuple(dr.select(inside, a, b) for a, b in zip(_pair(side(True), transmission),
+                                                            _pair(side(False), transmission)))
+        return out if transmission else out[0]
     out = dr.if_stmt(args=(), cond=inside, true_fn=lambda: _pair(side(True), transmission),
                      false_fn=lambda: _pair(side(False), transmission))
     return out if transmission else out[0]
