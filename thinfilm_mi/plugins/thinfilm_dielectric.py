@@ -37,9 +37,9 @@ Thin-film coated smooth dielectric (:monosp:`thinfilm_dielectric`)
      ``T`` where needed) is read from a verified table over (angle, wavelength) instead
      of the recursion (a cubic B-spline, split at the critical angle where the exit
      medium can totally reflect): its cost does not grow with the number of films.
-     ``auto`` tabulates stacks from 5 films in vectorised variants (non-absorbing films
-     between constant indices from 10: both sides are then one exact recursion at the
-     Snell-mapped angle, and fewer films cost less than a lookup), unless a
+     ``auto`` tabulates in vectorised variants by measured cost: absorbing films from
+     5 films, non-absorbing ones between constant indices from 10 (both sides are then
+     one exact recursion at the Snell-mapped angle), other non-absorbing ones from 1, unless a
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
      within 2^19 texels, a table that still fits the cache, by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact),

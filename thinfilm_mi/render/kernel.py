@@ -40,13 +40,16 @@ from thinfilm_mi.tabulate.store import default_store
 DEFAULT_COHERENCE_THICKNESS = 5000.0
 #: Default target for the tables: max abs error in R and T.
 DEFAULT_TABLE_ERROR = 1e-3
-#: ``tabulate="auto"`` uses a table for stacks of at least this many films (after
-#: the skips): one. A single film's lookup is ~2x cheaper per call than its
-#: recursion (3-4 against 5-8 ns per point): a render costs 0.98x Mitsuba's
-#: ``conductor`` against 1.07x exact (issue 32's target: <= 1.02x), for a build of
-#: ~10 ms and an error within ``table_error`` (measured ~3e-4 at the default 1e-3,
-#: where the float32 recursion errs by ~4e-6; ``tabulate=false`` keeps it exact).
+#: ``tabulate="auto"`` tabulates a side of ``R`` only from this many films (after the
+#: skips): one film on a conductor renders at 0.98x ``conductor`` tabulated against
+#: 1.07x exact (issue 32), within ``table_error`` (~3e-4 at the default 1e-3).
 AUTO_MIN_FILMS = 1
+#: The same for a side of ``R`` and ``T`` (two channels): such a lookup costs what 4-5
+#: films of the exact loop do (issue 44, sphere scene, tabulated / exact: ``dielectric``
+#: "Au 20" 1.96x / 1.87x, "SiO2 500; Au 20; Al 10" 2.15x (outside) / 1.92x, six films of
+#: SiO2 / Au / Ag 2.41x / 2.79x; ``diffuse`` "SiO2 500; Au 5" 2.49x / 2.27x, 4 films
+#: 2.85x / 2.69x).
+RT_AUTO_MIN_FILMS = 5
 #: ``tabulate="auto"`` keeps tables of at most this many texels (over all
 #: channels, 2 MiB of float32): a cubic lookup in a table that fits the cache
 #: costs 3-4.6 ns per point, beyond it 7-12 ns, as much as the exact recursion
@@ -66,15 +69,12 @@ DEFAULT_SPECTRAL_RESOLUTION = 1.0
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
 #: is below this: what lies beneath then changes r by less than ~1e-9.
 OPAQUE_AMPLITUDE = 1e-9
-#: Exact sides of at least this many films run as the film loop (:class:`LoopFilms`)
-#: where every film has a real index above the ambient's (real Fresnel amplitudes,
-#: ``optics.stack_rt_loop_real``, faster than unrolled films from one film on,
-#: benchmarks/SPEED.md), and in spectral variants for any films: the loop's buffers
-#: hold every film's index on the union of their knots (one search per wavelength
-#: for all films, where each unrolled film searches its ``eta`` and ``k``): issue 44,
-#: "SiO2 500; Au 20; Al 10" on glass 3.67x -> 2.36x ``dielectric``, "Au 20" 2.29x -> 2.09x.
-#: Polarized variants, and complex films under a ``thickness`` texture (whose gradients
-#: the loop does not carry backwards), loop from :data:`LOOP_MIN_FILMS` films.
+#: Exact sides of this many films run as the film loop (:class:`LoopFilms`): real
+#: films above the ambient's index (real amplitudes, benchmarks/SPEED.md), and any in
+#: spectral variants (one index search per wavelength for all films, issue 44: "SiO2
+#: 500; Au 20; Al 10" on glass 3.67x -> 2.36x ``dielectric``). Polarized variants and
+#: complex films under a ``thickness`` texture (whose gradients the loop does not carry
+#: backwards) loop from :data:`LOOP_MIN_FILMS` films.
 REAL_LOOP_MIN_FILMS = 1
 
 
@@ -235,25 +235,27 @@ class KernelStack:
         # "auto" tabulates in vectorised variants only: in scalar variants every
         # call is Python anyway and the load-time build would dominate.
         # ``quantity``: what the tables hold (None: the powers; tabulate.mueller.MUELLER)
-        min_films = quantity.auto_min_films if quantity else AUTO_MIN_FILMS
-        if quantity is None and len(self.sides) == 2:   # lit from both sides (render.mirror)
-            min_films = mirror.auto_min_films(self)
+        auto = self.tabulate == "auto"
+
+        def few(side):   # "auto": fewer films than a table of this side pays for
+            if quantity:
+                return len(side.films) < quantity.auto_min_films
+            if self.mirrored and mirror.exact_mirrors(self.ambient, self.substrate):
+                return len(side.films) < mirror.AUTO_MIN_FILMS
+            two = side.transmission and not side.opaque
+            return len(side.films) < (RT_AUTO_MIN_FILMS if two else AUTO_MIN_FILMS)
         want = self.tabulate is True or (
-            self.tabulate == "auto" and self.thickness_texture is None
-            and dr.is_jit_v(mitsuba_module().Float)
-            and max((len(s.films) for s in self.plan.values()), default=0) >= min_films)
+            auto and self.thickness_texture is None and dr.is_jit_v(mitsuba_module().Float)
+            and not all(few(s) for s in self.plan.values()))
         self.table_failed = []
         if not want or self._differentiating():
-            # A thickness that carries gradients reads every film exactly
-            # (evaluation_side): a table built now would not be read, so an
-            # optimisation loop spends no time in builds.
-            return
+            return   # (thicknesses with gradients read every film: evaluation_side)
         for inside, side in self.plan.items():
             if inside and self.mirrored and self.plan[False].table is None:
                 # no table to mirror: this side is planned (and tabulated) on its own
                 self.mirrored = False
                 side.transmission = self.sides[True] and not side.lossless
-            if side.films and not (self.tabulate == "auto" and inside in self._gave_up) \
+            if side.films and not (auto and (inside in self._gave_up or few(side))) \
                     and self.mirror_table(side) is None:
                 side.table = _tables_cache(self, side, quantity)
                 if side.table is None:

@@ -37,23 +37,6 @@ from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
 #: 1 film 0.93x exact against 1.63x tabulated; 3 films 1.37x against 1.54x; 10 films
 #: 1.98x against 1.90x; 30 films 3.69x against 2.06x).
 AUTO_MIN_FILMS = 10
-#: The same for other stacks lit from both sides (:func:`either_side`): a side's
-#: table of ``R`` and ``T`` costs about what 4-5 films of its exact loop do (issue 44,
-#: against ``dielectric``, one run: "Au 20" 1.96x tabulated against 1.87x exact;
-#: "SiO2 500; Au 20; Al 10" 2.15x with the outside tabulated against 1.92x exact;
-#: six films of SiO2 / Au / Ag 2.41x against 2.79x).
-BRANCHED_AUTO_MIN_FILMS = 5
-
-
-def auto_min_films(stack) -> int:
-    """The films from which ``tabulate="auto"`` tabulates ``stack``, lit from both sides
-    in a spectral variant: :data:`AUTO_MIN_FILMS` where :func:`mirrored_rt` evaluates
-    it exactly, else :data:`BRANCHED_AUTO_MIN_FILMS`."""
-    if stack.mirrored and exact_mirrors(stack.ambient, stack.substrate):
-        return AUTO_MIN_FILMS
-    return BRANCHED_AUTO_MIN_FILMS
-
-
 def real_on_grid(index) -> bool:
     """Whether a :class:`~thinfilm_mi.render.media.SpectralIndex` has no absorption
     over 360-830 nm (on the 1 nm grid)."""
