@@ -433,7 +433,7 @@ class KernelStack:
                     R = attach_gradient(R, sampler.estimate(wl, exact))
             return (R, T) if transmission else R
 
-        return mirror.either_side(side, inside, transmission, bool(self.indices))
+        return mirror.either_side(side, inside, transmission, mirror.branches(self))
 
     def colour_gradients(self, si, active=True) -> bool:
         """Whether a film thickness or an index of this stack carries gradients
@@ -463,7 +463,7 @@ class KernelStack:
         def side(flag: bool):
             return self.side_response(flag, si, cos_theta, active, transmission, thickness_scale)
 
-        return mirror.either_side(side, inside, transmission, bool(self.indices))
+        return mirror.either_side(side, inside, transmission, mirror.branches(self))
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):

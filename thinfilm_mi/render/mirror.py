@@ -108,17 +108,27 @@ def mirrored_rt(stack, si, cos_theta, inside: bool | Any, active, transmission: 
     return (R, 1.0 - R) if transmission else R
 
 
-def either_side(side, inside, transmission: bool, films: bool = True):
+def branches(stack) -> bool:
+    """Whether :func:`either_side` branches for ``stack``: not for a bare interface (its
+    Fresnel terms cost less than the branch), nor where a side is optically opaque or
+    averages a film incoherently. (There Dr.Jit 1.5.0 can reuse a literal made in one
+    branch, e.g. the opaque side's ``T = 0``, after the conditional: LLVM refuses the
+    kernel, "Instruction does not dominate all uses", tests/test_stability_bsdf.py.)"""
+    return bool(stack.indices) and not any(s.opaque or any(s.incoherent)
+                                           for s in stack.plan.values())
+
+
+def either_side(side, inside, transmission: bool, branch: bool = True):
     """``side(inside)`` for a Python bool; for a mask, ``side(True)`` where it is set
-    and ``side(False)`` elsewhere, each under a symbolic conditional (see the module
-    docstring; without ``films``, a bare interface's Fresnel terms, both are computed and
-    selected: cheaper than the branch); ``transmission``: whether ``side`` returns
-    ``(R, T)``."""
+    and ``side(False)`` elsewhere: with ``branch`` each under a symbolic conditional
+    (see the module docstring), else both computed and selected (:func:`branches`);
+    ``transmission``: whether ``side`` returns ``(R, T)``."""
     if isinstance(inside, bool):
         return side(inside)
-    if not films:
+    if not branch:
+        outside = _pair(side(False), transmission)
         out = tuple(dr.select(inside, a, b) for a, b in zip(_pair(side(True), transmission),
-                                                            _pair(side(False), transmission)))
+                                                            outside))
         return out if transmission else out[0]
     out = dr.if_stmt(args=(), cond=inside, true_fn=lambda: _pair(side(True), transmission),
                      false_fn=lambda: _pair(side(False), transmission))
