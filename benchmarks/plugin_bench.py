@@ -5,7 +5,7 @@ polarized variants, and the demo scene against its native twin.
                                       [--variants llvm_ad_spectral,llvm_ad_rgb,llvm_ad_spectral_polarized]
                                       [--demo-repeats 5] [--demo-size 512x341] [--demo-spp 32]
                                       [--first-repeats 3] [--skip-plugins] [--skip-demo]
-                                      [--write-readme]
+                                      [--write-docs]
 
 1. Per plugin: the sphere scene of ``render_bench.py`` (a sphere on a diffuse floor
    under a constant emitter, ``path`` with max depth 8, --res x --res, --spp spp,
@@ -25,8 +25,8 @@ polarized variants, and the demo scene against its native twin.
    (every table is built), timing ``mi.load_string`` + the first ``mi.render``;
    --first-repeats runs alternating, the median of each.
 
-``--write-readme`` writes the tables between ``<!-- plugins:begin -->`` and
-``<!-- plugins:end -->`` in README.md (generated, never copied by hand); ``--from-json
+``--write-docs`` writes the tables between ``<!-- plugins:begin -->`` and
+``<!-- plugins:end -->`` in docs/benchmarks.md (generated, never copied by hand); ``--from-json
 FILE`` takes a run's figures from the JSON line it wrote to stderr instead of measuring.
 """
 from __future__ import annotations
@@ -237,14 +237,15 @@ def markdown(plugins: dict, demo: dict | None, args) -> str:
     return "\n".join(lines)
 
 
-def write_readme(text: str) -> None:
-    path = os.path.join(REPO, "README.md")
+def write_docs(text: str) -> None:
+    """``text`` between the plugin markers of the documentation's benchmark page."""
+    path = os.path.join(REPO, "docs", "benchmarks.md")
     with open(path, encoding="utf-8") as f:
-        readme = f.read()
+        page = f.read()
     begin, end = "<!-- plugins:begin -->", "<!-- plugins:end -->"
-    i, j = readme.index(begin) + len(begin), readme.index(end)
+    i, j = page.index(begin) + len(begin), page.index(end)
     with open(path, "w", encoding="utf-8") as f:
-        f.write(readme[:i] + "\n" + text.rstrip("\n") + "\n" + readme[j:])
+        f.write(page[:i] + "\n" + text.rstrip("\n") + "\n" + page[j:])
 
 
 def main():
@@ -260,9 +261,9 @@ def main():
     ap.add_argument("--skip-plugins", action="store_true")
     ap.add_argument("--skip-demo", action="store_true")
     ap.add_argument("--skip-first", action="store_true")
-    ap.add_argument("--write-readme", action="store_true")
+    ap.add_argument("--write-docs", action="store_true")
     ap.add_argument("--from-json", help="the JSON line a run wrote to stderr: print (and with "
-                    "--write-readme write) its tables without measuring again; the other "
+                    "--write-docs write) its tables without measuring again; the other "
                     "options must be the run's")
     ap.add_argument("--plugins-child")
     ap.add_argument("--demo-first-child")
@@ -294,8 +295,8 @@ def main():
     text = markdown(plugins, demo, args)
     print(text)
     print(json.dumps({"plugins": plugins, "demo": demo}), file=sys.stderr)
-    if args.write_readme:
-        write_readme(text)
+    if args.write_docs:
+        write_docs(text)
 
 
 if __name__ == "__main__":
