@@ -11,6 +11,9 @@
   finds nothing in the package, tests, benchmarks and scripts.
 * Every module lists its public names in ``__all__`` (each one defined or imported
   there), but for the subpackages in :data:`ALL_PENDING`.
+* No plugin module imports another plugin module: what plugins share lives in the
+  layers below (``render.microfacet``, ``render.props``), as Mitsuba's BSDFs share
+  ``microfacet.h``; ``plugins/__init__`` registers them.
 """
 from __future__ import annotations
 
@@ -30,8 +33,9 @@ ALGORITHMS = {
 }
 
 #: Subpackages whose modules may still lack ``__all__``: they wait for the render-speed
-#: work to land (its files are being edited), then get one each and leave this list. The
-#: test fails when an entry is no longer needed, so the list cannot go stale.
+#: work to land (its files are being edited), then get one each and leave this list
+#: ("plugins": ``thinfilm_diffuse.py`` alone). The test fails when an entry is no longer
+#: needed, so the list cannot go stale.
 ALL_PENDING = ("render", "tabulate", "plugins")
 
 
@@ -144,6 +148,8 @@ def _top_level_names(tree: ast.Module) -> set:
         elif isinstance(node, (ast.Assign, ast.AnnAssign)):
             targets = node.targets if isinstance(node, ast.Assign) else [node.target]
             names.update(t.id for t in targets if isinstance(t, ast.Name))
+            names.update(e.id for t in targets if isinstance(t, ast.Tuple)
+                         for e in t.elts if isinstance(e, ast.Name))
         elif isinstance(node, (ast.Import, ast.ImportFrom)):
             names.update((a.asname or a.name).split(".")[0] for a in node.names)
     return names
@@ -181,3 +187,49 @@ def test_every_module_lists_its_public_names():
     assert not unknown, "names in __all__ that the module does not define:\n" + "\n".join(unknown)
     assert pending == set(ALL_PENDING), \
         f"every module of {sorted(set(ALL_PENDING) - pending)} has __all__ now: take it off ALL_PENDING"
+
+
+def _imported_modules(path: Path, root: Path = ROOT) -> set:
+    """Every ``thinfilm_mi`` module or package the module at ``path`` imports, at any
+    depth (in functions too), relative imports resolved, ``from P import x`` as both
+    ``P`` and ``P.x``."""
+    package = ".".join(path.relative_to(root).parts[:-1])
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parent = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                base = f"{parent}.{base}" if base else parent
+            found.add(base)
+            found.update(f"{base}.{alias.name}" for alias in node.names)
+    return {m for m in found if m == "thinfilm_mi" or m.startswith("thinfilm_mi.")}
+
+
+def _plugin_to_plugin(path: Path, root: Path = ROOT) -> list[str]:
+    """The modules of :mod:`thinfilm_mi.plugins` (the package included) that the
+    plugin module at ``path`` imports."""
+    return sorted(m for m in _imported_modules(path, root)
+                  if m == "thinfilm_mi.plugins" or m.startswith("thinfilm_mi.plugins."))
+
+
+def test_no_plugin_module_imports_another():
+    plugins = sorted(p for p in (PACKAGE / "plugins").glob("*.py") if p.name != "__init__.py")
+    assert len(plugins) >= 6
+    offenders = [f"{p.relative_to(ROOT)} imports {m}" for p in plugins for m in _plugin_to_plugin(p)]
+    assert not offenders, "\n".join(offenders) + "\n(move what they share to thinfilm_mi.render)"
+
+
+def test_the_plugin_import_check_is_not_vacuous(tmp_path):
+    """A plugin module importing another (absolute, relative, or in a function) is caught."""
+    plugin = tmp_path / "thinfilm_mi" / "plugins" / "thinfilm_new.py"
+    plugin.parent.mkdir(parents=True)
+    cases = ("from thinfilm_mi.plugins.thinfilm_conductor import NAME\n",
+             "from thinfilm_mi.plugins import thinfilm_conductor\n",
+             "from .thinfilm_conductor import NAME\n",
+             "def f():\n    import thinfilm_mi.plugins.thinfilm_conductor\n")
+    for text in cases:
+        plugin.write_text("from thinfilm_mi.render import modes\n" + text, encoding="utf-8")
+        assert "thinfilm_mi.plugins.thinfilm_conductor" in _plugin_to_plugin(plugin, tmp_path), text

@@ -66,6 +66,8 @@ import numpy as np
 from thinfilm_mi.colour.cie import colour_weights, trapezoid_weights, xyz_to_srgb_matrix
 from thinfilm_mi.errors import ThinFilmError
 
+__all__ = ["NAME", "C", "H", "K", "C0_F32", "C1_F32", "CIE_MIN", "CIE_MAX", "planck", "ThinFilmBlackbody"]
+
 NAME = "thinfilm_blackbody"
 
 # Mitsuba's constants (src/spectra/blackbody.cpp, CODATA 2014), as float32 there

@@ -126,49 +126,19 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.params import ParameterGuard
-from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
-from thinfilm_mi.render.textures import check_texture_range, uniform
+from thinfilm_mi.render.props import (
+    check_unqueried,
+    optional_texture,
+    stack_from_props,
+    substrate_from_props,
+)
 from thinfilm_mi.render.variant import check_variant
 
+__all__ = ["NAME", "ThinFilmConductor"]
+
 NAME = "thinfilm_conductor"
-
-
-def substrate_from_props(props, plugin: str) -> SpectralIndex:
-    """The conductor substrate: ``material`` or ``eta`` + ``k`` (as Mitsuba's conductor)."""
-    has_eta, has_k = ("eta" in props), ("k" in props)
-    if ("material" in props) and (has_eta or has_k):
-        raise ThinFilmError(f"{plugin}: give either 'material' "
-                            f"({props.get('material')!r}) or 'eta' + 'k', not both")
-    if has_eta or has_k:
-        if not (has_eta and has_k):
-            raise ThinFilmError(f"{plugin}: 'eta' and 'k' must be given together "
-                                f"(only '{'eta' if has_eta else 'k'}' was given)")
-        values = {}
-        for name in ("eta", "k"):
-            v = props.get(name)
-            if isinstance(v, bool) or isinstance(v, str):
-                raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
-                                    f"spectrum/texture, got {v!r}")
-            if isinstance(v, (int, float)):
-                v = uniform(v)
-            else:
-                try:
-                    v = props.get_unbounded_texture(name)
-                except Exception as e:
-                    raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
-                                        f"spectrum/texture, got {v!r} ({e})") from None
-            # the range of every index (thinfilm_mi.materials.catalog.MIN_INDEX/MAX_INDEX),
-            # over all of Mitsuba's wavelengths
-            check_texture_range(v, f"{plugin}: '{name}'", MIN_INDEX if name == "eta" else 0.0,
-                                MAX_INDEX, cover=True)
-            values[name] = v
-        return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
-    return SpectralIndex.from_material(props.get("material", "Au"), "material")
 
 
 class ThinFilmConductor(mi.BSDF):

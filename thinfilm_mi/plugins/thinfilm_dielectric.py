@@ -130,15 +130,14 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.media import real_index
+from thinfilm_mi.render.media import DEFAULT_INT_IOR, real_index
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
 from thinfilm_mi.render.variant import check_variant, spectral_mean
 
-NAME = "thinfilm_dielectric"
+__all__ = ["NAME", "ThinFilmDielectric"]
 
-#: Mitsuba's default interior index of ``dielectric`` (BK7 at 589 nm).
-DEFAULT_INT_IOR = 1.5046
+NAME = "thinfilm_dielectric"
 
 
 class ThinFilmDielectric(mi.BSDF):

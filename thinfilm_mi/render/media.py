@@ -20,8 +20,13 @@ from thinfilm_mi.render.colour import channel_mean_texture, colour_channels
 from thinfilm_mi.render.params import unchanged
 from thinfilm_mi.render.textures import GRID, irregular, mitsuba_module, texture_on_grid, uniform
 
+__all__ = ["DEFAULT_EXT_IOR", "DEFAULT_INT_IOR", "SpectralIndex", "real_index"]
+
 #: Mitsuba's default exterior index (air at standard conditions), as in ``conductor``.
 DEFAULT_EXT_IOR = 1.000277
+
+#: Mitsuba's default interior index of ``dielectric`` and ``roughdielectric`` (BK7 at 589 nm).
+DEFAULT_INT_IOR = 1.5046
 
 
 class SpectralIndex:

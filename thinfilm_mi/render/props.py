@@ -1,13 +1,15 @@
 """Reading the plugins' properties: the films (``layers`` or the one-film shorthand),
-the thickness texture, ``tabulate`` and the table settings, ``ext_ior``, and the
-check that no property was misspelt (:func:`check_unqueried`). Every bad value raises
-:class:`~thinfilm_mi.errors.ThinFilmError` naming the property and the value.
+the thickness texture, ``tabulate`` and the table settings, ``ext_ior``, a conductor's
+substrate (``material`` or ``eta`` + ``k``), and the check that no property was misspelt
+(:func:`check_unqueried`). Every bad value raises :class:`~thinfilm_mi.errors.ThinFilmError`
+naming the property and the value.
 """
 from __future__ import annotations
 
 import math
 
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
 from thinfilm_mi.materials.stack import check_thickness, parse_layers
 from thinfilm_mi.render.kernel import (
     DEFAULT_COHERENCE_THICKNESS,
@@ -16,7 +18,11 @@ from thinfilm_mi.render.kernel import (
     KernelStack,
 )
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR, SpectralIndex, real_index
-from thinfilm_mi.render.textures import checked_texture
+from thinfilm_mi.render.textures import check_texture_range, checked_texture, uniform
+
+__all__ = ["MAX_SPECTRAL_RESOLUTION", "optional_texture", "films_from_props", "thickness_texture_from_props",
+           "tabulate_from_props", "stack_from_props", "stack_options_from_props", "ext_ior_from_props",
+           "substrate_from_props", "check_unqueried"]
 
 
 def optional_texture(props, name: str, plugin: str):
@@ -140,6 +146,39 @@ def stack_options_from_props(props, plugin: str, thickness_texture: bool = True)
 
 def ext_ior_from_props(props) -> SpectralIndex:
     return real_index(props.get("ext_ior", DEFAULT_EXT_IOR), "ext_ior")
+
+
+def substrate_from_props(props, plugin: str) -> SpectralIndex:
+    """The conductor substrate: ``material`` or ``eta`` + ``k`` (as Mitsuba's conductor)."""
+    has_eta, has_k = ("eta" in props), ("k" in props)
+    if ("material" in props) and (has_eta or has_k):
+        raise ThinFilmError(f"{plugin}: give either 'material' "
+                            f"({props.get('material')!r}) or 'eta' + 'k', not both")
+    if has_eta or has_k:
+        if not (has_eta and has_k):
+            raise ThinFilmError(f"{plugin}: 'eta' and 'k' must be given together "
+                                f"(only '{'eta' if has_eta else 'k'}' was given)")
+        values = {}
+        for name in ("eta", "k"):
+            v = props.get(name)
+            if isinstance(v, bool) or isinstance(v, str):
+                raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
+                                    f"spectrum/texture, got {v!r}")
+            if isinstance(v, (int, float)):
+                v = uniform(v)
+            else:
+                try:
+                    v = props.get_unbounded_texture(name)
+                except Exception as e:
+                    raise ThinFilmError(f"{plugin}: '{name}' must be a number or a "
+                                        f"spectrum/texture, got {v!r} ({e})") from None
+            # the range of every index (thinfilm_mi.materials.catalog.MIN_INDEX/MAX_INDEX),
+            # over all of Mitsuba's wavelengths
+            check_texture_range(v, f"{plugin}: '{name}'", MIN_INDEX if name == "eta" else 0.0,
+                                MAX_INDEX, cover=True)
+            values[name] = v
+        return SpectralIndex.from_textures(values["eta"], values["k"], "eta/k")
+    return SpectralIndex.from_material(props.get("material", "Au"), "material")
 
 
 def check_unqueried(props, plugin: str) -> None:
