@@ -157,7 +157,7 @@ def main():
     else:
         import importlib
 
-        from thinfilm_mi.render.registry import PLUGINS  # importing thinfilm_mi installs the guard
+        from thinfilm_mi.plugins import PLUGINS  # importing thinfilm_mi installs the guard
         _register_counted({name: getattr(importlib.import_module(f"thinfilm_mi.plugins.{module}"), cls)
                            for name, (module, cls) in PLUGINS.items()}, alive)
         if kind == "thinfilm-unguarded":   # the guard taken out: what it protects against

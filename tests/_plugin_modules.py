@@ -5,7 +5,7 @@ import importlib
 
 import mitsuba as mi
 
-from thinfilm_mi.render.registry import PLUGINS
+from thinfilm_mi.plugins import PLUGINS
 
 
 def import_error(plugin: str, variant: str) -> str | None:

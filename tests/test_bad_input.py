@@ -1,7 +1,7 @@
 """Bad input never crashes or corrupts: the complete matrix.
 
 Every case is loaded through ``mi.load_dict`` *and* ``mi.load_string`` (XML), for
-every plugin of :data:`thinfilm_mi.render.registry.PLUGINS` that takes the parameter
+every plugin of :data:`thinfilm_mi.plugins.PLUGINS` that takes the parameter
 (decided by loading the plugin with a *valid* value of that parameter: a plugin
 that reports it as an unreferenced property does not take it, and the case is
 skipped for that plugin with that reason). Each must raise at scene load a
@@ -28,7 +28,7 @@ import pytest
 from _plugin_modules import import_error
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
-from thinfilm_mi.render.registry import PLUGINS
+from thinfilm_mi.plugins import PLUGINS
 
 VARIANT = "llvm_ad_spectral"
 HOW = ["dict", "xml"]
@@ -414,7 +414,7 @@ _LLVM15_SCRIPT = r"""
 import sys
 import mitsuba as mi
 import thinfilm_mi
-from thinfilm_mi.render.registry import PLUGINS
+from thinfilm_mi.plugins import PLUGINS
 mi.set_variant("llvm_ad_spectral")
 for plugin in PLUGINS:
     for how in ("dict", "xml"):

@@ -26,7 +26,7 @@ import pytest
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi  # noqa: E402,F401
-from thinfilm_mi.render.registry import PLUGINS, TEXTURES  # noqa: E402
+from thinfilm_mi.plugins import PLUGINS, TEXTURES  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(REPO / "docs" / "_ext"))

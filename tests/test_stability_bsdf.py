@@ -1,6 +1,6 @@
 """Stress tests of every thin-film BSDF: sample / eval / pdf on extreme stacks.
 
-Every plugin of :data:`thinfilm_mi.render.registry.PLUGINS` is covered (a plugin whose
+Every plugin of :data:`thinfilm_mi.plugins.PLUGINS` is covered (a plugin whose
 module does not import yet is skipped with the import error as the reason).
 Hypothesis draws stacks of 1, 2, 7 or 30 films (n in [1, 6], k in [0, 20],
 thickness in [0, 100 um], exactly 0 included; lossless or not), a real
@@ -49,7 +49,7 @@ from hypothesis import strategies as st
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.optics.unpolarised import unpolarised_rt
-from thinfilm_mi.render.registry import PLUGINS
+from thinfilm_mi.plugins import PLUGINS
 
 VARIANT = "llvm_ad_spectral"
 # Few distinct kernel shapes, so that compiled kernels are reused across examples.

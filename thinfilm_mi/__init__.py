@@ -13,7 +13,7 @@ from thinfilm_mi.materials.catalog import refractive_index
 from thinfilm_mi.materials.catalog import resolve as resolve_material
 from thinfilm_mi.materials.model import Material
 from thinfilm_mi.materials.stack import Layer, RTResult, Stack, parse_layers
-from thinfilm_mi.render.registry import PLUGINS, register
+from thinfilm_mi.plugins import PLUGINS, register
 from thinfilm_mi.version import __version__
 
 try:  # Mitsuba is a dependency, but keep the optics usable if its import fails.

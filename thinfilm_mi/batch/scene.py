@@ -181,7 +181,7 @@ def setup_llvm_only() -> None:
 def setup_variant(variant: str) -> None:
     """Check LLVM (``llvm_*`` variants), set the Mitsuba variant and register the
     thin-film plugins for it."""
-    from thinfilm_mi.render.registry import register
+    from thinfilm_mi.plugins import register
 
     if variant.startswith("llvm_"):
         setup_llvm_only()
@@ -323,7 +323,7 @@ def scene_variant(path: str | os.PathLike, params: Mapping[str, str] | None,
     not parse keeps ``variant`` (loading it then reports the error)."""
     import mitsuba as mi
 
-    from thinfilm_mi.render.registry import PLUGINS, TEXTURES
+    from thinfilm_mi.plugins import PLUGINS, TEXTURES
 
     available = list(mi.variants())
     if variant not in available or variant.endswith("_polarized"):

@@ -8,11 +8,11 @@
 * :mod:`thinfilm_mi.render.colour` -- colour tables and gradients in RGB/mono variants.
 * :mod:`thinfilm_mi.render.textures` -- Mitsuba textures made and read by the plugins.
 * :mod:`thinfilm_mi.render.params` -- validation of ``mi.traverse`` edits.
-* :mod:`thinfilm_mi.render.registry` -- registration of the plugins with Mitsuba.
+* :mod:`thinfilm_mi.render.props` -- reading the plugins' properties.
+* :mod:`thinfilm_mi.render.microfacet` -- the microfacet pieces the rough plugins share.
 """
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.media import SpectralIndex, real_index
 from thinfilm_mi.render.params import ParameterGuard
-from thinfilm_mi.render.registry import PLUGINS, register
 
-__all__ = ["KernelStack", "PLUGINS", "ParameterGuard", "SpectralIndex", "real_index", "register"]
+__all__ = ["KernelStack", "ParameterGuard", "SpectralIndex", "real_index"]
