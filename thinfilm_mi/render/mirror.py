@@ -37,6 +37,8 @@ from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
 #: 1 film 0.93x exact against 1.63x tabulated; 3 films 1.37x against 1.54x; 10 films
 #: 1.98x against 1.90x; 30 films 3.69x against 2.06x).
 AUTO_MIN_FILMS = 10
+
+
 def real_on_grid(index) -> bool:
     """Whether a :class:`~thinfilm_mi.render.media.SpectralIndex` has no absorption
     over 360-830 nm (on the 1 nm grid)."""
@@ -111,9 +113,10 @@ def mirrored_rt(stack, si, cos_theta, inside: bool | Any, active, transmission: 
 def branches(stack) -> bool:
     """Whether :func:`either_side` branches for ``stack``: not for a bare interface (its
     Fresnel terms cost less than the branch), nor where a side is optically opaque or
-    averages a film incoherently. (There Dr.Jit 1.5.0 can reuse a literal made in one
-    branch, e.g. the opaque side's ``T = 0``, after the conditional: LLVM refuses the
-    kernel, "Instruction does not dominate all uses", tests/test_stability_bsdf.py.)"""
+    averages a film incoherently. (Two opaque sides both return the literal ``T = 0``,
+    which Dr.Jit 1.5.0 hands back as one branch's own variable: LLVM refused the kernel,
+    tests/test_stability_bsdf.py. :func:`literal_outside` now mends any such output;
+    these stacks stay unbranched as they were measured.)"""
     return bool(stack.indices) and not any(s.opaque or any(s.incoherent)
                                            for s in stack.plan.values())
 
@@ -132,7 +135,22 @@ def either_side(side, inside, transmission: bool, branch: bool = True):
         return out if transmission else out[0]
     out = dr.if_stmt(args=(), cond=inside, true_fn=lambda: _pair(side(True), transmission),
                      false_fn=lambda: _pair(side(False), transmission))
+    out = tuple(literal_outside(x) for x in out)
     return out if transmission else out[0]
+
+
+def literal_outside(x):
+    """``x`` (an output of ``dr.if_stmt``) with each literal component made again
+    outside the conditional. Where both branches return the same literal, Dr.Jit 1.5.0
+    (drjit-core ``jitc_var_cond_end``) returns the false branch's own variable, which
+    the LLVM backend defines inside that branch's block: a use after the conditional
+    then fails LLVM's verification ("Instruction does not dominate all uses!") and the
+    process aborts. A literal's value is known without evaluating anything."""
+    if dr.depth_v(x) > 1:
+        return type(x)(*[literal_outside(c) for c in x])
+    if x.state == dr.VarState.Literal and not dr.grad_enabled(x):
+        return dr.full(type(x), x[0], dr.width(x))
+    return x
 
 
 def _pair(res, transmission: bool):
