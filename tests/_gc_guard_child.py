@@ -19,9 +19,10 @@ collector may run.
 * ``thinfilm-unguarded``: ``thinfilm`` with the guard taken out of ``gc.callbacks``.
 
 ``GC`` is ``default`` or ``1`` (``gc.set_threshold(1, 1, 1)``: a pass at every
-allocation). On success it prints one line: ``ok ITERATIONS alive=N max_alive=M``,
-where N counts the BSDF instances still alive after a final ``gc.collect()`` and M the
-most that were alive at any iteration's start (weak references, no collection forced).
+allocation). On success it prints one line: ``ok ITERATIONS alive=N max_alive=M
+freed_in_trace=F``, where N counts the BSDF instances still alive after a final
+``gc.collect()``, M the most that were alive at any iteration's start (weak references, no
+collection forced) and F those freed while a symbolic call was being traced.
 """
 from __future__ import annotations
 
@@ -117,12 +118,25 @@ def _scene(bsdf):
     return scene
 
 
+#: BSDFs freed while this thread was inside a symbolic scope: the defect's precondition
+#: (the next call on the freed object is a use-after-free, which crashes only when the
+#: freed memory has been reused, so a crash alone is not a reliable witness)
+FREED_IN_TRACE = [0]
+
+
+def _on_free():
+    if dr.flag(dr.JitFlag.SymbolicScope):
+        FREED_IN_TRACE[0] += 1
+
+
 def _register_counted(classes, alive):
-    """Register each Python BSDF class so that every instance made is counted (weakly)."""
+    """Register each Python BSDF class so that every instance made is counted (weakly)
+    and its freeing inside a trace is noticed."""
     def factory(cls):
         def make(props):
             bsdf = cls(props)
             alive.append(weakref.ref(bsdf))
+            weakref.finalize(bsdf, _on_free)
             return bsdf
         return make
     for name, cls in classes.items():
@@ -173,7 +187,7 @@ def main():
         _iteration(bsdfs[i % len(bsdfs)])
     gc.collect()
     left = sum(r() is not None for r in alive)
-    print(f"ok {iterations} alive={left} max_alive={most}", flush=True)
+    print(f"ok {iterations} alive={left} max_alive={most} freed_in_trace={FREED_IN_TRACE[0]}", flush=True)
 
 
 if __name__ == "__main__":
