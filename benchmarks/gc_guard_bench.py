@@ -53,7 +53,7 @@ def matrix(iterations):
     runs += [(v, g, "thinfilm", iterations) for v in VARIANTS for g in ("default", "1")]
     for variant, threshold, kind, n in runs:
         rc, last, seconds = _child(variant, n, threshold, kind)
-        print(f"{variant:28s} {threshold:8s} {kind:18s} {rc:6d}  {last if rc == 0 else "crashed":50s} "
+        print(f"{variant:28s} {threshold:8s} {kind:18s} {rc:6d}  {last if rc == 0 else 'crashed':50s} "
               f"{seconds:7.1f}", flush=True)
 
 
