@@ -70,12 +70,12 @@ COLOUR_CACHE = tabulate_base.TableCache()
 
 
 def colour_table(stack, side, side_data):
-    """The :class:`integrated.ColourTable` of the planned side ``side`` of the
+    """The :class:`~thinfilm_mi.tabulate.colour.ColourTable` of the planned side ``side`` of the
     :class:`~thinfilm_mi.render.kernel.KernelStack` ``stack`` in RGB/mono variants, shared
     between stacks with identical optics; ``None`` where the plugin evaluates per
     channel (no films over an index given per channel). ``side_data(side,
     transmission, channel)`` gives the side's float64 build data
-    (:class:`tables.SideData`; ``channel`` maps media given per channel, by ``id``,
+    (:class:`~thinfilm_mi.tabulate.base.SideData`; ``channel`` maps media given per channel, by ``id``,
     to the index of the channel built)."""
     channels = colour_channels()
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]

@@ -54,7 +54,7 @@ RT_AUTO_MIN_FILMS = 5
 #: channels, 2 MiB of float32): a cubic lookup in a table that fits the cache
 #: costs 3-4.6 ns per point, beyond it 7-12 ns, as much as the exact recursion
 #: of 3-10 films (benchmarks/SPEED.md). ``tabulate=true`` allows
-#: :data:`tables.MAX_TEXELS` per channel.
+#: :data:`~thinfilm_mi.tabulate.base.MAX_TEXELS` per channel.
 AUTO_MAX_TEXELS = 1 << 19
 #: Default ``spectral_resolution`` (nm): a stack whose exact ``R`` and ``T`` no
 #: table resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide)
@@ -101,7 +101,7 @@ class _Side:
         #: What the build of :attr:`table` did (a ``tabulate.base.BuildReport``), or None
         self.build_report = None
         self.loop = None   # a LoopFilms where the films are evaluated in a loop
-        #: RGB/mono variants: the side's integrated.ColourTable, or None where the
+        #: RGB/mono variants: the side's tabulate.colour.ColourTable, or None where the
         #: plugin evaluates per channel (no films over an index given per channel)
         self.colour = None
 
@@ -573,7 +573,7 @@ def _index_function(ix: SpectralIndex, real: bool = False, channel: complex | No
 
 def side_data(side: _Side, transmission: bool, channel: dict | None = None,
               quantity=None) -> tabulate_base.SideData:
-    """The float64 build data (:class:`tables.SideData`) of ``side``; ``channel`` maps
+    """The float64 build data (:class:`~thinfilm_mi.tabulate.base.SideData`) of ``side``; ``channel`` maps
     media (by ``id``) given per channel to their index in the channel built;
     ``quantity``: what is tabulated (``None``: the powers ``R`` [, ``T``])."""
     channel = channel or {}
