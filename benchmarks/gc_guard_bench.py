@@ -3,7 +3,7 @@
     python benchmarks/gc_guard_bench.py [--iterations 200] [--skip-matrix] [--skip-cost]
                                         [--repeats 9]
 
-1. The matrix: ``tests/_gc_guard_child.py`` in a fresh process per (variant, collector
+1. The matrix: ``tests/support/gc_guard_child.py`` in a fresh process per (variant, collector
    setting, kind): every thin-film plugin, bare, in ``blendbsdf`` and (those that do not
    transmit) in ``twosided``, one configuration per iteration in turn, in
    ``llvm_ad_rgb``, ``llvm_ad_spectral`` and ``llvm_ad_spectral_polarized``, with the
@@ -33,7 +33,7 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-CHILD = ROOT / "tests" / "_gc_guard_child.py"
+CHILD = ROOT / "tests" / "support" / "gc_guard_child.py"
 VARIANTS = ["llvm_ad_rgb", "llvm_ad_spectral", "llvm_ad_spectral_polarized"]
 
 

@@ -1,6 +1,6 @@
 """Sphinx configuration of the thinfilm-mi documentation (``make docs``).
 
-Lean on purpose: the test suite builds this site with ``-W`` (tests/test_readme_commands.py
+Lean on purpose: the test suite builds this site with ``-W`` (tests/cross/test_readme_commands.py
 runs ``make docs``), so no intersphinx (no network), no autosummary stub pages, and the
 notebooks are not rendered.
 """

@@ -5,7 +5,7 @@ colour-science (``colour.MSDS_CMFS``, ``colour.SDS_ILLUMINANTS``).
 Table builds (``thinfilm_mi.tabulate.exact``) check the colour error of a band-limited
 table against the exact reflectance under these illuminants. They read this file
 instead of importing colour-science, whose import takes ~1.6 s (once per process,
-at the first table build: the first image). tests/test_tables.py checks the file
+at the first table build: the first image). tests/colour/test_cie.py checks the file
 against colour-science.
 
     python scripts/make_colour_weights.py

@@ -8,6 +8,7 @@ import sys
 
 import pytest
 
+from tests.support import LLVM15
 from thinfilm_mi.llvm import LLVMVersionError, check_version
 
 
@@ -24,9 +25,6 @@ def test_check_version_refuses_llvm15():
     with pytest.raises(LLVMVersionError):
         check_version((-1, -1, -1))
     check_version((19, 1, 7))  # the tested version passes silently
-
-
-LLVM15 = "/usr/lib/x86_64-linux-gnu/libLLVM-15.so"
 
 
 @pytest.mark.skipif(not os.path.exists(LLVM15), reason="no libLLVM-15 on this machine")

@@ -251,7 +251,7 @@ def test_importing_thinfilm_mi_imports_neither_design_nor_scipy():
 def test_design_imports_only_lower_layers_and_public_names():
     """design/ needs no renderer: it imports the optics, materials, colour and error
     layers of the package (public names only), never the render layer, Mitsuba or
-    Dr.Jit (tests/test_architecture.py checks the layers of the whole package)."""
+    Dr.Jit (tests/cross/test_architecture.py checks the layers of the whole package)."""
     allowed = {"optics", "materials", "colour", "errors", "design"}
     for path in sorted((REPO / "thinfilm_mi" / "design").glob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):

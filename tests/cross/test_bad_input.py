@@ -12,7 +12,7 @@ and afterwards a valid scene must still load and evaluate in the same process.
 
 Plugin-specific inputs (``model``, ``reflectance`` of ``thinfilm_diffuse``,
 ...) are tested with their plugins; the LLVM guard of the numpy API is tested in
-tests/test_optics.py, and here only through scene loading in a subprocess.
+tests/test_llvm.py, and here only through scene loading in a subprocess.
 """
 from __future__ import annotations
 
@@ -405,10 +405,7 @@ def test_unsupported_variant_is_refused_at_load(variant):
 # ---------------------------------------------------------------------------
 # An LLVM that would abort the process: a clear error at scene load instead
 # ---------------------------------------------------------------------------
-try:  # the same library path as the numpy-API test in tests/test_optics.py
-    from test_optics import LLVM15
-except ImportError:  # pragma: no cover - run from another directory
-    LLVM15 = "/usr/lib/x86_64-linux-gnu/libLLVM-15.so"
+from tests.support import LLVM15  # the same library as the numpy-API test in tests/test_llvm.py
 
 _LLVM15_SCRIPT = r"""
 import sys

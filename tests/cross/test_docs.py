@@ -2,7 +2,7 @@
 
 Each plugin's page in the documentation site is generated from the doc block that
 opens its module (``docs/_ext/thinfilm_plugins.py``; the site itself is built, with
-warnings as errors, by ``make docs`` under tests/test_readme_commands.py, which also
+warnings as errors, by ``make docs`` under tests/cross/test_readme_commands.py, which also
 checks that every parameter of every doc block is on its page). Here: the set of
 properties a doc block's ``.. pluginparameters::`` table lists equals the set of
 properties the plugin reads.

@@ -1,6 +1,6 @@
 """No segfault whatever the garbage collector does (:mod:`thinfilm_mi.render.gc_guard`).
 
-Each check runs ``_gc_guard_child.py`` in a fresh process: the loop users run
+Each check runs ``tests/support/gc_guard_child.py`` in a fresh process: the loop users run
 (load, render, a refused edit whose exception is kept in a local, render, return), so
 that every later render traces the BSDFs of scenes that only reference cycles keep,
 while Python code that allocates runs inside the trace.

@@ -200,7 +200,7 @@ def test_diffuse_sample_and_eval_gradients_per_wavelength(key):
     """thinfilm_diffuse with a non-absorbing coating (all films over an ambient-matched
     base): the specular lane weighs k_r / p (relative gradient dk_r / k_r), the
     diffuse lane and eval k_d t_i t_o / (1 - p) (relative gradient dt_i/t_i + dt_o/t_o)
-    with the "single" model (the "multiple" series' R_dh: tests/test_diffuse_gradients.py)."""
+    with the "single" model (the "multiple" series' R_dh: tests/plugins/test_thinfilm_diffuse.py)."""
     films = [FILMS[0], (2.3, 60.0)]
 
     def coating(f, cos):

@@ -1,6 +1,6 @@
 """The notebooks run and are stored without outputs; the README's set-up commands are
 Makefile targets. (The plugins' parameter tables are the documentation site's, generated from
-the doc blocks: tests/test_docs.py and the `make docs` check of tests/test_readme_commands.py.)
+the doc blocks: tests/cross/test_docs.py and the `make docs` check of tests/cross/test_readme_commands.py.)
 
 Every ``notebooks/*.ipynb`` is executed with nbclient in a kernel running this
 interpreter (``sys.executable``), with ``THINFILM_NB_QUICK=1`` so that each one

@@ -4,7 +4,7 @@ Mitsuba's FileResolver).
 Before the fix the plugin constructors built helper spectra with
 ``mi.load_dict``, which installs a copy of the global FileResolver and frees it
 on return; C++ plugins resolving file names on other loader threads read the
-freed copy. The child script (``_parallel_load_child.py``) widens that window;
+freed copy. The child script (``tests/support/parallel_load_child.py``) widens that window;
 with the old constructors about one fresh process in four failed
 (``std::bad_alloc``, ``basic_string::_M_create`` or SIGSEGV; measured 13-25 % over
 16-40 processes), so 24 processes all passing had a chance of ~0.1 % (0.75^24)

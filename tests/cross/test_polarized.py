@@ -38,7 +38,7 @@ MODES = ["Radiance", "Importance"]
 # covers their rounding (~1e-6) with room for cos(theta) near 0 and TIR.
 F32_TOL = 2e-5
 # float32 stack recursion against tmm's float64: phase error < 1e-5 rad and power error
-# < 1e-5 for <= 3 films <= 500 nm (tests/test_bsdf_specular.py), plus the rotation.
+# < 1e-5 for <= 3 films <= 500 nm (tests/plugins/test_thinfilm_conductor.py), plus the rotation.
 TMM_TOL = 5e-5
 
 

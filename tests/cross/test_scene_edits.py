@@ -143,7 +143,7 @@ def variant(request):
     mi.set_variant(request.param)
     # Refused edits leave tracebacks whose frames hold the scene in reference cycles,
     # freed by the cyclic GC whenever it runs, during a later render's trace too:
-    # thinfilm_mi.render.gc_guard makes that safe (tests/test_gc_guard.py), so
+    # thinfilm_mi.render.gc_guard makes that safe (tests/cross/test_gc_guard.py), so
     # nothing is collected here by hand.
     yield request.param
     if previous is not None:

@@ -13,7 +13,7 @@ channels, with S0 equal to the RGB image. Every scene is also rendered with
 second subprocess for all of them at once, with the same checks; there too the
 ``stokes`` scenes go to ``llvm_ad_spectral_polarized`` (thin films refuse polarized RGB). The
 error paths of the CLI (bad -D, missing file, unknown plugin) are in
-tests/test_cli.py.
+tests/cli/test_render.py.
 """
 from __future__ import annotations
 
@@ -130,7 +130,7 @@ def _check_scene(scene: Path, out: Path, err: str, requested: str) -> None:
         S = np.stack([np.stack([channels[f"{s}.{c}"] for c in "RGB"], -1) for s in STOKES])
         assert np.all(np.isfinite(S))
         # the film's RGB is the intensity S0 (up to float32 rounding of the conversions);
-        # the degree of polarization is checked per wavelength in tests/test_polarized.py
+        # the degree of polarization is checked per wavelength in tests/cross/test_polarized.py
         assert np.allclose(S[0], image, rtol=1e-4, atol=1e-5)
         assert np.abs(S[1:]).max() > 0   # the stokes channels are filled
 

@@ -243,7 +243,7 @@ def float32_bound(n0, films, n_exit, wl, cos0, R64, T64):
     * 2e-5: ~31 interface steps of a few ulp each;
     * 16 u sum_j 2 pi |Re q_j| d_j / lambda: the phase of film j is formed with a
       relative error of a few u, i.e. an absolute error ~ u * phase, and
-      |dR/d delta| <~ 4 (test_float32_thick_films_bound in tests/test_optics.py);
+      |dR/d delta| <~ 4 (test_float32_thick_films_bound in tests/optics/test_core.py);
     * 4x the float64 change of R, T when every medium gets an absorption k = 4u|n|
       (rounding in the recursion acts like a loss of relative size u, amplified
       by resonances: guided modes, Fabry-Perot), when cos0 moves by 4u

@@ -354,7 +354,7 @@ def _round32(case):
 
 def test_float32_matches_float64():
     """Coherent sub-stacks of <= 300 nm films carry float32 errors <= 1e-5 (the
-    bound of test_optics.test_float32_matches_float64_moderate_stacks). An
+    bound of tests/optics/test_core.py::test_float32_matches_float64_moderate_stacks). An
     incoherent film adds no phase, only P = exp(-x) with x formed to a few ulp:
     |dP| <= x e^-x * 3 * 2^-24 <= 2e-8 at any thickness. The series terms are
     non-negative with denominators 1 - Rb P^2 R >= 1 - Rb R (>~ 0.3 here), so

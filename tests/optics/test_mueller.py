@@ -36,7 +36,7 @@ def tmm_channels(n_list, d_list, cos, wl):
 def test_components_match_tmm_unrolled_and_as_a_loop(inside):
     """R, B, C of reflection and transmission against tmm's amplitudes (conjugated
     products in our convention: C = r_s conj(r_p), sign of C_im as jones_shape's,
-    which tests/test_polarized.py maps onto Mitsuba's), an absorbing film included,
+    which tests/cross/test_polarized.py maps onto Mitsuba's), an absorbing film included,
     lit from glass through its critical angle (TIR: T = 0, |C| = R = 1). Both
     evaluators are float64 runs of the same recursion as tmm: agreement to ~1e-14
     (measured 4e-14); 1e-11 leaves room for other platforms' rounding."""

@@ -25,7 +25,7 @@
   load with an error naming ``temperature``, in every variant and through the CLI;
   an edit through ``mi.traverse`` to such a value is refused and undone.
 * scenes/fig8a_blackbody.xml renders in llvm_ad_mono (llvm_ad_rgb and the
-  default llvm_ad_spectral: tests/test_scenes.py).
+  default llvm_ad_spectral: tests/cross/test_scenes.py).
 """
 from __future__ import annotations
 

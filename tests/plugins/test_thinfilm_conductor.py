@@ -50,7 +50,7 @@ def test_conductor_rejects_back_side_and_disabled_component(variant):
 def test_thickness_edit_does_not_recompile():
     mi.set_variant("llvm_ad_spectral")
     # Exact mode: the kernel reads the thickness as an opaque input. (A table is
-    # rebuilt on an edit; tests/test_tables.py covers that mode.)
+    # rebuilt on an edit; tests/tabulate/test_exact.py covers that mode.)
     scene = lit_floor_scene({"type": "thinfilm_conductor", "layers": "1.46 300; 0.42+2.47j 15",
                     "eta": 4.0, "k": 0.05, "tabulate": False}, size=16)
     params = mi.traverse(scene)

@@ -185,7 +185,7 @@ def test_rgb_eta_k_without_films_is_mitsubas_conductor():
     b = theirs.sample(mi.BSDFContext(), si, 0.5, mi.Point2f(0.5, 0.5))
     # the same Fresnel equation per channel in two float32 forms (our amplitude
     # recursion, Mitsuba's fresnel_conductor): measured max difference 7e-5 at
-    # k ~ 4; tests/test_bsdf_specular.py holds the spectral pair to 1e-4 likewise
+    # k ~ 4; tests/plugins/test_thinfilm_conductor.py holds the spectral pair to 1e-4 likewise
     np.testing.assert_allclose(np.array(a[1]), np.array(b[1]), atol=1e-4)
     np.testing.assert_allclose(np.array(a[0].wo), np.array(b[0].wo), atol=1e-6)
 
@@ -417,7 +417,7 @@ def test_polarized_rgb_variants_are_refused():
 
 def test_diffuse_gradient_matches_finite_differences():
     """thinfilm_diffuse's diffuse term ("single": no R_dh; "multiple" in
-    tests/test_diffuse_gradients.py) in llvm_ad_rgb: the forward derivative averaged
+    tests/plugins/test_thinfilm_diffuse.py) in llvm_ad_rgb: the forward derivative averaged
     over hits against central differences of the tabulated value itself."""
     def load(d):
         return mi.load_dict({"type": "thinfilm_diffuse", "layers": f"1.46 {d}; 2.3 60",

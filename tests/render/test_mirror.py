@@ -4,7 +4,7 @@ Dr.Jit 1.5.0 hands back the false branch's own variable for an output that both 
 return as the same literal; the LLVM backend defines it inside that branch, and a use after
 the conditional aborts the process ("Instruction does not dominate all uses!"). Two opaque
 sides of a ``thinfilm_dielectric`` both return ``T = 0`` and aborted
-``tests/test_stability_bsdf.py``. The checks run in a subprocess, where an abort is a
+``tests/cross/test_stability_bsdf.py``. The checks run in a subprocess, where an abort is a
 failed assertion rather than the end of the test run.
 """
 from __future__ import annotations

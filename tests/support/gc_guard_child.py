@@ -1,6 +1,6 @@
-"""Child process of ``tests/test_gc_guard.py``: the loop users run, in one process.
+"""Child process of ``tests/cross/test_gc_guard.py``: the loop users run, in one process.
 
-    python tests/_gc_guard_child.py VARIANT ITERATIONS GC {thinfilm|plain}
+    python tests/support/gc_guard_child.py VARIANT ITERATIONS GC {thinfilm|plain}
 
 Each iteration loads a scene, renders it, makes a refused edit whose exception is kept
 in a local (exception -> traceback -> frame -> locals -> scene: a reference cycle once

@@ -1,4 +1,4 @@
-"""Child process of tests/test_parallel_load.py: one parallel scene load in a fresh
+"""Child process of tests/cross/test_parallel_load.py: one parallel scene load in a fresh
 process, with the race's window widened. Prints ``ok`` or ``FAIL <error>``.
 
 Every thin-film plugin type (with many constant-index films: each index was a

@@ -20,7 +20,7 @@ COND_SUB = 0.35 + 2.9j
 DIEL_FILMS = [(1.46, 300.0), (0.42 + 2.47j, 10.0)]
 DIEL_SUB = 1.5
 # Float32 against float64 for a film reflectance/transmittance (the bound of
-# tests/test_bsdf_specular.py: phase error < 1e-5 rad for these stacks).
+# tests/plugins/test_thinfilm_conductor.py: phase error < 1e-5 rad for these stacks).
 F32_TOL = 3e-5
 
 

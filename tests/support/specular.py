@@ -12,7 +12,7 @@ VARIANTS = ["llvm_ad_spectral", "scalar_spectral"]
 # Float32 tolerance for a weight against float64: the in-kernel recursion runs in
 # float32 (relative rounding 6e-8 per operation); for the <= 3 films and
 # thicknesses <= 500 nm used here the phase error is below 1e-5 rad and the
-# reflectance error below 1e-5 (see tests/test_optics.py); 3e-5 leaves margin for
+# reflectance error below 1e-5 (see tests/optics/test_core.py); 3e-5 leaves margin for
 # the 1 nm spectral resampling of datasets and the float32 cos(theta).
 F32_TOL = 3e-5
 

@@ -6,7 +6,7 @@ import numpy as np
 import thinfilm_mi as tf
 
 # A float32 kernel value against float64: rounding below 3e-5 for these stacks
-# (tests/test_bsdf_specular.py). A table lookup adds its interpolation error,
+# (tests/plugins/test_thinfilm_conductor.py). A table lookup adds its interpolation error,
 # which the build verified to be below ``table.error`` at the midpoints of its
 # cells; the cubic spline's error peaks near those midpoints, so a point
 # anywhere may exceed it only marginally: we allow 1.5x plus the float32 term.

@@ -154,7 +154,7 @@ def test_thick_films_are_incoherent_like_tmm_inc_tmm():
         res = [tmm.inc_tmm(p, [1.0, 1.38, 1.9, 1.5], [np.inf, 100.0, 20000.0, np.inf],
                            ["i", "c", "i", "i"], theta, w) for p in "sp"]
         # tmm is float64; the kernel float32 (the incoherent core holds 1e-5,
-        # tests/test_incoherent.py).
+        # tests/optics/test_incoherent.py).
         assert abs(R[j] - 0.5 * (res[0]["R"] + res[1]["R"])) < 1e-5
         assert abs(T[j] - 0.5 * (res[0]["T"] + res[1]["T"])) < 1e-5
     coherent = mi.load_dict({"type": "thinfilm_dielectric", "layers": "1.38 100; 1.9 20000",
@@ -291,7 +291,7 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     films on Al, with cavity resonances ~0.1 nm wide -- is rejected by the probe
     alone, for a small fraction of the evaluations a failing build used to spend
     (up to tabulate_base.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
-    table is tried after it; tests/test_band_tables.py covers those.)"""
+    table is tried after it; tests/tabulate/test_band.py covers those.)"""
     from thinfilm_mi.tabulate import base as tabulate_base
     K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",

@@ -25,7 +25,7 @@ from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.mueller import AUTO_MAX_FLOATS, AUTO_MIN_FILMS, MUELLER
 
 # A float32 kernel value against float64: rounding below 3e-5 for these stacks
-# (tests/test_tables.py, the same recursion and lookups).
+# (tests/tabulate/test_exact.py, the same recursion and lookups).
 F32 = 3e-5
 
 
@@ -71,7 +71,7 @@ def _exact_components(stack, inside, cos, wls) -> np.ndarray:
 
 def _points(n, seed, critical=None):
     """Incidence outside the grazing sliver the builds do not verify (as
-    tests/test_tables.py), and 500 points within 1e-3 of the critical angle."""
+    tests/tabulate/test_exact.py), and 500 points within 1e-3 of the critical angle."""
     rng = np.random.default_rng(seed)
     cos = f32(rng.uniform(tabulate_base.GRAZING_COS, 1.0, n))
     if critical is not None:
@@ -80,7 +80,7 @@ def _points(n, seed, critical=None):
 
 
 # Each channel of a lookup is within 1.5x its table's verified error of the exact
-# value (tests/test_tables.py: the spline errs most near the checked midpoints),
+# value (tests/tabulate/test_exact.py: the spline errs most near the checked midpoints),
 # plus float32 rounding. The render path then projects the four components of a
 # lobe onto the cone of physical matrices (amplitudes.physical), which keeps them at
 # least as close to the exact (physical) ones in the Euclidean norm, i.e. within
@@ -139,7 +139,7 @@ def test_a_thick_films_table_holds_the_incoherent_components():
 
 def test_band_limited_mueller_rows_match_a_brute_force_convolution():
     """A 10-film stack on a metal (resonances ~0.1 nm wide, as in
-    tests/test_band_tables.py): the band-limited rows of its Mueller components
+    tests/tabulate/test_band_rows.py): the band-limited rows of its Mueller components
     against each exact component convolved by direct summation on a 0.0005 nm
     grid. Bound 1e-4 as there (a tenth of the default table_error; a missed
     resonance errs by ~1e-3 or more); measured <= 1.3e-5."""
@@ -187,8 +187,8 @@ def test_plugins_read_the_table_and_stay_physical(mode="Radiance"):
     entries with weights cos 2a, sin 2a (|cos| + |sin| <= sqrt 2 per side), so 2x
     the bound of the components. Random Stokes inputs stay physical (S0 >= 0,
     degree of polarization <= 1, 1e-5 relative for float32 rounding, as
-    tests/test_polarized.py). (One transport mode: the table's components do not
-    depend on it; the rotations of both are tests/test_polarized.py's.)"""
+    tests/cross/test_polarized.py). (One transport mode: the table's components do not
+    depend on it; the rotations of both are tests/cross/test_polarized.py's.)"""
     props = {"type": "thinfilm_dielectric", "layers": layers(10, 10.0, 30.0), "int_ior": 1.52,
              "spectral_resolution": 0.0}
     table = mi.load_dict(dict(props, tabulate=True))
@@ -216,7 +216,7 @@ def test_plugins_read_the_table_and_stay_physical(mode="Radiance"):
 def test_auto_tabulates_deep_polarized_stacks():
     """``tabulate="auto"`` in a polarized variant: fewer than AUTO_MIN_FILMS films
     stay exact (their amplitudes cost less than a lookup of 4 channels, and the
-    matrices stay at tests/test_polarized.py's tolerances); from it on a Mueller
+    matrices stay at tests/cross/test_polarized.py's tolerances); from it on a Mueller
     table (reflection: 4 channels) within the auto budget of AUTO_MAX_FLOATS;
     gradients bypass it."""
     fewer = mi.load_dict({"type": "thinfilm_conductor",
@@ -238,9 +238,9 @@ def test_auto_tabulates_deep_polarized_stacks():
 def test_exact_deep_stacks_run_as_a_film_loop(plugin, films, tol):
     """Without a table, stacks of LOOP_MIN_FILMS films or more are evaluated by a loop
     over the films' buffers (optics.mueller.loop_amplitudes: one loop body in the
-    kernel whatever the depth), against tmm's matrices (tests/test_polarized.py's
+    kernel whatever the depth), against tmm's matrices (tests/cross/test_polarized.py's
     construction and rotation), both lobes of the dielectric from both sides.
-    Tolerances: 10 films at tests/test_polarized.py's TMM_TOL (measured 1.6e-5);
+    Tolerances: 10 films at tests/cross/test_polarized.py's TMM_TOL (measured 1.6e-5);
     30 resonant films on glass carry float32 rounding through 30 steps, measured
     7.6e-5 for the loop and 8.3e-5 for the unrolled recursion it replaces."""
     from tests.support.polarized import directions, interaction, mat, rotated, tmm_matrix

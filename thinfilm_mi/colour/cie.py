@@ -51,7 +51,7 @@ def delta_e2000(lab1: np.ndarray, lab2: np.ndarray) -> np.ndarray:
     :func:`thinfilm_mi.design.colourmath.delta_e2000_residuals`).
 
     The same formula as colour-science's ``colour.delta_E(..., method="CIE 2000")``,
-    equal to it on random and edge-case pairs (tests/test_colorimetry.py), written out
+    equal to it on random and edge-case pairs (tests/colour/test_cie.py), written out
     in numpy because importing colour-science takes ~1.5 s, which a scene load that
     builds a table would pay."""
     L1, a1, b1 = np.moveaxis(lab1, -1, 0)

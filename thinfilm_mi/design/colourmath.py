@@ -6,7 +6,7 @@ steps after it need derivatives. They are carried forward by :class:`Dual`
 numbers: a value and its derivatives with respect to the three components of
 XYZ. The formulas are the CIE's (L*a*b* with the linear segment below
 ``(6/29)^3``; CIEDE2000 as in Sharma, Wu & Dalal 2005, the test data set of
-which colour-science also follows); tests/test_design.py compares both with
+which colour-science also follows); tests/design/test_colourmath.py compares both with
 colour-science. A CIEDE2000 without derivatives is
 :func:`thinfilm_mi.colour.cie.delta_e2000`.
 

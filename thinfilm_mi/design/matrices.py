@@ -22,7 +22,7 @@ targets hold). The products are ordinary float64 matrix products, fine for the
 dielectric and thin metal films of coating designs (an overflow needs
 ``Im delta > 700``, a metal film microns thick); the renderer's recursion in
 :mod:`thinfilm_mi.optics.core` stays the reference for everything else, and
-tests/test_design.py checks this module against tmm.
+tests/design/test_matrices.py checks this module against tmm.
 
 Derivatives are forward-mode through prefix products ``P_j = M_1 ... M_{j-1}``
 and suffix vectors ``S_j = M_{j+1} ... M_L [1, eta_exit]``: a change of film j

@@ -40,7 +40,7 @@ with the same s/p signs (its "Verdet convention" ``a_p`` is tmm's ``r_p``). A fi
 ``Re(a exp(-i w t))`` is ``Re(conj(a) exp(+i w t))``, so **Mitsuba's amplitudes are
 the complex conjugates of ours**: ``A_s = conj(r_s)``, ``A_p = conj(r_p)`` (and the
 same for ``t``), which flips the sign of the s-p phase difference and hence of
-``S3``. :mod:`thinfilm_mi.render.amplitudes` applies this map; tests/test_polarized.py checks
+``S3``. :mod:`thinfilm_mi.render.amplitudes` applies this map; tests/cross/test_polarized.py checks
 it on bare interfaces (a conductor, glass from both sides, TIR) against
 ``mueller.specular_reflection`` and ``specular_transmission``.
 

@@ -32,7 +32,7 @@ through the stack; the final ``c_T`` is turned to the electric-field amplitudes 
 real exit medium). With no film marked incoherent this is
 :func:`~thinfilm_mi.optics.mueller.mueller_rt` itself. Conventions (absorbing
 incoherent films, evanescent ones, guards) as in
-:mod:`thinfilm_mi.optics.incoherent`; ``tests/test_polarized_tables.py`` checks
+:mod:`thinfilm_mi.optics.incoherent`; ``tests/optics/test_incoherent_mueller.py`` checks
 the result against the average of coherent matrices over the thick film's phase.
 """
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 A plugin module imports only the layers below (what the plugins share lives in
 :mod:`thinfilm_mi.render`, as Mitsuba's BSDFs share ``microfacet.h``), never another
-plugin module (``tests/test_architecture.py`` checks both).
+plugin module (``tests/cross/test_architecture.py`` checks both).
 
 :func:`register` registers every plugin of this package (the BSDFs of :data:`PLUGINS`
 and the textures of :data:`TEXTURES`) for the current Mitsuba variant and installs a

@@ -36,7 +36,7 @@ variants ("Not implemented for non-spectral modes").
   Mitsuba's ``MI_CIE_Y_NORMALIZATION`` (1/106.75). This is what Mitsuba's
   spectral pipeline computes for the emitter with an RGB film, so a render in an
   RGB variant agrees with one in a spectral variant (measured: within 0.03 %
-  for 2856-20000 K; tests/test_blackbody.py).
+  for 2856-20000 K; tests/plugins/test_thinfilm_blackbody.py).
 * Mono variants: the luminance ``Y`` of the same integral.
 
 The radiance is not spatially varying. The temperature and scale can be changed

@@ -269,7 +269,7 @@ re-evaluates ``eval`` at the sampled direction for the derivative; ``eval`` hold
 only the diffuse part, so for paths that took the delta specular component ``prb``
 uses the diffuse term's derivative where ``k_r``'s belongs (a thickness gradient of
 +5.4e-4 where ``path`` and a finite difference give -1.5e-4, in
-``tests/test_render_gradients.py``'s scene), as it does for Mitsuba's own
+``tests/plugins/test_thinfilm_diffuse.py``'s scene), as it does for Mitsuba's own
 ``plastic``. A BSDF cannot tell ``prb`` from ``path`` (both trace ``sample`` with
 gradients suspended in their primal pass and ``eval`` with gradients later), so
 there is no run-time warning.

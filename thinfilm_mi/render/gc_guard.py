@@ -18,7 +18,7 @@ The defect (Mitsuba 3.9.1, Dr.Jit 1.5; upstream, not ours):
   ``BSDF::eval_pdf_sample`` or ``BlendBSDF::eval_pdf``. A pass during the
   trace of a *live* scene's BSDF is harmless. Related upstream: mitsuba3 #771
   (a dropped Python emitter still traced) and PR #776 (the lifetime of Python
-  plugin references). ``tests/test_gc_guard.py`` runs a reproducer
+  plugin references). ``tests/cross/test_gc_guard.py`` runs a reproducer
   without this package: a plain Python BSDF, a dropped scene in a cycle, a
   render of another scene.
 

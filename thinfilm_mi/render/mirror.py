@@ -115,7 +115,7 @@ def branches(stack) -> bool:
     Fresnel terms cost less than the branch), nor where a side is optically opaque or
     averages a film incoherently. (Two opaque sides both return the literal ``T = 0``,
     which Dr.Jit 1.5.0 hands back as one branch's own variable: LLVM refused the kernel,
-    tests/test_stability_bsdf.py. :func:`literal_outside` now mends any such output;
+    tests/cross/test_stability_bsdf.py. :func:`literal_outside` now mends any such output;
     these stacks stay unbranched as they were measured.)"""
     return bool(stack.indices) and not any(s.opaque or any(s.incoherent)
                                            for s in stack.plan.values())

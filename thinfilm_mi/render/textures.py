@@ -8,7 +8,7 @@
   plugin (``bitmap``, ``ply``, ``hdrfilm``, or the loading of a plugin
   library) resolving a file name on another thread at that moment reads the
   freed copy: ``std::bad_alloc``, ``basic_string::_M_create`` or a crash.
-  ``create_object`` touches no resolver (``tests/test_parallel_load.py``).
+  ``create_object`` touches no resolver (``tests/cross/test_parallel_load.py``).
 * Reading: :func:`texture_on_grid` (a spectrum on a wavelength grid) and
   :func:`texture_range` (smallest and largest value over a texture's spectral
   and spatial domain) at load time; :func:`check_texture_range` turns the

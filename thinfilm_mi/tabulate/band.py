@@ -41,7 +41,7 @@ weights, ``I_b = ∫ R(ν) B((ν - ν_b) / w) dν``:
 then ``R_σ = Σ_b G_σ'(ν - ν_b) I_b`` with ``σ'² = σ_ν² - w²/3`` (the
 B-spline's variance; the Gaussian of ``σ'`` times the B-spline is the Gaussian
 of ``σ_ν`` to its fourth cumulant), one FFT per row.
-``tests/test_band_tables.py`` checks ``R_σ`` against a brute-force convolution
+``tests/tabulate/test_band_rows.py`` checks ``R_σ`` against a brute-force convolution
 of exact values on a 0.0005 nm grid (measured within 1e-5).
 
 **The table** is the cubic B-spline of :mod:`thinfilm_mi.tabulate.exact` (same lookup;

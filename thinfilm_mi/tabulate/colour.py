@@ -23,7 +23,7 @@ normal incidence, Y of a 30-film 2.3/1.46 stack on Al on uniform grids against a
 0.005 nm one differs by 4.1e-5 at 1 nm, 3.2e-8 at 0.2 nm and 2.0e-9 at 0.05 nm
 (one 500 nm SiO2 film on Au: 4.8e-6, 1.9e-7, 1.8e-8), so the cavity resonances
 (~0.1 nm wide) need steps of ~0.2 nm where they are and nowhere else; the
-adaptive rule spends them there. ``tests/test_rgb.py`` checks the tables against
+adaptive rule spends them there. ``tests/render/test_colour.py`` checks the tables against
 colour-science's observer and D65 on a 0.01 nm grid: ΔE2000 <= 0.1 (measured
 <= 0.03) for 1-30 films up to 89°.
 
@@ -64,11 +64,11 @@ from thinfilm_mi.tabulate.refine import (
 #: channel; L* alone in mono) and :data:`TOLERANCE_ABS` in every channel. The
 #: table then keeps the exact midpoints too: its grid is twice as fine as the
 #: one checked, so its own error is ~1/16 of the check's for a smooth function
-#: (tests/test_rgb.py: the tables are within ΔE2000 0.03 of a 0.01 nm reference).
+#: (tests/render/test_colour.py: the tables are within ΔE2000 0.03 of a 0.01 nm reference).
 TOLERANCE_DE = 0.05
 #: The same for the nodes of a 2-D table (a ``thickness`` texture): the cells
 #: multiply by four at every level, and ΔE2000 0.2 is a fifth of a just noticeable
-#: difference (tests/test_rgb.py checks such a table against the reference).
+#: difference (tests/render/test_colour.py checks such a table against the reference).
 TOLERANCE_DE_2D = 0.2
 TOLERANCE_ABS_2D = 3e-3
 TOLERANCE_ABS = 1e-3

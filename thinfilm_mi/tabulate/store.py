@@ -17,7 +17,7 @@ found not tabulable, with its build report) in one file per key under a director
 * **what is read back**: the float32 texture values exactly as built (with a
   band-limited table's shear, :mod:`thinfilm_mi.tabulate.shear`), so a table
   from the store gives the same image bit for bit as the one it stands for
-  (``tests/test_table_store.py``);
+  (``tests/tabulate/test_store.py``);
 * **safety**: files are written under a temporary name and renamed (atomic on one
   file system: another process never reads half a file), read with
   ``allow_pickle=False`` and checked (shape, channels, finite values); a file that
