@@ -1,5 +1,5 @@
 """Parameter sweeps on Dask (thinfilm_mi/batch/sweeps.py): frames named and grouped by
-scene load, one GPU a worker, no Dask on import, values checked on the scene, outputs
+scene load, one GPU a worker, no Dask on import, arguments checked, outputs
 and manifest, failures retried, killed workers, resumed sweeps, polarized grids."""
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ pytest.importorskip("distributed")
 import mitsuba as mi  # noqa: E402
 
 from tests.support.sweep import SCENE, THICKNESS, TIMEOUT, read_manifest
-from thinfilm_mi.batch import exr, grid, outputs, sweeps, worker  # noqa: E402
+from thinfilm_mi.batch import exr, grid, outputs, sweeps  # noqa: E402
 from thinfilm_mi.batch import scene as tf_scene  # noqa: E402
 from thinfilm_mi.errors import UsageError  # noqa: E402
 
@@ -77,15 +77,6 @@ def test_importing_the_package_does_not_import_dask():
             "and 'dask' not in sys.modules; from thinfilm_mi import sweep; "
             "assert callable(sweep) and 'distributed' in sys.modules")
     subprocess.run([sys.executable, "-c", code], check=True, timeout=120)
-
-
-def test_traverse_values_are_checked_on_the_scene(scene):
-    mi.set_variant(tf_scene.DEFAULT_VARIANT)
-    loaded = tf_scene.load_scene(scene)
-    with pytest.raises(UsageError, match="did you mean sphere.bsdf.layers.0.thickness"):
-        worker.set_parameters(loaded, None, [("sphere.bsdf.layers.0.thicknes", "3")])
-    with pytest.raises(UsageError, match="single numbers"):
-        worker.set_parameters(loaded, None, [("sphere.bsdf.layers.0.eta.values", "1.5")])
 
 
 def test_sweep_arguments_are_checked(scene, tmp_path):

@@ -1,4 +1,4 @@
-"""``python -m thinfilm_mi`` (thinfilm_mi/cli/tools.py): plan, spectrum, materials, demo and
+"""``python -m thinfilm_mi`` (thinfilm_mi/cli/tools.py): spectrum, materials, demo and
 colour commands, their output formats and their one-line errors."""
 from __future__ import annotations
 
@@ -7,33 +7,8 @@ import pytest
 
 from tests.support.cli import error_lines, png_size
 from thinfilm_mi import Stack  # noqa: E402
-from thinfilm_mi.batch import scene as tf_scene  # noqa: E402
 from thinfilm_mi.cli import tools as tf_main  # noqa: E402
 from thinfilm_mi.errors import UsageError  # noqa: E402
-
-
-@pytest.mark.parametrize("spp,pixels,cap", [(1, 100, 1 << 22), (7, 100, 1 << 22),
-                                            (1000, 1000, 10_000), (64, 1 << 22, 1 << 22)])
-
-
-def test_plan_passes(spp, pixels, cap):
-    plan = tf_scene.plan_passes(spp, pixels, cap)
-    assert sum(plan) == spp
-    assert max(plan) - min(plan) <= 1
-    assert len(plan) >= min(spp, tf_scene.MIN_PASSES)
-    assert max(plan) * pixels <= max(cap, pixels)
-    seeds = {tf_scene.pass_seed(0, i) for i in range(len(plan))} | {tf_scene.pass_seed(1, i) for i in range(len(plan))}
-    assert len(seeds) == 2 * len(plan)
-
-
-def test_parse_helpers():
-    assert tf_scene.parse_defines(["a=1", "b_2= x=y"]) == {"a": "1", "b_2": " x=y"}
-    assert tf_scene.parse_size("640x480") == (640, 480)
-    for bad in ("640", "0x4", "axb"):
-        with pytest.raises(UsageError):
-            tf_scene.parse_size(bad)
-    with pytest.raises(UsageError):
-        tf_scene.parse_defines(["1a=3"])
 
 
 def test_spectrum_matches_stack(capsys):
@@ -172,7 +147,6 @@ def test_parse_angles_ranges():
     np.testing.assert_array_equal(tf_main.parse_angles("0:80:10"), np.arange(0, 81, 10.0))
     np.testing.assert_array_equal(tf_main.parse_angles("0, 30 60"), [0.0, 30.0, 60.0])
     np.testing.assert_array_equal(tf_main.parse_angles("90"), [90.0])  # spectrum allows grazing
-    from thinfilm_mi.errors import UsageError
 
     with pytest.raises(UsageError, match=r"--angles.*\[0, 90\)"):
         tf_main.parse_angles("90", below_90=True)

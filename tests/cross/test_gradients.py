@@ -17,6 +17,7 @@ import pytest
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402
+from tests.support.bsdf import unit_vector
 
 WLS = [450.0, 520.0, 610.0, 700.0]
 EXT = 1.0
@@ -78,8 +79,7 @@ def interaction(wi):
 
 
 def direction(theta_deg, phi_deg=0.0, below=False):
-    t, p = np.radians(theta_deg), np.radians(phi_deg)
-    v = np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+    v = unit_vector(theta_deg, phi_deg)
     return -v if below else v
 
 

@@ -36,6 +36,7 @@ tests); the fixed cases use the default path (tables where chosen).
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import drjit as dr
 import mitsuba as mi
@@ -46,6 +47,7 @@ from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
+from tests.support import bsdf
 from tests.support.plugin_modules import import_error
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.optics.unpolarised import unpolarised_rt
@@ -189,11 +191,8 @@ def spectrum_np(x) -> np.ndarray:
     return np.stack([np.array(x[i], dtype=np.float64) for i in range(4)], axis=1)
 
 
-def context(component=None, mode=mi.TransportMode.Importance):
-    ctx = mi.BSDFContext(mode)
-    if component is not None:
-        ctx.component = component
-    return ctx
+#: Contexts in importance transport (the adjoint: the harder case for the sampled weights).
+context = partial(bsdf.context, mode=mi.TransportMode.Importance)
 
 
 def is_delta(flags) -> bool:

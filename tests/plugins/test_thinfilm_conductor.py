@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import thinfilm_mi as tf
-from tests.support.specular import F32_TOL, WLS, context, interaction, lit_floor_scene, tmm_R, weight
+from tests.support.bsdf import context
+from tests.support.specular import F32_TOL, WLS, interaction, lit_floor_scene, tmm_R, weight
 
 RNG_STACKS = [
     [(1.46, 500.0)],

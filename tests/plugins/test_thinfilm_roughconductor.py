@@ -8,7 +8,8 @@ import pytest
 mi.set_variant("llvm_ad_spectral")
 
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
-from tests.support.rough import ALPHA0, COND_FILMS, COND_SUB, check_near_smooth, conductor, direction, layers_of
+from tests.support.bsdf import direction
+from tests.support.rough import ALPHA0, COND_FILMS, COND_SUB, check_near_smooth, conductor, layers_of
 
 
 @pytest.mark.parametrize("theta", [0.0, 35.0, 70.0])

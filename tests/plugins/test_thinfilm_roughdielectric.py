@@ -9,6 +9,7 @@ import pytest
 mi.set_variant("llvm_ad_spectral")
 
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
+from tests.support.bsdf import context, direction, to_np
 from tests.support.rough import (
     ALPHA0,
     DG_RTOL,
@@ -16,9 +17,7 @@ from tests.support.rough import (
     DIEL_SUB,
     WLS,
     check_near_smooth,
-    context,
     dielectric,
-    direction,
     f32_vec,
     films_tol,
     layers_of,
@@ -27,7 +26,6 @@ from tests.support.rough import (
     random_samples,
     ref_D,
     ref_G1,
-    to_np,
 )
 
 

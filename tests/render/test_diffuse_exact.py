@@ -18,7 +18,8 @@ import tmm
 mi.set_variant("llvm_ad_spectral")
 
 import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
-from tests.support.diffuse_exact import WL, direction, make_si
+from tests.support.bsdf import WAVELENGTHS as WL
+from tests.support.bsdf import direction, make_si
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
 from thinfilm_mi.render.media import SpectralIndex  # noqa: E402
 

@@ -17,6 +17,7 @@ from mitsuba.chi2 import ChiSquareTest, SphericalDomain  # noqa: E402
 
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
 from tests.support import ROOT
+from tests.support.bsdf import context, direction, to_np
 from tests.support.rough import (
     COND_FILMS,
     COND_SUB,
@@ -25,9 +26,7 @@ from tests.support.rough import (
     DIEL_SUB,
     WLS,
     conductor,
-    context,
     dielectric,
-    direction,
     f32_vec,
     films_tol,
     layers_of,
@@ -36,7 +35,6 @@ from tests.support.rough import (
     random_samples,
     ref_D,
     ref_G1,
-    to_np,
 )
 
 ROOT = ROOT

@@ -24,9 +24,9 @@ mi.set_variant("llvm_ad_spectral")
 from mitsuba.chi2 import ChiSquareTest, SphericalDomain  # noqa: E402
 
 import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
+from tests.support.bsdf import make_si
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
 
-WAVELENGTHS = (450.0, 520.0, 600.0, 680.0)
 SIGMAS = (0.1, 0.4, 1.0, math.pi / 2)
 
 
@@ -36,15 +36,6 @@ def load(layers="", sigma=0.5, base="qualitative", reflectance=0.8, **extra):
     if sigma is not None:
         d["roughness"] = sigma
     return mi.load_dict(d)
-
-
-def make_si(n, wi):
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.wi = wi
-    si.uv = mi.Point2f(0.3, 0.7)
-    if mi.is_spectral:
-        si.wavelengths = mi.UnpolarizedSpectrum(*WAVELENGTHS)
-    return si
 
 
 def directions(n, seed):

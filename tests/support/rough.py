@@ -4,15 +4,20 @@ small roughness gives the smooth plugin."""
 from __future__ import annotations
 
 import math
+from functools import partial
 
-import drjit as dr
 import mitsuba as mi
 import numpy as np
+
+from tests.support import bsdf
+from tests.support.bsdf import to_np
 
 mi.set_variant("llvm_ad_spectral")
 
 
 WLS = (450.0, 520.0, 610.0, 700.0)
+#: Interactions at these wavelengths, at uv (0.3, 0.6).
+make_si = partial(bsdf.make_si, wavelengths=WLS, uv=(0.3, 0.6))
 # A dielectric stack on gold, and an absorbing stack on glass (R + T < 1, and the
 # two sides of the glass differ), as float64 reference stacks and as layers strings.
 COND_FILMS = [(1.46, 300.0), (2.3, 60.0)]
@@ -45,32 +50,6 @@ def conductor(**extra):
 def dielectric(**extra):
     return mi.load_dict({"type": "thinfilm_roughdielectric", "layers": layers_of(DIEL_FILMS),
                          "int_ior": DIEL_SUB, "ext_ior": 1.0, **extra})
-
-
-def make_si(n, wi, wavelengths=WLS):
-    si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.wi = wi
-    si.uv = mi.Point2f(0.3, 0.6)
-    si.wavelengths = mi.Spectrum(*wavelengths)
-    return si
-
-
-def direction(theta_deg, phi_deg=0.0):
-    t, p = math.radians(theta_deg), math.radians(phi_deg)
-    return mi.Vector3f(math.sin(t) * math.cos(p), math.sin(t) * math.sin(p), math.cos(t))
-
-
-def context(component=None, type_mask=None, mode=None):
-    ctx = mi.BSDFContext(mode) if mode is not None else mi.BSDFContext()
-    if component is not None:
-        ctx.component = component
-    if type_mask is not None:
-        ctx.type_mask = type_mask
-    return ctx
-
-
-def to_np(x):
-    return np.array(x, dtype=np.float64)
 
 
 def random_samples(n, seed):

@@ -7,6 +7,8 @@ import mitsuba as mi
 import numpy as np
 import tmm
 
+from tests.support.bsdf import context
+
 WLS = [380.0, 470.0, 590.0, 760.0]
 VARIANTS = ["llvm_ad_spectral", "scalar_spectral"]
 # Float32 tolerance for a weight against float64: the in-kernel recursion runs in
@@ -23,13 +25,6 @@ def interaction(cos_theta, wls=WLS):
     s = float(np.sqrt(max(0.0, 1.0 - cos_theta ** 2)))
     si.wi = mi.Vector3f(s, 0.0, float(cos_theta))
     return si
-
-
-def context(component=None):
-    ctx = mi.BSDFContext()
-    if component is not None:
-        ctx.component = component
-    return ctx
 
 
 def weight(bsdf, cos_theta, component=None, sample1=0.3):

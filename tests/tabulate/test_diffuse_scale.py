@@ -9,7 +9,8 @@ import pytest
 mi.set_variant("llvm_ad_spectral")
 
 import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
-from tests.support.diffuse_exact import WL, direction, make_si
+from tests.support.bsdf import WAVELENGTHS as WL
+from tests.support.bsdf import direction, make_si
 
 
 def test_scale_table_against_direct_terms():
