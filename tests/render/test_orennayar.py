@@ -24,7 +24,7 @@ mi.set_variant("llvm_ad_spectral")
 from mitsuba.chi2 import ChiSquareTest, SphericalDomain  # noqa: E402
 
 import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
-from tests.support.bsdf import make_si
+from tests.support.bsdf import make_si, mc_albedo
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
 
 SIGMAS = (0.1, 0.4, 1.0, math.pi / 2)
@@ -89,16 +89,6 @@ def evaluate(b, wi, wo):
     n = wi.shape[1]
     f = np.array(b.eval(mi.BSDFContext(), make_si(n, vec(wi)), vec(wo)), np.float64)
     return f.reshape(-1, n)
-
-
-def mc_albedo(b, theta, n=1 << 17, seed=1):
-    rng = mi.PCG32(size=n, initstate=seed)
-    t = math.radians(theta)
-    si = make_si(n, mi.Vector3f(math.sin(t), 0.0, math.cos(t)))
-    _, w = b.sample(mi.BSDFContext(), si, rng.next_float32(),
-                    mi.Point2f(rng.next_float32(), rng.next_float32()))
-    w = np.array(w, np.float64).reshape(-1, n)
-    return w.mean(axis=1), w.std(axis=1) / math.sqrt(n)
 
 
 # ---------------------------------------------------------------------------
@@ -224,13 +214,13 @@ def test_furnace_bare_bases():
         s2 = sigma ** 2
         A, B = 1 - 0.5 * s2 / (s2 + 0.33), 0.45 * s2 / (s2 + 0.09)
         for theta in (0.0, 45.0, 80.0, 89.0):
-            mean, err = mc_albedo(white, theta)
+            mean, err = mc_albedo(white, theta, n=1 << 17)
             # EON reflects everything: 5 standard errors (<= 2e-3 here) plus float32
             assert np.all(np.abs(mean - 1.0) <= 5 * err + 1e-5), (sigma, theta, mean, err)
             mu = math.cos(math.radians(theta))
             S = math.sin(math.radians(theta))
             h = (S * (math.radians(theta) - S * mu) + 2 / 3 * S * mu * (1 + S + S * S) / (1 + S)) / math.pi
-            mean, err = mc_albedo(q, theta)
+            mean, err = mc_albedo(q, theta, n=1 << 17)
             assert np.all(np.abs(mean - (A + B * h)) <= 5 * err + 1e-5), (sigma, theta, mean, A + B * h)
         if sigma == math.pi / 2:     # the seed's model loses 44 % at normal incidence here
             assert A < 0.56
@@ -241,7 +231,7 @@ def test_furnace_with_films(model):
     for layers in ("SiO2 500; Au 2", "SiO2 300; Au 4", "Si 50; SiO2 100; Cu 5"):
         b = load(layers, math.pi / 2, model, reflectance=1.0)
         for theta in (0.0, 60.0, 85.0):
-            mean, err = mc_albedo(b, theta)
+            mean, err = mc_albedo(b, theta, n=1 << 17)
             assert np.all(mean <= 1.0 + 5 * err + 1e-5), (layers, theta, mean, err)
     # lossless films over a white EON base: the interreflection weighs the coating's
     # reflection of the base's exitance by the cosine (R_dh) where the base's lobe is not

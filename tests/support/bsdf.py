@@ -1,4 +1,5 @@
-"""What the BSDF tests build to query a plugin: a context, an interaction, a direction.
+"""What the BSDF tests build to query a plugin: a context, an interaction, a direction;
+and a Monte Carlo directional albedo.
 
 The plugin test modules and the render tests of the shared BSDF code (Oren–Nayar,
 the exact diffuse model, the microfacets) query BSDFs the same way; these are the
@@ -48,6 +49,17 @@ def unit_vector(theta_deg, phi_deg=0.0):
     """The same direction as :func:`direction`, as a float64 numpy array."""
     t, p = np.radians(theta_deg), np.radians(phi_deg)
     return np.array([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)])
+
+
+def mc_albedo(bsdf, theta_deg, n=1 << 18, seed=1, ctx=None):
+    """Per channel, the mean of ``n`` sample() weights at incidence ``theta_deg`` (the
+    directional albedo, in ``ctx``'s components) and its standard error."""
+    rng = mi.PCG32(size=n, initstate=seed)
+    s1 = rng.next_float32()
+    s2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+    _, w = bsdf.sample(ctx or mi.BSDFContext(), make_si(n, direction(theta_deg)), s1, s2)
+    w = np.array(w, np.float64).reshape(-1, n)
+    return w.mean(axis=1), w.std(axis=1) / math.sqrt(n)
 
 
 def to_np(x):
