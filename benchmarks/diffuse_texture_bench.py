@@ -55,4 +55,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("diffuse_texture_bench"):   # --write-docs: docs/_generated/diffuse_texture_bench.md
+        main()

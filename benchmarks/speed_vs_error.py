@@ -320,4 +320,7 @@ def plot(results, path):
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("speed_vs_error"):   # --write-docs: docs/_generated/speed_vs_error.md
+        main()

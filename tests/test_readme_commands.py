@@ -43,8 +43,9 @@ from thinfilm_mi.batch.exr import read_exr  # noqa: E402
 REPO = Path(__file__).resolve().parent.parent
 README = REPO / "README.md"
 DOCS = REPO / "docs"
-#: the documentation's Markdown pages (not its build, nor the generated plugin pages)
-DOC_PAGES = sorted(p for p in DOCS.rglob("*.md") if "_build" not in p.relative_to(DOCS).parts)
+#: the documentation's Markdown pages (not its build, nor the generated plugin pages and
+#: benchmark tables: the tables quote the command that wrote them, a benchmark run of minutes)
+DOC_PAGES = sorted(p for p in DOCS.rglob("*.md") if not {"_build", "_generated"} & set(p.relative_to(DOCS).parts))
 TIMEOUT = 600  # seconds, per command (they take 1-20 s)
 
 #: a line of a code block is a shell command when it starts like one
