@@ -57,7 +57,9 @@ def provenance() -> str:
     """One line: machine (CPU model, cores, load average now), date (UTC), commit, versions."""
     load = " / ".join(f"{x:.1f}" for x in os.getloadavg())
     commit = _git("rev-parse", "--short", "HEAD") or "unknown"
-    dirty = _git("status", "--porcelain", "--untracked-files=no", "--", "thinfilm_mi", "benchmarks", "scenes")
+    # the code and scenes measured (not the outputs a benchmark writes, such as its plot)
+    dirty = _git("status", "--porcelain", "--untracked-files=no", "--", "thinfilm_mi/*.py", "benchmarks/*.py",
+                 "scenes")
     versions = []
     for module in ("mitsuba", "drjit"):
         with contextlib.suppress(ImportError):
