@@ -38,6 +38,7 @@ from thinfilm_mi.design import (
 from thinfilm_mi.design.colourmath import Dual, colour_weights, delta_e2000_residuals, lab
 from thinfilm_mi.design.matrices import stack_response
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.optics.polarization import P, S
 
 REPO = Path(__file__).resolve().parent.parent
 AR = REPO / "examples" / "design" / "ar.yml"
@@ -114,10 +115,10 @@ def test_characteristic_matrices_against_tmm():
         d = rng.uniform(5.0, 300.0, 4)
         sub, angle = complex(rng.uniform(1.3, 2.0), rng.uniform(0, 2)), rng.uniform(0, 80)
         beta2 = np.full(wl.shape, np.sin(np.radians(angle)) ** 2)
-        for pol in "sp":
+        for pol in (S, P):
             res = stack_response(np.ones(wl.shape), np.full(wl.shape, sub), [np.full(wl.shape, n) for n in films],
                                  d, wl, beta2, pol, derivatives=False)
-            R, T = tmm_rt(list(zip(films, d)), sub, 1.0, wl, angle, pol)
+            R, T = tmm_rt(list(zip(films, d)), sub, 1.0, wl, angle, pol.name)
             # float64 transfer matrices of a few films: agreement to rounding
             np.testing.assert_allclose(res.R, R, rtol=0, atol=1e-12)
             np.testing.assert_allclose(res.T, T, rtol=0, atol=1e-12)
@@ -198,18 +199,19 @@ def test_reported_values_agree_with_tmm_for_every_kind_of_target():
     films = numeric_layers(result.layers)
     for rec, v in zip(result.target_records(), result.values):
         t = v.target
+        quantity, pol, side = rec["quantity"], rec["polarization"], rec["side"]    # as the JSON names them
         for a, angle in enumerate(t.angles):
-            if t.quantity in ("R", "T", "A"):
-                R, T = tmm_rt(films, 1.52, 1.0, t.wavelengths, angle, t.polarization, t.side)
-                want = {"R": R, "T": T, "A": 1 - R - T}[t.quantity]
+            if quantity in ("R", "T", "A"):
+                R, T = tmm_rt(films, 1.52, 1.0, t.wavelengths, angle, pol, side)
+                want = {"R": R, "T": T, "A": 1 - R - T}[quantity]
                 np.testing.assert_allclose(v.achieved[a], want, atol=1e-10)
             else:
                 wl = integration_wavelengths(t.illuminant)
-                R, T = tmm_rt(films, 1.52, 1.0, wl, angle, t.polarization, t.side)
-                XYZ, xy, Lab = cs_colour(R if t.of == "R" else T, t.illuminant, t.observer)
-                if t.quantity == "Y":
+                R, T = tmm_rt(films, 1.52, 1.0, wl, angle, pol, side)
+                XYZ, xy, Lab = cs_colour(R if rec["of"] == "R" else T, t.illuminant, t.observer)
+                if quantity == "Y":
                     assert abs(v.achieved[a] - XYZ[1]) < 1e-10
-                elif t.space == "xy":
+                elif rec["space"] == "xy":
                     np.testing.assert_allclose(v.achieved[a], xy, atol=1e-10)
                 else:
                     assert delta_e2000(Lab, v.achieved[a]) < 1e-6
@@ -287,9 +289,9 @@ def test_films_that_reach_zero_are_removed():
 # ---------------------------------------------------------------------------
 def test_parse_tolerance():
     spec = parse_tolerance("1%:200")
-    assert (spec.sigma, spec.relative, spec.draws, spec.distribution) == (0.01, True, 200, "normal")
+    assert (spec.sigma, spec.relative, spec.draws, spec.distribution.name) == (0.01, True, 200, "normal")
     spec = parse_tolerance("2nm:500:uniform")
-    assert (spec.sigma, spec.relative, spec.draws, spec.distribution) == (2.0, False, 500, "uniform")
+    assert (spec.sigma, spec.relative, spec.draws, spec.distribution.name) == (2.0, False, 500, "uniform")
     assert parse_tolerance("0.5%").draws == 200
     for bad in ("1", "abc", "-1%", "1%:0", "150%", "1%:10:gauss", "nan%"):
         with pytest.raises(ThinFilmError, match="--tolerance"):

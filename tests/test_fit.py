@@ -130,7 +130,7 @@ def test_back_side_against_inc_tmm(tmp_path):
     model = FitModel(load_measurements({**doc, "layers": "; ".join(f"{m} {x}" for m, x in zip(specs, d))}))
     values, _ = model.predict(model.x0, jac=False)
     for ds, v in zip(model.m.datasets, values):
-        R, T = _inc(specs, d, n_sub, 1e6, wl, ds.angles[0], ds.polarization)
+        R, T = _inc(specs, d, n_sub, 1e6, wl, ds.angles[0], ds.polarization.name)
         np.testing.assert_allclose(v, R if ds.quantity == "R" else T, atol=1e-6)
     with_back = fit(doc)
     assert np.all(np.abs(with_back.x - d) <= 3 * with_back.se), (with_back.x, with_back.se)

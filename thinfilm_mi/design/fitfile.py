@@ -45,26 +45,18 @@ from typing import Any
 import numpy as np
 
 from thinfilm_mi.design.dispersion import DispersionModel, model_class
-from thinfilm_mi.design.targets import (
-    check_keys,
-    fail,
-    locate_file,
-    parse_choice,
-    parse_number,
-    read_yaml,
-    resolve_material,
-)
+from thinfilm_mi.design.parsing import fail, parse_choice, parse_number
+from thinfilm_mi.design.targets import check_keys, locate_file, read_yaml, resolve_material
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import MIN_INDEX, Material
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL, parse_layers
+from thinfilm_mi.optics.polarization import ALIASES, POLARIZATIONS, Polarization
 
 __all__ = ["Dataset", "FitMaterial", "Parameter", "Measurement", "load_measurements", "QUANTITIES",
-           "POLARIZATIONS", "THICKNESS_MODES"]
+           "THICKNESS_MODES"]
 
 #: What a dataset measures: the power reflected or transmitted.
 QUANTITIES = ("R", "T")
-#: A dataset's polarisation: the s and p components it averages.
-POLARIZATIONS = {"unpolarized": ("s", "p"), "s": ("s",), "p": ("p",)}
 
 
 class ThicknessMode:
@@ -128,7 +120,7 @@ class Dataset:
     index: int
     file: str
     quantity: str
-    polarization: str
+    polarization: Polarization
     wavelengths: np.ndarray
     angles: np.ndarray
     value: np.ndarray
@@ -142,9 +134,9 @@ class Dataset:
     def describe(self) -> str:
         a = np.unique(self.angles)
         angle = f"{a[0]:g}°" if a.size == 1 else f"{a.size} angles {a[0]:g}-{a[-1]:g}°"
-        pol = "" if self.polarization == "unpolarized" else f", {self.polarization}-pol"
-        return f"{self.quantity} at {angle}{pol}, {self.wavelengths.min():g}-{self.wavelengths.max():g} nm " \
-               f"({self.value.size} points)"
+        pol = self.polarization.describe()
+        return f"{self.quantity} at {angle}{pol and ', ' + pol}, " \
+               f"{self.wavelengths.min():g}-{self.wavelengths.max():g} nm ({self.value.size} points)"
 
 
 @dataclass
@@ -258,8 +250,8 @@ def _dataset(entry: Any, i: int, base: Path | None) -> tuple[Dataset, bool]:
     if "quantity" not in entry:
         fail(where, f"missing 'quantity' ({' or '.join(QUANTITIES)})")
     quantity = parse_choice(entry["quantity"], QUANTITIES, where, "quantity")
-    polarization = parse_choice(entry.get("polarization", "unpolarized"), tuple(POLARIZATIONS), where,
-                                "polarization", {"unpolarised": "unpolarized"})
+    polarization = parse_choice(entry.get("polarization", "unpolarized"), POLARIZATIONS, where,
+                                "polarization", ALIASES)
     path = Path(str(entry["file"]))
     if not path.is_absolute() and base is not None:
         path = base / path
