@@ -15,6 +15,7 @@ import thinfilm_mi as tf
 from thinfilm_mi.optics import unpolarised
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.tabulate import axes, quantities
 
 # A float32 kernel value against float64: rounding below 3e-5 for these stacks
 # (tests/test_bsdf_specular.py). A table lookup adds its interpolation error,
@@ -85,7 +86,7 @@ def test_dielectric_tables_both_sides_with_tir(inside, layers):
     assert bsdf.stack.mirrored == lossless and bsdf.stack.mode() == "table"
     table = bsdf.stack.mirror_table(side) if lossless and inside else side.table
     assert table is not None and table.channels == (1 if lossless else 2)
-    assert table.kind == ("tir" if inside and not lossless else "plain")
+    assert table.axis.name == ("tir" if inside and not lossless else "plain")
     cos, wls = random_points(20000, seed=2)
     # Points straddling the critical angle (cos = sqrt(1 - 1.000277^2/1.6^2) = 0.78049).
     cos[:2000] = f32(0.7804861 + np.linspace(-1e-3, 1e-3, 2000))
@@ -108,7 +109,7 @@ def test_dielectric_tables_both_sides_with_tir(inside, layers):
 
 def test_auto_mode_and_what_prevents_a_table():
     one = mi.load_dict({"type": "thinfilm_conductor", "layers": "1.46 300"})
-    assert K.AUTO_MIN_FILMS == 1 and one.stack.mode() == "table"     # one film is enough
+    assert quantities.AUTO_MIN_FILMS == 1 and one.stack.mode() == "table"     # one film is enough
     exact = mi.load_dict({"type": "thinfilm_conductor", "layers": "1.46 300", "tabulate": False})
     assert exact.stack.mode() == "exact"
     three = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu"})
@@ -280,8 +281,8 @@ def test_scalar_variant_uses_tables_too():
     assert np.max(np.abs(R - exact)) <= 1.5 * bsdf.stack.plan[False].table.error + F32
 
 
-@pytest.mark.parametrize("ends", [("values", "values"), ("mirror", "extrapolate"),
-                                  ("extrapolate", "mirror")])
+@pytest.mark.parametrize("ends", [(None, None), (axes.MIRROR, axes.EXTRAPOLATE),
+                                  (axes.EXTRAPOLATE, axes.MIRROR)])
 
 
 def test_probe_lines_know_their_interpolation_error(ends):
@@ -297,7 +298,7 @@ def test_probe_lines_know_their_interpolation_error(ends):
     nodes a period; beyond it an extrapolated ghost is meaningless)."""
     from thinfilm_mi.tabulate import exact as tables
     intervals, min_nodes = 1024, 17
-    ext = tables.ghost_count(intervals, min_nodes) if ends[0] == "values" else 0
+    ext = tables.ghost_count(intervals, min_nodes) if ends[0] is None else 0
     assert tables.ghost_count(intervals, min_nodes) == 3 * 64
     omega = 2.0 * np.pi / 37.3
     x = np.arange(-ext, intervals + ext + 1.0)
@@ -325,11 +326,11 @@ def test_ghost_nodes():
     from thinfilm_mi.tabulate import base as tabulate_base
     x = np.arange(10.0)
     f = x ** 3 - 2 * x
-    out = tabulate_base.with_ghosts(f, "mirror", "extrapolate")
+    out = tabulate_base.with_ghosts(f, axes.MIRROR, axes.EXTRAPOLATE)
     assert np.array_equal(out[:3], f[[3, 2, 1]])
     xr = np.arange(10.0, 13.0)
     assert np.allclose(out[-3:], xr ** 3 - 2 * xr, rtol=0, atol=1e-9)
-    out = tabulate_base.with_ghosts(f, "extrapolate", "mirror")
+    out = tabulate_base.with_ghosts(f, axes.EXTRAPOLATE, axes.MIRROR)
     xl = np.arange(-3.0, 0.0)
     assert np.allclose(out[:3], xl ** 3 - 2 * xl, rtol=0, atol=1e-9)
     assert np.array_equal(out[-3:], f[[8, 7, 6]])
@@ -396,7 +397,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                         "tabulate": True})
     table = big.stack.plan[False].table
-    assert table is not None and K.AUTO_MAX_TEXELS < table.texels <= tabulate_base.MAX_TEXELS
+    assert table is not None and quantities.AUTO_MAX_TEXELS < table.texels <= tabulate_base.MAX_TEXELS
     assert table.resolution == 0.0
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                          "spectral_resolution": 0.0})
@@ -405,7 +406,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
     table = auto.stack.plan[False].table
     assert table is not None and table.resolution == K.DEFAULT_SPECTRAL_RESOLUTION
-    assert table.texels <= K.AUTO_MAX_TEXELS and table.error <= 1e-3
+    assert table.texels <= quantities.AUTO_MAX_TEXELS and table.error <= 1e-3
 
 
 @pytest.mark.parametrize("n", [2, 3, 16, 33, 700])
@@ -454,7 +455,7 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     def counted(*a, **k):
         calls.append(k["film_n_min"])
         return loop(*a, **k)
-    monkeypatch.setattr(K, "unpolarised_rt_loop", counted)
+    monkeypatch.setattr(quantities.POWERS, "rt_loop", counted)
     K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
                          "tabulate": True})

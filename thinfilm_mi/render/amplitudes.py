@@ -41,6 +41,9 @@ from thinfilm_mi.optics.unpolarised import unpolarised_powers
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
 
+__all__ = ["Polarised", "Shape", "depolarizing_shape", "jones_shape", "physical",
+           "polarised_response", "table_response", "table_shape"]
+
 
 @dataclass
 class Shape:
@@ -144,7 +147,7 @@ def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised
     mi = mitsuba_module()
     table = side.table
     n0 = side.n0.eval_real(si, active)
-    n_exit = side.exit.eval_real(si, active) if table.kind == "tir" else None
+    n_exit = side.exit.eval_real(si, active) if table.axis.needs_n_exit else None
     ch = table.lookup_channels(cos_theta, n0, n_exit, si.wavelengths, active)
     if table.channels == 8:
         R, *refl = physical(ch[0], *ch[2:5], 1.0)

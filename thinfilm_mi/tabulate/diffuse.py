@@ -45,7 +45,8 @@ import numpy as np
 
 from thinfilm_mi.colour import cie
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
-from thinfilm_mi.tabulate.base import BuildReport, grid_coordinate, linear_texture, opaque_float, u_texel
+from thinfilm_mi.tabulate.axes import PLAIN
+from thinfilm_mi.tabulate.base import BuildReport, grid_coordinate, linear_texture, opaque_float
 from thinfilm_mi.tabulate.refine import Budget, LinearAxis, interleave, linear_error, subdivide
 
 #: Relative error of the Chebyshev interpolation of ``G(k_d, r)`` in ``r``.
@@ -260,7 +261,7 @@ class ColourDiffuse:
         """The angle axis's texture coordinate of ``cos``."""
         cos = dr.clip(cos, 0.0, 1.0)
         sin = dr.safe_sqrt((1.0 - cos) * (1.0 + cos))
-        return (u_texel(cos, sin, 1.0, 1.0, "plain", self._nu) + 0.5) * self._inv_u
+        return (PLAIN.texel(cos, sin, 1.0, 1.0, self._nu) + 0.5) * self._inv_u
 
     def _weights(self, kd):
         """``G(k_d, r_j)`` per node ``j``, as ``mi.Spectrum`` (per channel); with a

@@ -36,7 +36,6 @@ import numpy as np
 from thinfilm_mi.optics.core import transmittance_factor_p, transmittance_factor_s
 from thinfilm_mi.optics.incoherent_mueller import incoherent_mueller
 from thinfilm_mi.optics.mueller import (
-    POWER_CHANNELS,
     amplitude_loop,
     channel_count,
     mueller_rt,
@@ -113,8 +112,9 @@ class MuellerQuantity:
     """What a Mueller table holds and how its builds evaluate it (see the module)."""
 
     name = "mueller"
-    auto_min_films = AUTO_MIN_FILMS
     auto_max_floats = AUTO_MAX_FLOATS
+    #: channels 8-9 of :meth:`smooth_terms` are amplitudes (``T``), not their squares
+    squared_terms = False
     #: First v-node spacing of band-limited tables (in σ_ν; the powers' is
     #: ``band_rows.V_SPACING`` = 0.6): the cross term ``C`` interpolates ~3.5x worse
     #: along v than ``R`` (measured at 0.6 on the 10- and 30-film benchmark stacks:
@@ -128,9 +128,9 @@ class MuellerQuantity:
         return channel_count(transmission)
 
     @staticmethod
-    def power_channels(transmission: bool) -> int:
-        """The leading channels that are unpolarised powers (``R`` [, ``T``])."""
-        return POWER_CHANNELS[transmission]
+    def auto_min_films(transmission: bool) -> int:
+        """Films from which ``tabulate="auto"`` tabulates a side (either way)."""
+        return AUTO_MIN_FILMS
 
     @staticmethod
     def rt(incoherent: list):
