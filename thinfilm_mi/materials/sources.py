@@ -11,6 +11,7 @@ import importlib.util
 import json
 import re
 import warnings
+from abc import ABC, abstractmethod
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -30,7 +31,8 @@ __all__ = [
     "normalise_name", "builtin_registry", "short_names", "load_builtin", "ri_database_version", "load_ri_page",
     "mitsuba_ior_dir", "mitsuba_presets", "MITSUBA_SWAPPED", "read_spd", "mitsuba_reference", "load_mitsuba",
     "short_reference", "MaterialFile", "CsvFile", "TextFile", "SpdFile", "RiiFile", "SPD", "MATERIAL_FILES",
-    "FILE_SUFFIXES", "file_format", "is_material_file", "load_file",
+    "FILE_SUFFIXES", "file_format", "is_material_file", "load_file", "RiiData", "RiiTable", "RiiFormula",
+    "RII_DATA_TYPES",
 ]
 
 
@@ -119,42 +121,79 @@ def _parse_rii_table(data: str, where: str, user_file: bool) -> np.ndarray:
     return table
 
 
+class RiiData(ABC):
+    """A ``DATA`` entry type of a refractiveindex.info file: which ``type`` it
+    reads, and how it gives the material's ``n`` and ``k`` parts."""
+
+    @abstractmethod
+    def matches(self, kind: list[str]) -> bool:
+        """Whether the entry's ``type`` (split into words) is this one."""
+
+    @abstractmethod
+    def read(self, kind: list[str], entry: dict, here: str, user_file: bool, parts: dict) -> None:
+        """Set the parts (``parts["n"]``, ``parts["k"]``) the entry gives that are still ``None``."""
+
+
+class RiiTable(RiiData):
+    """``tabulated n``, ``tabulated k`` or ``tabulated nk``: rows of λ (µm) and the
+    ``columns`` named."""
+
+    def __init__(self, columns: str):
+        self.columns = columns
+
+    def matches(self, kind):
+        return kind == ["tabulated", self.columns]
+
+    def read(self, kind, entry, here, user_file, parts):
+        table = _parse_rii_table(entry.get("data", ""), here, user_file)
+        need = 1 + len(self.columns)
+        if table.shape[1] != need:
+            raise MaterialError(f"{here}: expected {need} columns, got {table.shape[1]}")
+        wl = table[:, 0] * 1000.0
+        for col, part in enumerate(self.columns, 1):
+            if parts[part] is None:
+                parts[part] = TabulatedIndex(wl, table[:, col])
+
+
+class RiiFormula(RiiData):
+    """``formula N``: dispersion formula N of refractiveindex.info (the index n)."""
+
+    def matches(self, kind):
+        return len(kind) == 2 and kind[0] == "formula"
+
+    def read(self, kind, entry, here, user_file, parts):
+        rng = entry.get("wavelength_range", entry.get("range"))
+        try:
+            formula = int(kind[1])
+            coefficients = [float(x) for x in str(entry["coefficients"]).split()]
+            lo_um, hi_um = (float(x) for x in str(rng).split())
+        except (KeyError, ValueError, TypeError):
+            raise MaterialError(f"{here}: needs integer formula, coefficients and wavelength_range") from None
+        if parts["n"] is None:
+            parts["n"] = DispersionFormula(formula, coefficients, (lo_um * 1000.0, hi_um * 1000.0))
+
+
+#: The refractiveindex.info ``DATA`` types read.
+RII_DATA_TYPES: tuple[RiiData, ...] = (RiiTable("n"), RiiTable("k"), RiiTable("nk"), RiiFormula())
+
+
 def _material_from_rii(doc: Any, name: str, where: str, source: str,
                        user_file: bool = False) -> DispersiveMaterial:
     """A material from a parsed refractiveindex.info YAML document (λ in µm); a user's
     file (``user_file``) must give one value per wavelength (:func:`_check_wavelengths`)."""
     if not isinstance(doc, dict) or not isinstance(doc.get("DATA"), list):
         raise MaterialError(f"{where}: not a refractiveindex.info material file (no DATA list)")
-    n_part = k_part = None
+    parts: dict[str, Any] = {"n": None, "k": None}
     for i, entry in enumerate(doc["DATA"]):
         if not isinstance(entry, dict) or "type" not in entry:
             raise MaterialError(f"{where}: DATA[{i}] has no 'type'")
         kind = str(entry["type"]).split()
         here = f"{where} DATA[{i}] ({entry['type']})"
-        if kind[0] == "tabulated" and len(kind) == 2 and kind[1] in ("n", "k", "nk"):
-            table = _parse_rii_table(entry.get("data", ""), here, user_file)
-            need = 3 if kind[1] == "nk" else 2
-            if table.shape[1] != need:
-                raise MaterialError(f"{here}: expected {need} columns, got {table.shape[1]}")
-            wl = table[:, 0] * 1000.0
-            if kind[1] in ("n", "nk") and n_part is None:
-                n_part = TabulatedIndex(wl, table[:, 1])
-            if kind[1] == "k" and k_part is None:
-                k_part = TabulatedIndex(wl, table[:, 1])
-            if kind[1] == "nk" and k_part is None:
-                k_part = TabulatedIndex(wl, table[:, 2])
-        elif kind[0] == "formula" and len(kind) == 2:
-            rng = entry.get("wavelength_range", entry.get("range"))
-            try:
-                formula = int(kind[1])
-                coefficients = [float(x) for x in str(entry["coefficients"]).split()]
-                lo_um, hi_um = (float(x) for x in str(rng).split())
-            except (KeyError, ValueError, TypeError):
-                raise MaterialError(f"{here}: needs integer formula, coefficients and wavelength_range") from None
-            if n_part is None:
-                n_part = DispersionFormula(formula, coefficients, (lo_um * 1000.0, hi_um * 1000.0))
-        else:
+        data = next((d for d in RII_DATA_TYPES if d.matches(kind)), None)
+        if data is None:
             raise MaterialError(f"{here}: unsupported data type {entry['type']!r}")
+        data.read(kind, entry, here, user_file, parts)
+    n_part, k_part = parts["n"], parts["k"]
     if n_part is None:
         raise MaterialError(f"{where}: holds no refractive index n (only k)")
     reference = _strip_html(str(doc.get("REFERENCES", ""))) or source
