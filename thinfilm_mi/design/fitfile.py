@@ -53,7 +53,7 @@ from thinfilm_mi.materials.stack import AMBIENT_K_TOL, parse_layers
 from thinfilm_mi.optics.polarization import ALIASES, POLARIZATIONS, Polarization
 
 __all__ = ["Dataset", "FitMaterial", "Parameter", "Measurement", "load_measurements", "QUANTITIES",
-           "THICKNESS_MODES"]
+           "THICKNESS_MODES", "ParameterKind", "THICKNESS", "DISPERSION", "DATA_SCALE"]
 
 #: What a dataset measures: the power reflected or transmitted.
 QUANTITIES = ("R", "T")
@@ -79,7 +79,7 @@ class EachThickness(ThicknessMode):
     name = "each"
 
     def parameters(self, nominal):
-        return [Parameter(f"d[{j}]", float(d), 0.0, math.inf, "thickness", j) for j, d in enumerate(nominal)]
+        return [Parameter(f"d[{j}]", float(d), 0.0, math.inf, THICKNESS, j) for j, d in enumerate(nominal)]
 
     def thicknesses(self, values, nominal):
         return np.asarray(values, dtype=np.float64).copy(), np.eye(nominal.size)
@@ -91,7 +91,7 @@ class ScaleThickness(ThicknessMode):
     name = "scale"
 
     def parameters(self, nominal):
-        return [Parameter("thickness_scale", 1.0, 0.0, math.inf, "thickness")]
+        return [Parameter("thickness_scale", 1.0, 0.0, math.inf, THICKNESS)]
 
     def thicknesses(self, values, nominal):
         return values[0] * nominal, nominal[:, None].copy()
@@ -151,18 +151,29 @@ class FitMaterial:
         return self.material.wavelength_range if self.model is None else self.model.wavelength_range
 
 
+@dataclass(frozen=True)
+class ParameterKind:
+    """What a free parameter sets: :data:`THICKNESS` (of the file's
+    :class:`ThicknessMode`), :data:`DISPERSION` (``target`` (material name,
+    parameter)) or :data:`DATA_SCALE` (``target`` the dataset); the model
+    (:class:`~thinfilm_mi.design.fitmodel.FitModel`) groups the columns by it."""
+
+    name: str
+
+
+THICKNESS, DISPERSION, DATA_SCALE = ParameterKind("thickness"), ParameterKind("dispersion"), ParameterKind("data_scale")
+
+
 @dataclass
 class Parameter:
-    """A free parameter: ``name``, start ``value``, bounds, and what it is:
-    ``kind`` ``thickness`` (of the file's :class:`ThicknessMode`),
-    ``dispersion`` (``target`` (material name, parameter)) or ``data_scale``
-    (``target`` the dataset)."""
+    """A free parameter: ``name``, start ``value``, bounds, and what it sets,
+    ``kind`` (a :class:`ParameterKind`) and its ``target``."""
 
     name: str
     value: float
     lower: float
     upper: float
-    kind: str
+    kind: ParameterKind
     target: Any = None
     relative: bool = True         # multi-start spread relative to the value (else of the bounds' width)
 
@@ -396,8 +407,8 @@ def _measurement(doc: Any, base: Path | None, name: str) -> Measurement:
     for key, names in free_of.items():
         model = materials[key].model
         params += [Parameter(f"{key}.{p}", model.values[p], model.lower.get(p, -math.inf), math.inf,
-                             "dispersion", (key, p)) for p in names]
-    params += [Parameter(f"data[{d.index}].scale", d.scale, 0.0, math.inf, "data_scale", d.index)
+                             DISPERSION, (key, p)) for p in names]
+    params += [Parameter(f"data[{d.index}].scale", d.scale, 0.0, math.inf, DATA_SCALE, d.index)
                for d, free in parsed if free]
     _bounds(params, doc.get("bounds"))
     bw, cone = _instrument(doc.get("instrument"))

@@ -39,7 +39,7 @@ import math
 
 import numpy as np
 
-from thinfilm_mi.design.fitfile import QUANTITIES, Measurement
+from thinfilm_mi.design.fitfile import DATA_SCALE, DISPERSION, QUANTITIES, THICKNESS, Measurement
 from thinfilm_mi.design.matrices import film_index_response, normal_index, stack_response
 from thinfilm_mi.optics.polarization import Component
 
@@ -102,9 +102,12 @@ class FitModel:
         self.m = m
         self.nominal = np.array([d for _, d in m.films], dtype=np.float64)
         params = m.parameters
-        self.thick_cols = [i for i, p in enumerate(params) if p.kind == "thickness"]
-        self.disp_cols = {p.target: i for i, p in enumerate(params) if p.kind == "dispersion"}
-        self.scale_cols = {p.target: i for i, p in enumerate(params) if p.kind == "data_scale"}
+        cols: dict = {}                 # kind -> [(target, column)]
+        for i, p in enumerate(params):
+            cols.setdefault(p.kind, []).append((p.target, i))
+        self.thick_cols = [i for _, i in cols.get(THICKNESS, [])]
+        self.disp_cols = dict(cols.get(DISPERSION, []))
+        self.scale_cols = dict(cols.get(DATA_SCALE, []))
         offsets, w_bw = bandwidth_nodes(m.bandwidth_nm)
         wanted: dict[float, list[np.ndarray]] = {}
         plan = []         # per data set: [(angle key, wavelengths (N, B), weights (B,), point mask (N,))]

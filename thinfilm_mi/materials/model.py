@@ -213,17 +213,14 @@ class DispersiveMaterial(Material):
             )
         self.wavelength_range = (float(lo), float(hi))
         self.constant = None
-        for part, what in ((n_part, "n"), (k_part, "k")):
+        for part, what, bad, need in ((n_part, "n", np.less_equal, "> 0"), (k_part, "k", np.less, ">= 0")):
             if isinstance(part, TabulatedIndex):
                 vals = part.values
                 if not np.all(np.isfinite(vals)):
                     raise MaterialError(f"material {name!r}: its {what} table holds non-finite values")
-                if what == "n" and np.any(vals <= 0):
-                    raise MaterialError(f"material {name!r}: n must be > 0, its table has n = {vals.min()!r}")
-                if what == "k" and np.any(vals < 0):
-                    raise MaterialError(
-                        f"material {name!r}: k must be >= 0, its table has k = {vals.min()!r}"
-                    )
+                if np.any(bad(vals, 0)):
+                    raise MaterialError(f"material {name!r}: {what} must be {need}, "
+                                        f"its table has {what} = {vals.min()!r}")
 
     def knots(self) -> np.ndarray:
         """Wavelengths (nm) of the tabulated data points, where the linear
