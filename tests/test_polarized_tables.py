@@ -348,7 +348,7 @@ def test_auto_tabulates_deep_polarized_stacks():
     params = mi.traverse(deep)
     key = next(k for k in params.keys() if k.endswith("layers.0.thickness"))
     dr.enable_grad(params[key])
-    assert deep.stack.evaluation_side(False, False).table is None
+    assert deep.stack.current_plan(False, False).table is None
 
 
 @pytest.mark.parametrize("plugin,films,tol", [("thinfilm_conductor", 10, 5e-5),

@@ -165,7 +165,7 @@ def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised
 def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
           thickness_scale) -> Polarised:
     mi = mitsuba_module()
-    side = stack.evaluation_side(inside, transmission, stack.index_gradients(si, active))
+    side = stack.current_plan(inside, transmission, stack.index_gradients(si, active))
     if side.table is not None and thickness_scale is None and (
             not transmission or side.opaque or side.table.channels == 8):
         return table_response(side, si, cos_theta, active, transmission)

@@ -40,7 +40,7 @@ from thinfilm_mi.tabulate.store import default_store
 
 __all__ = ["DEFAULT_COHERENCE_THICKNESS", "DEFAULT_SPECTRAL_RESOLUTION", "DEFAULT_TABLE_ERROR",
            "KernelStack", "OPAQUE_AMPLITUDE", "REAL_LOOP_MIN_FILMS", "STORE_MIN_POINTS",
-           "TABLE_CACHE", "side_data"]
+           "SidePlan", "TABLE_CACHE", "side_data"]
 
 #: Default coherence thickness (nm): thicker films are averaged incoherently.
 DEFAULT_COHERENCE_THICKNESS = 5000.0
@@ -68,13 +68,13 @@ OPAQUE_AMPLITUDE = 1e-9
 REAL_LOOP_MIN_FILMS = 1
 
 
-class _Side:
+class SidePlan:
     """How one lighting side of a stack is evaluated, after the skips.
 
     ``films`` are ``(SpectralIndex, thickness, incoherent)`` from the side the
     light comes from; ``exit`` is the exit medium (the substrate, the ambient,
     or the first optically opaque film, in which case ``opaque`` is true and
-    ``T = 0``); ``table`` is a :class:`~thinfilm_mi.tabulate.exact.Table` or ``None``.
+    ``T = 0``); ``table`` is a :class:`~thinfilm_mi.tabulate.base.Table` or ``None``.
     """
 
     def __init__(self, n0: SpectralIndex, films, exit_: SpectralIndex, exit_real: bool,
@@ -160,7 +160,7 @@ class KernelStack:
         k = n.imag if n is not None else texture_on_grid(index.k)
         return bool(np.max(np.exp(-2.0 * math.pi * k * d / GRID)) < OPAQUE_AMPLITUDE)
 
-    def _side(self, inside: bool, transmission: bool, films: list, opaque: list) -> _Side:
+    def _side_plan(self, inside: bool, transmission: bool, films: list, opaque: list) -> SidePlan:
         """The plan of one side from the non-zero ``films`` ``(index, thickness,
         incoherent)`` and their ``opaque`` flags, both listed from the ambient."""
         if inside:
@@ -170,8 +170,8 @@ class KernelStack:
             n0, exit_, exit_real = self.ambient, self.substrate, False
         if any(opaque):
             j = opaque.index(True)
-            return _Side(n0, films[:j], films[j][0], False, True, transmission)
-        return _Side(n0, films, exit_, exit_real, False, transmission)
+            return SidePlan(n0, films[:j], films[j][0], False, True, transmission)
+        return SidePlan(n0, films, exit_, exit_real, False, transmission)
 
     def _plan(self) -> None:
         # Zero-thickness films dropped; opacity decided once per film for all sides.
@@ -187,7 +187,7 @@ class KernelStack:
         lossless = {i: real and (not i or mirror.real_on_grid(self.substrate)) for i in self.sides}
         self.mirrored = (set(self.sides) == {False, True} and spectral
                          and mirror.mirror_applies(self.ambient, films, self.substrate))
-        self.plan = {inside: self._side(inside, t and not lossless[inside], films, opaque)
+        self.plan = {inside: self._side_plan(inside, t and not lossless[inside], films, opaque)
                      for inside, t in self.sides.items()}
         for inside, side in self.plan.items():
             side.lossless = lossless[inside]
@@ -237,7 +237,7 @@ class KernelStack:
             and not all(few(s) for s in self.plan.values())))
         self.table_failed = []
         if not want or self._differentiating():
-            return   # (thicknesses with gradients read every film: evaluation_side)
+            return   # (thicknesses with gradients read every film: current_plan)
         for inside, side in self.plan.items():
             if inside and self.mirrored and self.plan[False].table is None:
                 # no table to mirror: this side is planned (and tabulated) on its own
@@ -267,7 +267,7 @@ class KernelStack:
         return Route.of([s.table is not None or self.mirror_table(s) is not None
                          for s in self.plan.values() if s.films])
 
-    def mirror_table(self, side: _Side):
+    def mirror_table(self, side: SidePlan):
         """The table that serves ``side`` lit from the substrate through the ambient
         side's (:mod:`thinfilm_mi.render.mirror`), or ``None``."""
         outside = self.plan.get(False)
@@ -309,10 +309,10 @@ class KernelStack:
     def _differentiating(self) -> bool:
         return any(dr.grad_enabled(d) for d in self.thickness if dr.is_diff_v(d))
 
-    def _full_side(self, inside: bool, transmission: bool) -> _Side:
+    def _full_plan(self, inside: bool, transmission: bool) -> SidePlan:
         """Every film, no skips, no table (for gradients through every film)."""
         films = [(ix, d, False) for ix, d in zip(self.indices, self.thickness)]
-        return self._side(inside, transmission, films, [False] * len(films))
+        return self._side_plan(inside, transmission, films, [False] * len(films))
 
     def index_gradients(self, si, active=True) -> bool:
         """Whether an index of this stack (ambient, films, substrate) carries
@@ -323,8 +323,8 @@ class KernelStack:
         media = [self.ambient, self.substrate] + list(self.indices)
         return any(ix.carries_gradients(si, active) for ix in media)
 
-    def evaluation_side(self, inside: bool, transmission: bool,
-                        index_gradients: bool = False) -> _Side:
+    def current_plan(self, inside: bool, transmission: bool,
+                     index_gradients: bool = False) -> SidePlan:
         """The plan of the side lit from the ambient (``inside`` false) or the
         substrate, as evaluated now: every film, without skips or table, when a
         thickness (or, with ``index_gradients``, an index) carries gradients or the
@@ -332,7 +332,7 @@ class KernelStack:
         derivatives)."""
         side = self.plan.get(inside)
         if side is None or self._differentiating() or index_gradients:
-            side = self._full_side(inside, transmission)
+            side = self._full_plan(inside, transmission)
         return side
 
     def side_response(self, inside: bool, si, cos_theta, active, transmission: bool,
@@ -341,7 +341,7 @@ class KernelStack:
         mi = mitsuba_module()
         # RGB/mono variants come here only for a side without films: any wavelength will do
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
-        side = self.evaluation_side(inside, transmission, self.index_gradients(si, active))
+        side = self.current_plan(inside, transmission, self.index_gradients(si, active))
         n0 = side.n0.eval_real(si, active)
         table = side.table
         if table is not None and thickness_scale is None and (
@@ -370,7 +370,7 @@ class KernelStack:
         """Exact ``R`` [, ``T``] at the wavelengths ``wl`` (``mi.Spectrum``) in an
         RGB/mono variant, through every film (the colour gradients)."""
         mi = mitsuba_module()
-        side = self._full_side(inside, transmission)
+        side = self._full_plan(inside, transmission)
 
         def index(ix):
             return Cx(*index_on_wavelengths(ix, si, wl, active))
@@ -440,7 +440,7 @@ class KernelStack:
         """
         if thickness_scale is None:
             thickness_scale = self.thickness_scale_at(si, active)
-        if (self.mirrored and thickness_scale is None and self.evaluation_side(
+        if (self.mirrored and thickness_scale is None and self.current_plan(
                 False, False, self.index_gradients(si, active)) is self.plan[False]):
             out = mirror.mirrored_rt(self, si, cos_theta, inside, active, transmission)
             if out is not None:
@@ -469,7 +469,7 @@ TABLE_CACHE = tabulate_base.TableCache()
 STORE_MIN_POINTS = 50_000
 
 
-def _tables_cache(stack: KernelStack, side: _Side, quantity=POWERS):
+def _tables_cache(stack: KernelStack, side: SidePlan, quantity=POWERS):
     """The table of ``side``, shared between stacks with identical optics.
 
     The key is the stack's numbers (every index on the 1 nm grid, thicknesses,
@@ -543,7 +543,7 @@ def _index_function(ix: SpectralIndex, real: bool = False, channel: complex | No
     return f
 
 
-def side_data(side: _Side, transmission: bool, channel: dict | None = None,
+def side_data(side: SidePlan, transmission: bool, channel: dict | None = None,
               quantity=POWERS) -> tabulate_base.SideData:
     """The float64 build data (:class:`~thinfilm_mi.tabulate.base.SideData`) of ``side``; ``channel`` maps
     media (by ``id``) given per channel to their index in the channel built;

@@ -62,7 +62,7 @@ AUTO_MIN_FILMS = 40
 #: channels, 8 MiB): a lookup slows with the table's size (a 1.5 MiB table
 #: 1.01-1.36x, a 6.2 MiB one 1.27-1.75x, above), but the exact amplitudes of the
 #: deep stacks that need such tables cost more (the powers' budget,
-#: :data:`thinfilm_mi.render.kernel.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
+#: :data:`thinfilm_mi.tabulate.quantities.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
 #: band-limited tables of the benchmark's 10- and 30-film stacks).
 AUTO_MAX_FLOATS = 1 << 21
 #: :meth:`MuellerQuantity.smooth_terms` rescales the amplitudes by smooth factors
