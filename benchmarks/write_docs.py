@@ -23,22 +23,25 @@ __all__ = ["BENCHMARKS", "main"]
 
 HERE = Path(__file__).resolve().parent
 
-#: benchmark (benchmarks/<name>.py) -> the arguments the benchmark page's table is made with
+#: benchmark (benchmarks/<name>.py) -> the arguments the benchmark page's table is made with:
+#: fewer rounds than the benchmarks' defaults where a full run takes tens of minutes on the
+#: shared 2-core machine (medians of 3 rounds instead of 5-9; the first image once per
+#: configuration); each table's header repeats the command it was made with
 BENCHMARKS = {
     "optics_throughput": [],
     "speed_vs_error": [],
     "render_bench": [],
-    "plugin_bench": [],
-    "rgb_bench": [],
-    "polarized_bench": ["--films", "3,10,30"],
-    "band_bench": [],
-    "deep_bench": [],
+    "plugin_bench": ["--repeats", "3", "--demo-repeats", "3", "--first-repeats", "1"],
+    "rgb_bench": ["--repeats", "5", "--build-repeats", "3"],
+    "polarized_bench": ["--films", "3,10,30", "--repeats", "3", "--first-repeats", "1"],
+    "band_bench": ["--repeats", "3", "--first-repeats", "1", "--de-spp", "256"],
+    "deep_bench": ["--rounds", "1"],
     "stability": ["--worst"],
-    "diffuse_models": [],
+    "diffuse_models": ["--spp", "32"],
     "diffuse_texture_bench": [],
-    "diffuse_grad_bench": [],
+    "diffuse_grad_bench": ["--repeats", "3", "--edit-repeats", "3"],
     "orennayar_energy": [],
-    "design_bench": [],
+    "design_bench": ["--cases", "10"],
     "fit_bench": [],
     "sweep_bench": [],
     "gc_guard_bench": [],
