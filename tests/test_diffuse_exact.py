@@ -19,6 +19,7 @@ mi.set_variant("llvm_ad_spectral")
 
 import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
+from thinfilm_mi.render.coated_diffuse import DIFFUSE_MODELS  # noqa: E402
 from thinfilm_mi.render.media import SpectralIndex  # noqa: E402
 
 WL = (450.0, 520.0, 600.0, 680.0)
@@ -82,7 +83,7 @@ def test_exact_is_the_default_model():
     default = mi.load_dict({"type": "thinfilm_diffuse", "layers": layers, "reflectance": 0.6})
     exact = mi.load_dict({"type": "thinfilm_diffuse", "layers": layers, "reflectance": 0.6,
                           "model": "exact"})
-    assert default.model == "exact"
+    assert default.model is DIFFUSE_MODELS["exact"]
     si = make_si(3, direction(25.0))
     wo = dr.normalize(mi.Vector3f([0.1, 0.5, -0.6], [0.0, 0.2, 0.1], [1.0, 0.6, 0.5]))
     values = [np.array(b.eval(mi.BSDFContext(), si, wo)) for b in (default, exact)]
@@ -241,7 +242,7 @@ def test_bitmap_scale_renders_finite(variant, model):
 def test_scale_table_against_direct_terms():
     """The table over the scale (linear in s, within SCALE_ABS at the check) against
     the terms computed at scales between its nodes."""
-    from thinfilm_mi.tabulate.diffuse_scale import SCALE_ABS
+    from thinfilm_mi.tabulate.hemispherical import SCALE_ABS
     b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300; Au 4", "model": "exact",
                       "thickness": {"type": "checkerboard", "color0": 0.2, "color1": 1.4}})
     table = b.terms.table
@@ -250,7 +251,7 @@ def test_scale_table_against_direct_terms():
     n = s.size
     si = make_si(n, direction(0.0))
     r, t, _ = table.lookup(si.wavelengths, mi.Float(s))
-    from thinfilm_mi.render.diffuse_exact import ExactFactors
+    from thinfilm_mi.render.diffuse import ExactFactors
     R, T = ExactFactors(b.coating).hemispherical_scales(np.array(WL), s)
     np.testing.assert_allclose(np.array(r), R.T, atol=SCALE_ABS / 2 + 1e-6)
     np.testing.assert_allclose(np.array(t), T.T, atol=SCALE_ABS / 2 + 1e-6)
@@ -311,7 +312,7 @@ def test_gradient_wrt_thickness_texture():
 # bad input
 # ---------------------------------------------------------------------------
 @pytest.mark.parametrize("extra, pattern", [
-    ({"model": "Exact"}, r"model.*'Exact'"),
+    ({"model": "exakt"}, r"model.*'exakt'"),
     ({"model": "multiple", "base_ior": 1.5}, r"base_ior.*'multiple'"),
     ({"model": "exact", "base_ior": -1.0}, r"base_ior"),
     ({"model": "exact", "base_ior": float("nan")}, r"base_ior"),
@@ -357,3 +358,21 @@ def test_exact_with_a_rough_base_and_a_texture(roughness_model):
                                                         np.linspace(0.99, 0.01, 64)))
     a, b = (np.array(s.eval(mi.BSDFContext(), si, wo)) for s in smooth)
     assert np.array_equal(a, b)
+
+
+def test_model_and_base_ior_lookups_name_the_value_and_the_choices():
+    """The registry's lookup: a ThinFilmError (wrapped by Mitsuba's loader) naming 'model',
+    the value and every choice; 'base_ior' only where the model takes it."""
+    with pytest.raises(Exception, match=r"'model': expected one of exact, single, multiple, "
+                                        r"got 'singel'"):
+        mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300", "model": "singel"})
+    with pytest.raises(Exception, match=r"'base_ior' is a parameter of model 'exact' only "
+                                        r"\(model is 'multiple'\)"):
+        mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300", "model": "multiple",
+                      "base_ior": 1.5})
+    for name, model in DIFFUSE_MODELS.items():
+        b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300; Au 4", "model": name})
+        assert b.model is model and f"model = {name}," in str(b)
+        # the house's one lookup (optics.choices.choose) ignores case, as colour-science's
+        # validate_method does
+        assert mi.load_dict({"type": "thinfilm_diffuse", "model": name.upper()}).model is model
