@@ -15,7 +15,9 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
    - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."``, e.g.
      ``"SiO2 500; Au 2"``. The innermost film is normally the paper's absorbing
      film (a thin metal or semiconductor). Default: ``""`` (no films: exactly
-     Mitsuba's ``diffuse``).
+     Mitsuba's ``diffuse``; with model ``"exact"`` and a ``base_ior`` unlike
+     ``ext_ior``, the bare interface over the base, as Mitsuba's ``plastic`` with
+     ``nonlinear=true``).
  * - thin_film_ior, thin_film_thickness
    - |string| or |float|, |float|
    - Shorthand for one film (index or material name, thickness in nm). Not
@@ -110,7 +112,10 @@ If the innermost film does not absorb (or there are no films), there is no film 
 the coating is the whole stack, its exit medium is the base medium (index ``ext_ior``,
 see below), ``k_a = 1``, and ``k_r``, ``t = k_t`` are the exact composite reflectance
 and transmittance of all films. With no films ``k_r = 0`` and ``t = 1``, and every model
-*is* Mitsuba's ``diffuse``, bit for bit (the kernel does no stack work there).
+*is* Mitsuba's ``diffuse``, bit for bit (the kernel does no stack work there), except
+model ``"exact"`` over a ``base_ior`` unlike ``ext_ior``: no films there is still the
+interface between the two media, the limit of a film of vanishing thickness (its albedo
+is ``plastic``'s with ``nonlinear=true``, up to that plugin's fitted ``F_dr``).
 
 **model = "single"** (eq. 8-10). With ``ω_i`` the viewing direction (the
 paper's ``θ_i``) and ``ω_o`` the light direction (``θ_l``)::

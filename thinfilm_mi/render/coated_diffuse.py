@@ -20,6 +20,7 @@ up by name.
 from __future__ import annotations
 
 import drjit as dr
+import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
@@ -207,8 +208,8 @@ class CoatedDiffuse:
     BSDF in errors.
 
     Component 0 is the coating's delta reflection, component 1 the diffuse lobe.
-    :attr:`bare`: no films: exactly Mitsuba's ``diffuse`` (or the rough base alone), with
-    no stack work."""
+    :attr:`bare`: no films and no interface (the base medium is the ambient): exactly
+    Mitsuba's ``diffuse`` (or the rough base alone), with no stack work."""
 
     def __init__(self, model: DiffuseModel, films, ext, base, reflectance, rough, options: dict,
                  mode, plugin: str):
@@ -223,8 +224,9 @@ class CoatedDiffuse:
                                    **options)
         #: t carries n_0/n_b (a base medium unlike the ambient)
         self.base_ratio = model.base_ratio(ext, base)
-        #: no films: exactly Mitsuba's diffuse
-        self.bare = not films
+        #: no films and no interface (a base medium of the ambient's index): Mitsuba's diffuse
+        self.bare = not films and (not self.base_ratio or np.array_equal(
+            base.spectral_values(GRID, real=True), ext.spectral_values(GRID, real=True)))
         #: spectral variants: R_dh and T_hemi (SpectralTerms)
         self.terms = None
         #: RGB/mono variants: the diffuse term integrated as a product (ColourDiffuse)
