@@ -21,7 +21,8 @@
   term; :func:`scale_bounds` — the largest value of a ``thickness`` texture, read at load;
   :func:`texture_gradients_refused` — why film gradients and a texture do not go together.
 * :func:`absorbs`, :func:`reflectance_from_props`, :func:`grid_spectrum` — the reading of
-  the films and the albedo, and spectra on the 1 nm grid.
+  the films and the albedo, and spectra on the 1 nm grid; :func:`side_rt` — a kernel
+  stack's exact float64 ``R``, ``T`` as the colour tables see them.
 """
 from __future__ import annotations
 
