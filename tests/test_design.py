@@ -298,6 +298,24 @@ def test_parse_tolerance():
             parse_tolerance(bad)
 
 
+def test_tolerance_distributions_draw_their_errors():
+    """DISTRIBUTIONS: normal draws are numpy's standard normals times sigma; uniform ones
+    lie within ±sigma and fill it; both clipped at 0 nm."""
+    from thinfilm_mi.design.tolerance import DISTRIBUTIONS, draw_thicknesses
+
+    assert list(DISTRIBUTIONS) == ["normal", "uniform"]
+    d = np.array([100.0, 3.0])
+    normal = draw_thicknesses(d, parse_tolerance("2nm:4000"), seed=7)
+    want = d[:, None] + 2.0 * np.random.default_rng(7).standard_normal((2, 4000))
+    np.testing.assert_array_equal(normal, np.maximum(want, 0.0))
+    uniform = draw_thicknesses(d, parse_tolerance("1%:4000:uniform"), seed=7)
+    ratio = uniform[0] / d[0] - 1.0
+    # 4000 uniform draws on [-0.01, 0.01]: each lands within 1e-3 of a given end with
+    # probability 0.05, so both extremes do unless (0.95)^4000 ~ 1e-89 happens (normal draws
+    # would leave the band [-0.01, 0.01] of 1 sigma in 32 % of cases)
+    assert np.all(np.abs(ratio) <= 0.01 + 1e-15) and ratio.max() > 0.01 - 1e-3 and ratio.min() < -0.01 + 1e-3
+
+
 def test_tolerance_statistics_are_those_of_the_draws():
     problem = load_problem(ALL_KINDS)
     merit = Merit(problem)

@@ -19,6 +19,7 @@ import pytest
 tmm = pytest.importorskip("tmm")
 
 from thinfilm_mi.design import fit, load_measurements
+from thinfilm_mi.design.fitfile import DATA_SCALE, DISPERSION, THICKNESS
 from thinfilm_mi.design.fitmodel import FitModel
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import refractive_index
@@ -210,6 +211,12 @@ def test_jacobian_matches_finite_differences(tmp_path, thickness):
         scale = np.max(np.abs(J[:, k]))
         assert scale > 0, p.name
         np.testing.assert_allclose(J[:, k], fd, rtol=0, atol=1e-6 * scale, err_msg=p.name)
+    # the model's column groups follow each parameter's kind
+    kinds = {k.name: [i for i, p in enumerate(model.m.parameters) if p.kind is k]
+             for k in (THICKNESS, DISPERSION, DATA_SCALE)}
+    assert kinds["thickness"] == model.thick_cols and kinds["thickness"]
+    assert sorted(model.disp_cols.values()) == kinds["dispersion"] and kinds["dispersion"]
+    assert sorted(model.scale_cols.values()) == kinds["data_scale"] and kinds["data_scale"]
 
 
 def test_instrument_quadratures_match_brute_force(tmp_path):

@@ -112,7 +112,8 @@ class TargetQuantity(ABC):
 
 
 class Power(TargetQuantity):
-    """``R`` or ``T`` at each wavelength and angle: the mean over the polarisation's components."""
+    """``R`` or ``T`` at each wavelength and angle: the mean over the polarisation's
+    components. ``slot``: its place in ``(R, T)``."""
 
     keys = _COMMON + ("wavelengths", "value")
     colour_integral = False
@@ -175,6 +176,9 @@ class Power(TargetQuantity):
 
 class Absorptance(Power):
     """``A = 1 - R - T``, the power the stack absorbs."""
+
+    def __init__(self):
+        self.name = "A"
 
     def curve(self, R, T):
         return 1.0 - R - T
@@ -395,7 +399,7 @@ class Colour(Integrated):
 
 
 #: The target quantities by name, in the order errors list them.
-TARGET_QUANTITIES: dict[str, TargetQuantity] = {q.name: q for q in (POWERS["R"], POWERS["T"], Absorptance("A", 2),
+TARGET_QUANTITIES: dict[str, TargetQuantity] = {q.name: q for q in (POWERS["R"], POWERS["T"], Absorptance(),
                                                                 Luminous(), Colour())}
 #: Other spellings users write.
 TARGET_QUANTITY_ALIASES = {"color": "colour"}
