@@ -232,4 +232,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("band_bench"):   # --write-docs: docs/_generated/band_bench.md
+        main()

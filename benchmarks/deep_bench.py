@@ -219,4 +219,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("deep_bench"):   # --write-docs: docs/_generated/deep_bench.md
+        main()

@@ -89,4 +89,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("design_bench"):   # --write-docs: docs/_generated/design_bench.md
+        main()

@@ -177,4 +177,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("diffuse_grad_bench"):   # --write-docs: docs/_generated/diffuse_grad_bench.md
+        main()

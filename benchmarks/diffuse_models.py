@@ -184,4 +184,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("diffuse_models"):   # --write-docs: docs/_generated/diffuse_models.md
+        main()

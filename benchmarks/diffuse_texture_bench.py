@@ -4,7 +4,7 @@
 
 Per variant: a sphere under ``SiO2 500; Au 4`` (model "exact") with no texture, a
 constant scale 1.2 and the soap-film bitmap (``scenes/textures/soap_film.exr``, scale
-0-1.47; RGB/mono variants build a table over (θ_i, θ_o, s), ``tabulate/diffuse_texture.py``).
+0-1.47; RGB/mono variants build a table over (θ_i, θ_o, s), ``tabulate/diffuse.py``).
 Load: ``mi.load_dict`` wall time (the tables over the scale are built there). Render: 96x96 at 16 spp, the best of 3
 after a warm-up render, relative to the same scene without a texture.
 """
@@ -55,4 +55,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("diffuse_texture_bench"):   # --write-docs: docs/_generated/diffuse_texture_bench.md
+        main()

@@ -75,4 +75,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("fit_bench"):   # --write-docs: docs/_generated/fit_bench.md
+        main()

@@ -147,4 +147,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("gc_guard_bench"):   # --write-docs: docs/_generated/gc_guard_bench.md
+        main()

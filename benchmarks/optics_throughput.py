@@ -79,4 +79,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("optics_throughput"):   # --write-docs: docs/_generated/optics_throughput.md
+        main()

@@ -111,7 +111,10 @@ def render_cost(repeats: int = 5) -> None:
 
 
 if __name__ == "__main__":
-    if "--render" in sys.argv:
-        render_cost()
-    else:
-        main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("orennayar_energy"):   # --write-docs: docs/_generated/orennayar_energy.md
+        if "--render" in sys.argv:
+            render_cost()
+        else:
+            main()

@@ -25,9 +25,10 @@ polarized variants, and the demo scene against its native twin.
    (every table is built), timing ``mi.load_string`` + the first ``mi.render``;
    --first-repeats runs alternating, the median of each.
 
-``--write-docs`` writes the tables between ``<!-- plugins:begin -->`` and
-``<!-- plugins:end -->`` in docs/benchmarks.md (generated, never copied by hand); ``--from-json
-FILE`` takes a run's figures from the JSON line it wrote to stderr instead of measuring.
+``--write-docs`` writes the tables to docs/_generated/plugin_bench.md, which docs/benchmarks.md
+includes (``docs_output.py``: under a line naming the machine, date and commit; generated,
+never copied by hand); ``--from-json FILE`` takes a run's figures, and that line, from the JSON
+line it wrote to stderr instead of measuring.
 """
 from __future__ import annotations
 
@@ -47,6 +48,7 @@ os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
+import docs_output  # noqa: E402
 from render_bench import render_sync, scene_dict  # noqa: E402
 
 VARIANTS = ("llvm_ad_spectral", "llvm_ad_rgb", "llvm_ad_spectral_polarized")
@@ -237,17 +239,6 @@ def markdown(plugins: dict, demo: dict | None, args) -> str:
     return "\n".join(lines)
 
 
-def write_docs(text: str) -> None:
-    """``text`` between the plugin markers of the documentation's benchmark page."""
-    path = os.path.join(REPO, "docs", "benchmarks.md")
-    with open(path, encoding="utf-8") as f:
-        page = f.read()
-    begin, end = "<!-- plugins:begin -->", "<!-- plugins:end -->"
-    i, j = page.index(begin) + len(begin), page.index(end)
-    with open(path, "w", encoding="utf-8") as f:
-        f.write(page[:i] + "\n" + text.rstrip("\n") + "\n" + page[j:])
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
@@ -276,10 +267,12 @@ def main():
     if args.demo_steady_child:
         return demo_steady_child(args.demo_repeats, args.demo_size, args.demo_spp)
     plugins, demo = {}, {}
+    header = docs_output.provenance()   # the machine and its load at the start
     if args.from_json:
         with open(args.from_json, encoding="utf-8") as f:
             data = json.loads(f.read().strip().splitlines()[-1])
         plugins, demo = data["plugins"], data["demo"]
+        header = data.get("provenance", f"From {args.from_json}, a run that did not record its machine.")
         args.skip_plugins = args.skip_demo = True
     if not args.skip_plugins:
         for v in args.variants.split(","):
@@ -294,9 +287,9 @@ def main():
     mi.set_variant("scalar_rgb")
     text = markdown(plugins, demo, args)
     print(text)
-    print(json.dumps({"plugins": plugins, "demo": demo}), file=sys.stderr)
+    print(json.dumps({"plugins": plugins, "demo": demo, "provenance": header}), file=sys.stderr)
     if args.write_docs:
-        write_docs(text)
+        docs_output.write("plugin_bench", text, header)
 
 
 if __name__ == "__main__":

@@ -140,4 +140,7 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("polarized_bench"):   # --write-docs: docs/_generated/polarized_bench.md
+        main()

@@ -372,4 +372,7 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("render_bench"):   # --write-docs: docs/_generated/render_bench.md
+        main()

@@ -284,4 +284,7 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("rgb_bench"):   # --write-docs: docs/_generated/rgb_bench.md
+        main()

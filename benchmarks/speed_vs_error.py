@@ -232,7 +232,7 @@ def main():
             mx, rms, mx_v = errors(R, ref_R, cos64)
             ns = t / npts * 1e9
             results.append((L, f"table {e:g}", ns, mx))
-            kind = "cubic" if tab.kind == "plain" else "cubic, split"
+            kind = "cubic, split" if tab.axis.split else "cubic"
             print(f"| {L} | table ({kind}) | {e:g} | {tab.nu} x {tab.nv} | {t_first:.3f} / "
                   f"{t_second:.3f} | {tab.error:.1e} | {ns:.2f} | {mx:.1e} | {mx_v:.1e} | "
                   f"{rms:.1e} |", flush=True)
@@ -320,4 +320,7 @@ def plot(results, path):
 
 
 if __name__ == "__main__":
-    main()
+    from docs_output import write_docs_option
+
+    with write_docs_option("speed_vs_error"):   # --write-docs: docs/_generated/speed_vs_error.md
+        main()

@@ -498,4 +498,8 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(0 if main() else 1)
+    from docs_output import write_docs_option
+
+    with write_docs_option("stability"):   # --write-docs: docs/_generated/stability.md
+        ok = main()
+    sys.exit(0 if ok else 1)

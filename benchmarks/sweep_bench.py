@@ -145,4 +145,8 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from docs_output import write_docs_option
+
+    with write_docs_option("sweep_bench"):   # --write-docs: docs/_generated/sweep_bench.md
+        code = main()
+    sys.exit(code)

@@ -1,8 +1,9 @@
 """Sphinx configuration of the thinfilm-mi documentation (``make docs``).
 
 Lean on purpose: the test suite builds this site with ``-W`` (tests/cross/test_readme_commands.py
-runs ``make docs``), so no intersphinx (no network), no autosummary stub pages, and the
-notebooks are not rendered.
+runs ``make docs``), so no intersphinx (no network) and no autosummary stub pages. The
+notebooks (``docs/notebooks`` is a link to ``notebooks/``) are rendered by myst-nb from the
+outputs stored in them (``scripts/store_notebook_outputs.py``), never executed here.
 """
 from __future__ import annotations
 
@@ -22,18 +23,20 @@ copyright = "the thinfilm-mi authors, BSD-3-Clause"
 release = version = __version__
 
 extensions = [
-    "myst_parser",
+    "myst_nb",                  # Markdown pages (MyST) and the notebooks
     "sphinx.ext.autodoc",
     "sphinx.ext.napoleon",      # the numpy-style "Parameters" sections of the docstrings
     "sphinx.ext.mathjax",
     "thinfilm_plugins",
 ]
-source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
+source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 exclude_patterns = ["_build"]
 root_doc = "index"
 rst_prolog = RST_PROLOG
 myst_enable_extensions = ["dollarmath", "colon_fence"]
 myst_heading_anchors = 3
+nb_execution_mode = "off"       # the stored outputs; `make docs` never runs a notebook
+nb_merge_streams = True
 
 autodoc_member_order = "bysource"
 autodoc_typehints = "description"

@@ -44,3 +44,18 @@ def test_axes_names_and_values_are_checked():
         grid.parse_axes({THICKNESS: "thick"}, "traverse")
     with pytest.raises(UsageError, match="clash"):
         grid.build_frames(grid.parse_axes(["status=1,2"], "define"))
+
+
+def test_axis_kinds_registry():
+    """-D and -P axes are the AxisKind objects of grid.AXIS_KINDS; parse_axes takes the
+    object or its name, and the frames sort the axes' values by it."""
+    assert list(grid.AXIS_KINDS) == ["define", "traverse"]
+    assert [k.flag for k in grid.AXIS_KINDS.values()] == ["-D", "-P"]
+    assert grid.parse_axes(["a=1,2"], grid.DEFINE) == grid.parse_axes(["a=1,2"], "define")
+    assert grid.parse_axes([f"{THICKNESS}=1"], "traverse")[0].kind is grid.TRAVERSE
+    with pytest.raises(UsageError, match=r"-P 'x': expected name=VALUES, e.g. -P sphere\.bsdf"):
+        grid.parse_axes(["x"], grid.TRAVERSE)
+    with pytest.raises(ValueError, match="kind: expected one of define, traverse, got 'other'"):
+        grid.parse_axes(["a=1"], "other")
+    frame = grid.build_frames(grid.parse_axes(["a=1"], grid.DEFINE) + grid.parse_axes(["b.c=2"], grid.TRAVERSE))[0]
+    assert (frame.defines, frame.traverse) == ((("a", "1"),), (("b.c", "2"),))

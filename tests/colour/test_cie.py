@@ -36,6 +36,7 @@ def test_delta_e2000_matches_colour_science():
 colour = pytest.importorskip("colour")
 
 from thinfilm_mi.colour.cie import delta_e2000  # noqa: E402
+from thinfilm_mi.errors import ThinFilmError
 
 # colour-science warns when sd_to_XYZ aligns a table to the requested shape (here on purpose)
 pytestmark = [pytest.mark.filterwarnings("ignore::colour.utilities.ColourRuntimeWarning"),
@@ -60,3 +61,23 @@ def test_delta_e2000_equals_colour_science():
     for X, Y in pairs:
         np.testing.assert_allclose(delta_e2000(X, Y), colour.delta_E(X, Y, method="CIE 2000"), rtol=0, atol=1e-10)
     assert delta_e2000(A[:7].reshape(7, 1, 3), A[:7]).shape == (7, 7)       # broadcasts as numpy does
+
+
+def test_channel_sets_registry():
+    """colour.cie.CHANNELS: the mono weights are the luminance Y of the rgb ones (the Y row
+    of the inverse of the XYZ -> linear sRGB matrix applied to them); an unknown set is named."""
+    import mitsuba as mi
+
+    from thinfilm_mi.colour import cie
+
+    if mi.variant() is None:            # the matrix comes from Mitsuba (any variant)
+        mi.set_variant("scalar_rgb")
+    assert list(cie.CHANNELS) == ["rgb", "mono"]
+    wl = np.linspace(360.0, 830.0, 235)
+    rgb, mono = cie.channel_weights("rgb", wl), cie.channel_weights(cie.CHANNELS["mono"], wl)
+    assert rgb.shape == (3, wl.size) and mono.shape == (1, wl.size)
+    y_row = np.linalg.inv(cie.xyz_to_srgb_matrix())[1]
+    # a float64 3x3 inverse and product: agreement to rounding of terms up to ~1.1
+    np.testing.assert_allclose(y_row @ rgb, mono[0], rtol=0, atol=1e-12)
+    with pytest.raises(ThinFilmError, match="channels: expected one of rgb, mono, got 'xyz'"):
+        cie.channel_weights("xyz", wl)

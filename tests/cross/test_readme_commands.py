@@ -44,8 +44,9 @@ from thinfilm_mi.batch.exr import read_exr  # noqa: E402
 REPO = ROOT
 README = REPO / "README.md"
 DOCS = REPO / "docs"
-#: the documentation's Markdown pages (not its build, nor the generated plugin pages)
-DOC_PAGES = sorted(p for p in DOCS.rglob("*.md") if "_build" not in p.relative_to(DOCS).parts)
+#: the documentation's Markdown pages (not its build, nor the generated plugin pages and
+#: benchmark tables: the tables quote the command that wrote them, a benchmark run of minutes)
+DOC_PAGES = sorted(p for p in DOCS.rglob("*.md") if not {"_build", "_generated"} & set(p.relative_to(DOCS).parts))
 TIMEOUT = 600  # seconds, per command (they take 1-20 s)
 
 #: a line of a code block is a shell command when it starts like one
@@ -167,7 +168,8 @@ def workdir(tmp_path_factory) -> Path:
     shutil.copytree(REPO / "scenes", root / "scenes")
     shutil.copytree(REPO / "scripts", root / "scripts")
     shutil.copytree(REPO / "examples", root / "examples")
-    shutil.copytree(DOCS, root / "docs", ignore=lambda folder, names: [
+    shutil.copytree(REPO / "notebooks", root / "notebooks")   # docs/notebooks links to them
+    shutil.copytree(DOCS, root / "docs", symlinks=True, ignore=lambda folder, names: [
         n for n in names if n == "_build" or (Path(folder).name == "plugins" and n.endswith(".rst"))])
     (root / "benchmarks").mkdir()
     shutil.copy2(REPO / "benchmarks" / "README.md", root / "benchmarks" / "README.md")
@@ -239,6 +241,13 @@ def check_make_docs(proc, root, command):
         assert f'id="{name}"' in api, name
     for page in ("getting-started", "limitations", "physics", "benchmarks", "upstream_gc_during_symbolic_call"):
         assert (html / f"{page}.html").is_file(), page
+    # every notebook is a page, showing the figures stored in it (myst-nb, not executed)
+    for path in sorted((REPO / "notebooks").glob("*.ipynb")):
+        cells = json.loads(path.read_text(encoding="utf-8"))["cells"]
+        figures = sum("image/png" in o.get("data", {}) for c in cells if c["cell_type"] == "code"
+                      for o in c.get("outputs", []))
+        page = (html / "notebooks" / f"{path.stem}.html").read_text(encoding="utf-8")
+        assert page.count("<img ") >= figures, (path.stem, figures)
 
 
 def check_fig8a(proc, root, command):

@@ -18,18 +18,19 @@ def test_reported_values_agree_with_tmm_for_every_kind_of_target():
     films = numeric_layers(result.layers)
     for rec, v in zip(result.target_records(), result.values):
         t = v.target
+        quantity, pol, side = rec["quantity"], rec["polarization"], rec["side"]    # as the JSON names them
         for a, angle in enumerate(t.angles):
-            if t.quantity in ("R", "T", "A"):
-                R, T = tmm_rt(films, 1.52, 1.0, t.wavelengths, angle, t.polarization, t.side)
-                want = {"R": R, "T": T, "A": 1 - R - T}[t.quantity]
+            if quantity in ("R", "T", "A"):
+                R, T = tmm_rt(films, 1.52, 1.0, t.wavelengths, angle, pol, side)
+                want = {"R": R, "T": T, "A": 1 - R - T}[quantity]
                 np.testing.assert_allclose(v.achieved[a], want, atol=1e-10)
             else:
                 wl = integration_wavelengths(t.illuminant)
-                R, T = tmm_rt(films, 1.52, 1.0, wl, angle, t.polarization, t.side)
-                XYZ, xy, Lab = cs_colour(R if t.of == "R" else T, t.illuminant, t.observer)
-                if t.quantity == "Y":
+                R, T = tmm_rt(films, 1.52, 1.0, wl, angle, pol, side)
+                XYZ, xy, Lab = cs_colour(R if rec["of"] == "R" else T, t.illuminant, t.observer)
+                if quantity == "Y":
                     assert abs(v.achieved[a] - XYZ[1]) < 1e-10
-                elif t.space == "xy":
+                elif rec["space"] == "xy":
                     np.testing.assert_allclose(v.achieved[a], xy, atol=1e-10)
                 else:
                     assert delta_e2000(Lab, v.achieved[a]) < 1e-6

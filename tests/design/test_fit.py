@@ -17,6 +17,7 @@ import pytest
 
 from tests.support.fit import SIGMA, coherent_spectra, measurement_files, tmm, write_spectrum
 from thinfilm_mi.design import fit, load_measurements
+from thinfilm_mi.design.fitfile import DATA_SCALE, DISPERSION, THICKNESS
 from thinfilm_mi.design.fitmodel import FitModel
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import refractive_index
@@ -95,7 +96,7 @@ def test_back_side_against_inc_tmm(tmp_path):
     model = FitModel(load_measurements({**doc, "layers": "; ".join(f"{m} {x}" for m, x in zip(specs, d))}))
     values, _ = model.predict(model.x0, jac=False)
     for ds, v in zip(model.m.datasets, values):
-        R, T = _inc(specs, d, n_sub, 1e6, wl, ds.angles[0], ds.polarization)
+        R, T = _inc(specs, d, n_sub, 1e6, wl, ds.angles[0], ds.polarization.name)
         np.testing.assert_allclose(v, R if ds.quantity == "R" else T, atol=1e-6)
     with_back = fit(doc)
     assert np.all(np.abs(with_back.x - d) <= 3 * with_back.se), (with_back.x, with_back.se)
@@ -175,6 +176,12 @@ def test_jacobian_matches_finite_differences(tmp_path, thickness):
         scale = np.max(np.abs(J[:, k]))
         assert scale > 0, p.name
         np.testing.assert_allclose(J[:, k], fd, rtol=0, atol=1e-6 * scale, err_msg=p.name)
+    # the model's column groups follow each parameter's kind
+    kinds = {k.name: [i for i, p in enumerate(model.m.parameters) if p.kind is k]
+             for k in (THICKNESS, DISPERSION, DATA_SCALE)}
+    assert kinds["thickness"] == model.thick_cols and kinds["thickness"]
+    assert sorted(model.disp_cols.values()) == kinds["dispersion"] and kinds["dispersion"]
+    assert sorted(model.scale_cols.values()) == kinds["data_scale"] and kinds["data_scale"]
 
 
 def test_instrument_quadratures_match_brute_force(tmp_path):

@@ -21,9 +21,9 @@ from thinfilm_mi.errors import ThinFilmError
 # ---------------------------------------------------------------------------
 def test_parse_tolerance():
     spec = parse_tolerance("1%:200")
-    assert (spec.sigma, spec.relative, spec.draws, spec.distribution) == (0.01, True, 200, "normal")
+    assert (spec.sigma, spec.relative, spec.draws, spec.distribution.name) == (0.01, True, 200, "normal")
     spec = parse_tolerance("2nm:500:uniform")
-    assert (spec.sigma, spec.relative, spec.draws, spec.distribution) == (2.0, False, 500, "uniform")
+    assert (spec.sigma, spec.relative, spec.draws, spec.distribution.name) == (2.0, False, 500, "uniform")
     assert parse_tolerance("0.5%").draws == 200
     for bad in ("1", "abc", "-1%", "1%:0", "150%", "1%:10:gauss", "nan%"):
         with pytest.raises(ThinFilmError, match="--tolerance"):
@@ -47,3 +47,21 @@ def test_tolerance_statistics_are_those_of_the_draws():
     none = tolerance_analysis(merit, nominal, "0nm:5")
     assert np.allclose(none.merits, none.nominal_merit, rtol=1e-12)
     assert all(t["delta_e2000_nominal"][0]["worst"] < 1e-9 for t in none.targets if "delta_e2000_nominal" in t)
+
+
+def test_tolerance_distributions_draw_their_errors():
+    """DISTRIBUTIONS: normal draws are numpy's standard normals times sigma; uniform ones
+    lie within ±sigma and fill it; both clipped at 0 nm."""
+    from thinfilm_mi.design.tolerance import DISTRIBUTIONS, draw_thicknesses
+
+    assert list(DISTRIBUTIONS) == ["normal", "uniform"]
+    d = np.array([100.0, 3.0])
+    normal = draw_thicknesses(d, parse_tolerance("2nm:4000"), seed=7)
+    want = d[:, None] + 2.0 * np.random.default_rng(7).standard_normal((2, 4000))
+    np.testing.assert_array_equal(normal, np.maximum(want, 0.0))
+    uniform = draw_thicknesses(d, parse_tolerance("1%:4000:uniform"), seed=7)
+    ratio = uniform[0] / d[0] - 1.0
+    # 4000 uniform draws on [-0.01, 0.01]: each lands within 1e-3 of a given end with
+    # probability 0.05, so both extremes do unless (0.95)^4000 ~ 1e-89 happens (normal draws
+    # would leave the band [-0.01, 0.01] of 1 sigma in 32 % of cases)
+    assert np.all(np.abs(ratio) <= 0.01 + 1e-15) and ratio.max() > 0.01 - 1e-3 and ratio.min() < -0.01 + 1e-3

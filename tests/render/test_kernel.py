@@ -62,6 +62,7 @@ def test_load_from_xml_and_to_string(tmp_path):
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from tests.support.stacks import benchmark_layers, sphere_scene
 from thinfilm_mi.render import kernel as K
+from thinfilm_mi.render import tabulation
 from thinfilm_mi.tabulate import base as tabulate_base
 
 
@@ -134,7 +135,7 @@ def test_a_table_asked_for_may_take_longer_than_auto_waits():
     asked = mi.load_dict(dict(_bsdf(70), tabulate=True))
     report = asked.stack.plan[False].build_report
     assert asked.stack.mode() == "table" and report["result"] == "table"
-    assert report["expected_work"] <= K.REQUESTED_BUDGET_SCALE * tabulate_base.MAX_BUILD_WORK
+    assert report["expected_work"] <= tabulation.REQUESTED_BUDGET_SCALE * tabulate_base.MAX_BUILD_WORK
     table = asked.stack.plan[False].table
     assert table.error <= 1e-3 and table.resolution == 1.0 and table.shear is not None
     K.TABLE_CACHE.clear()

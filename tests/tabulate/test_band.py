@@ -77,7 +77,7 @@ def test_band_table_of_a_side_lit_from_inside_glass():
     inside = K.side_data(bsdf.stack.plan[True], True)
     assert np.all(np.asarray(inside.n0(np.array([500.0]))) > 1.2) and inside.transmission
     table = band_tables.build_band_table(inside, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0)
-    assert table is not None and table.kind == "tir" and table.channels == 2
+    assert table is not None and table.axis.name == "tir" and table.channels == 2
     assert table.error <= 1e-3
     sig = band_rows.sigma_nu(1.0)
     for theta in (25.0, 55.0):

@@ -11,7 +11,7 @@ import thinfilm_mi as tf
 from tests.support.band import resonant_side
 from tests.support.stacks import benchmark_layers
 from thinfilm_mi.render import kernel as K
-from thinfilm_mi.tabulate import band_rows
+from thinfilm_mi.tabulate import band_amplitudes
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate import exact as tables
 
@@ -26,7 +26,7 @@ def test_near_zeros_finds_a_narrow_pole():
     for z0, found in ((17.3 + 0.01j, True), (25.6 - 0.4j, True), (10.2 + 9.0j, False)):
         f = (x - z0) * (1.0 + 0.02 * x)
         samples = np.stack([f.real, f.imag], axis=-1)[None]
-        r, pos, dist = band_rows.near_zeros(samples, 0)
+        r, pos, dist = band_amplitudes.near_zeros(samples, 0)
         assert (r.size == 1) == found
         if found:
             assert abs(pos[0] - z0.real) < 1e-6 and abs(dist[0] - abs(z0.imag)) < 1e-6
@@ -40,8 +40,8 @@ def test_amplitudes_give_the_exact_reflectance(monkeypatch):
     side = resonant_side(monkeypatch, films=10)
     wl = np.linspace(400.0, 700.0, 301)
     cos = np.full(wl.size, 0.8)
-    terms, _ = band_rows.amplitudes(side, cos, np.arange(wl.size), wl, tabulate_base.side_indices(side, wl))
-    R = band_rows.powers_of(terms, False)[:, 0]
+    terms, _ = band_amplitudes.amplitudes(side, cos, np.arange(wl.size), wl, tabulate_base.side_indices(side, wl))
+    R = band_amplitudes.powers_of(terms, False)[:, 0]
     layers = [(n(np.array([500.0]))[0].real, d) for n, d in side.films]
     ref = tf.Stack(layers=layers, substrate=complex(1.2, 7.0), ambient=1.0).rt(wl, math.acos(0.8)).R
     assert np.max(np.abs(R - ref)) < 1e-7
@@ -56,9 +56,9 @@ def test_near_zeros_with_exponents_match_the_unscaled_function():
     E = np.random.default_rng(1).integers(-40, 40, x.size).astype(np.float64)
     plain = np.stack([f.real, f.imag], axis=-1)[None]
     scaled = np.stack([np.ldexp(f.real, -E.astype(int)), np.ldexp(f.imag, -E.astype(int))], axis=-1)[None]
-    for a, b in zip(band_rows.near_zeros(plain, 0), band_rows.near_zeros(scaled, 0, E[None])):
+    for a, b in zip(band_amplitudes.near_zeros(plain, 0), band_amplitudes.near_zeros(scaled, 0, E[None])):
         assert np.array_equal(a, b)
-    assert band_rows.near_zeros(plain, 0)[0].size == 2
+    assert band_amplitudes.near_zeros(plain, 0)[0].size == 2
 
 
 def test_amplitudes_stay_in_range_at_any_depth(monkeypatch):
@@ -84,8 +84,8 @@ def test_amplitudes_stay_in_range_at_any_depth(monkeypatch):
     cos = np.tile([1.0, 0.3], wl.size)
     rows = np.repeat(np.arange(wl.size), 2)
     idx = tabulate_base.side_indices(side, wl)
-    terms, E = band_rows.amplitudes(side, cos, rows, wl, idx)
+    terms, E = band_amplitudes.amplitudes(side, cos, rows, wl, idx)
     assert E.min() > 100.0
-    R = band_rows.powers_of(terms, False)[:, 0]
+    R = band_amplitudes.powers_of(terms, False)[:, 0]
     ref = tabulate_base.evaluate_side(side, cos, rows, wl, idx)[:, 0]
     assert np.all(np.isfinite(R)) and np.max(np.abs(R - ref)) < 1e-10

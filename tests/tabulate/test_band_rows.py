@@ -5,8 +5,7 @@ import numpy as np
 import pytest
 
 from tests.support.band import brute_force, resonant_side
-from thinfilm_mi.tabulate import band_rows
-from thinfilm_mi.tabulate import base as tabulate_base
+from thinfilm_mi.tabulate import axes, band_rows
 
 pytestmark = pytest.mark.usefixtures("llvm")
 
@@ -22,12 +21,12 @@ def test_band_limited_values_match_a_brute_force_convolution(monkeypatch):
     9e-4 with the looser Simpson tolerance 5e-5, 1.7e-2 without the panels'
     grading)."""
     side = resonant_side(monkeypatch)
-    rows = band_rows.Rows(side, "band", 1.0)
+    rows = band_rows.Rows(side, axes.BAND, 1.0)
     xs = np.array([0.0, 0.3, 0.7])
     vals = rows.values(xs)
     bins = rows.b0 + np.array([100, 600, 1100, 1500])
     for i, x in enumerate(xs):
-        cos = float(tabulate_base.band_cos(x))
+        cos = float(axes.band_cos(x))
         ref = brute_force(side, cos, rows.wavenumbers[bins], rows.sigma)
         np.testing.assert_allclose(vals[i, bins, 0], ref, atol=1e-4, rtol=0)
 
@@ -43,7 +42,7 @@ def test_the_adaptive_panels_read_the_first_levels_amplitudes(monkeypatch):
     xs = np.array([0.1, 0.5, 0.9])
     out = {}
     for interpolate in (False, True):
-        rows = band_rows.Rows(side, "band", 1.0)
+        rows = band_rows.Rows(side, axes.BAND, 1.0)
         assert rows.interpolate      # 32 samples per fringe or more here
         rows.interpolate = interpolate
         out[interpolate] = (rows.values(xs), rows.points)

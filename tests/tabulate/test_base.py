@@ -8,6 +8,7 @@ import pytest
 import thinfilm_mi as tf
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.tabulate import axes
 
 pytestmark = pytest.mark.usefixtures("llvm")
 
@@ -18,11 +19,11 @@ def test_ghost_nodes():
     from thinfilm_mi.tabulate import base as tabulate_base
     x = np.arange(10.0)
     f = x ** 3 - 2 * x
-    out = tabulate_base.with_ghosts(f, "mirror", "extrapolate")
+    out = tabulate_base.with_ghosts(f, axes.MIRROR, axes.EXTRAPOLATE)
     assert np.array_equal(out[:3], f[[3, 2, 1]])
     xr = np.arange(10.0, 13.0)
     assert np.allclose(out[-3:], xr ** 3 - 2 * xr, rtol=0, atol=1e-9)
-    out = tabulate_base.with_ghosts(f, "extrapolate", "mirror")
+    out = tabulate_base.with_ghosts(f, axes.EXTRAPOLATE, axes.MIRROR)
     xl = np.arange(-3.0, 0.0)
     assert np.allclose(out[:3], xl ** 3 - 2 * xl, rtol=0, atol=1e-9)
     assert np.array_equal(out[-3:], f[[8, 7, 6]])

@@ -15,6 +15,7 @@ from tests.support.tables import F32, STACK, f32, random_points, ref_R
 from thinfilm_mi.optics import unpolarised
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.tabulate import axes, quantities
 
 pytestmark = pytest.mark.usefixtures("llvm")
 
@@ -51,7 +52,7 @@ def test_dielectric_tables_both_sides_with_tir(inside, layers):
     assert bsdf.stack.mirrored == lossless and bsdf.stack.mode() == "table"
     table = bsdf.stack.mirror_table(side) if lossless and inside else side.table
     assert table is not None and table.channels == (1 if lossless else 2)
-    assert table.kind == ("tir" if inside and not lossless else "plain")
+    assert table.axis.name == ("tir" if inside and not lossless else "plain")
     cos, wls = random_points(20000, seed=2)
     # Points straddling the critical angle (cos = sqrt(1 - 1.000277^2/1.6^2) = 0.78049).
     cos[:2000] = f32(0.7804861 + np.linspace(-1e-3, 1e-3, 2000))
@@ -74,7 +75,7 @@ def test_dielectric_tables_both_sides_with_tir(inside, layers):
 
 def test_auto_mode_and_what_prevents_a_table():
     one = mi.load_dict({"type": "thinfilm_conductor", "layers": "1.46 300"})
-    assert K.AUTO_MIN_FILMS == 1 and one.stack.mode() == "table"     # one film is enough
+    assert quantities.AUTO_MIN_FILMS == 1 and one.stack.mode() == "table"     # one film is enough
     exact = mi.load_dict({"type": "thinfilm_conductor", "layers": "1.46 300", "tabulate": False})
     assert exact.stack.mode() == "exact"
     three = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu"})
@@ -246,8 +247,8 @@ def test_scalar_variant_uses_tables_too():
     assert np.max(np.abs(R - exact)) <= 1.5 * bsdf.stack.plan[False].table.error + F32
 
 
-@pytest.mark.parametrize("ends", [("values", "values"), ("mirror", "extrapolate"),
-                                  ("extrapolate", "mirror")])
+@pytest.mark.parametrize("ends", [(None, None), (axes.MIRROR, axes.EXTRAPOLATE),
+                                  (axes.EXTRAPOLATE, axes.MIRROR)])
 
 
 def test_probe_lines_know_their_interpolation_error(ends):
@@ -263,7 +264,7 @@ def test_probe_lines_know_their_interpolation_error(ends):
     nodes a period; beyond it an extrapolated ghost is meaningless)."""
     from thinfilm_mi.tabulate import exact as tables
     intervals, min_nodes = 1024, 17
-    ext = tables.ghost_count(intervals, min_nodes) if ends[0] == "values" else 0
+    ext = tables.ghost_count(intervals, min_nodes) if ends[0] is None else 0
     assert tables.ghost_count(intervals, min_nodes) == 3 * 64
     omega = 2.0 * np.pi / 37.3
     x = np.arange(-ext, intervals + ext + 1.0)
@@ -324,7 +325,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                         "tabulate": True})
     table = big.stack.plan[False].table
-    assert table is not None and K.AUTO_MAX_TEXELS < table.texels <= tabulate_base.MAX_TEXELS
+    assert table is not None and quantities.AUTO_MAX_TEXELS < table.texels <= tabulate_base.MAX_TEXELS
     assert table.resolution == 0.0
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                          "spectral_resolution": 0.0})
@@ -333,7 +334,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
     table = auto.stack.plan[False].table
     assert table is not None and table.resolution == K.DEFAULT_SPECTRAL_RESOLUTION
-    assert table.texels <= K.AUTO_MAX_TEXELS and table.error <= 1e-3
+    assert table.texels <= quantities.AUTO_MAX_TEXELS and table.error <= 1e-3
 
 
 def test_a_table_build_does_not_import_scipy():
@@ -366,7 +367,7 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     def counted(*a, **k):
         calls.append(k["film_n_min"])
         return loop(*a, **k)
-    monkeypatch.setattr(K, "unpolarised_rt_loop", counted)
+    monkeypatch.setattr(quantities.POWERS, "rt_loop", counted)
     K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
                          "tabulate": True})

@@ -1,7 +1,8 @@
 """The float64 hemispherical terms (thinfilm_mi/tabulate/hemispherical.py): the loop over
 films of deep coatings equals the unrolled recursion, and ``r_dh_partials`` (the
 derivative table) against central differences of ``hemispherical_factors`` in float64,
-shallow and deep (the film loop) stacks."""
+shallow and deep (the film loop) stacks; the table over the thickness scale against the
+terms computed directly at scales between its nodes."""
 from __future__ import annotations
 
 import mitsuba as mi
@@ -9,6 +10,9 @@ import numpy as np
 import pytest
 
 mi.set_variant("llvm_ad_spectral")
+import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
+from tests.support.bsdf import WAVELENGTHS as WL
+from tests.support.bsdf import direction, make_si
 from thinfilm_mi.tabulate.hemispherical import hemispherical_factors, r_dh_partials  # noqa: E402
 
 # ---------------------------------------------------------------------------
@@ -85,3 +89,21 @@ def test_hemispherical_terms_of_a_deep_coating_loop_equal_the_unrolled_recursion
     unrolled = hemispherical.hemispherical_factors(*args)
     for a, b in zip(looped, unrolled):
         np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+
+
+def test_scale_table_against_direct_terms():
+    """The table over the scale (linear in s, within SCALE_ABS at the check) against
+    the terms computed at scales between its nodes."""
+    from thinfilm_mi.tabulate.hemispherical import SCALE_ABS
+    b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 300; Au 4", "model": "exact",
+                      "thickness": {"type": "checkerboard", "color0": 0.2, "color1": 1.4}})
+    table = b.terms.table
+    assert table.s_max == pytest.approx(1.4, rel=1e-6)
+    s = np.array([0.37, 0.91, 1.33])
+    n = s.size
+    si = make_si(n, direction(0.0))
+    r, t, _ = table.lookup(si.wavelengths, mi.Float(s))
+    from thinfilm_mi.render.diffuse import ExactFactors
+    R, T = ExactFactors(b.coating).hemispherical_scales(np.array(WL), s)
+    np.testing.assert_allclose(np.array(r), R.T, atol=SCALE_ABS / 2 + 1e-6)
+    np.testing.assert_allclose(np.array(t), T.T, atol=SCALE_ABS / 2 + 1e-6)

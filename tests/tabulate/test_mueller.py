@@ -20,7 +20,7 @@ from thinfilm_mi.optics.incoherent_mueller import incoherent_mueller
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render.amplitudes import polarised_response
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR
-from thinfilm_mi.tabulate import band_rows
+from thinfilm_mi.tabulate import axes, band_rows
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.mueller import AUTO_MAX_FLOATS, AUTO_MIN_FILMS, MUELLER
 
@@ -102,7 +102,7 @@ def test_dielectric_mueller_tables_match_the_exact_components(films):
         side = bsdf.stack.plan[inside]
         table = side.table
         assert table is not None and table.channels == 8 and table.resolution == 0.0
-        assert table.kind == ("tir" if inside else "plain")
+        assert table.axis.name == ("tir" if inside else "plain")
         cos, wls = _points(6000, 2 + inside, critical if inside else None)
         ours = _render_components(bsdf.stack, inside, cos, wls)
         ref = _exact_components(bsdf.stack, inside, cos, wls)
@@ -146,14 +146,14 @@ def test_band_limited_mueller_rows_match_a_brute_force_convolution():
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "ext_ior": 1.0,
                          "layers": layers(10, 50.0, 200.0), "tabulate": False})
     data = K.side_data(bsdf.stack.plan[False], False, quantity=MUELLER)
-    rows = band_rows.Rows(data, "band", 1.0)
+    rows = band_rows.Rows(data, axes.BAND, 1.0)
     xs = np.array([0.0, 0.55])
     vals = rows.values(xs)
     assert vals.shape[-1] == 4
     bins = rows.b0 + np.array([300, 1000, 1500])
     sigma = rows.sigma
     for i, x in enumerate(xs):
-        cos = float(tabulate_base.band_cos(x))
+        cos = float(axes.band_cos(x))
         for b in bins:
             nu = rows.wavenumbers[b]
             lam = np.arange(1.0 / (nu + 7.0 * sigma), 1.0 / (nu - 7.0 * sigma), 0.0005)
@@ -230,7 +230,7 @@ def test_auto_tabulates_deep_polarized_stacks():
     params = mi.traverse(deep)
     key = next(k for k in params.keys() if k.endswith("layers.0.thickness"))
     dr.enable_grad(params[key])
-    assert deep.stack.evaluation_side(False, False).table is None
+    assert deep.stack.current_plan(False, False).table is None
 
 
 @pytest.mark.parametrize("plugin,films,tol", [("thinfilm_conductor", 10, 5e-5),

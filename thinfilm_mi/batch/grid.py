@@ -14,15 +14,17 @@ import hashlib
 import itertools
 import math
 import re
+from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 from thinfilm_mi.batch.scene import parse_defines
 from thinfilm_mi.errors import UsageError
+from thinfilm_mi.optics.choices import choose
 
 __all__ = [
-    "Axis", "Frame", "Job", "parse_values", "parse_axes", "parse_scalar", "axis_label",
-    "build_frames", "plan_tasks", "FRAMES_DIR", "MAX_FRAMES", "COLUMNS",
+    "Axis", "AxisKind", "AXIS_KINDS", "DEFINE", "TRAVERSE", "Frame", "Job", "parse_values", "parse_axes",
+    "parse_scalar", "axis_label", "build_frames", "plan_tasks", "FRAMES_DIR", "MAX_FRAMES", "COLUMNS",
 ]
 
 #: the frames' folder in the output folder
@@ -33,15 +35,59 @@ MAX_FRAMES = 100_000
 COLUMNS = ("exr", "png", "seconds", "status", "error")
 
 
+class AxisKind(ABC):
+    """What an axis of the grid sets: its option (``flag``), an example of it, and
+    the checks of its names and values."""
+
+    name: str
+    flag: str
+    example: str
+
+    @abstractmethod
+    def check_name(self, name: str) -> None:
+        """:class:`UsageError` unless ``name`` can name an axis of this kind."""
+
+    def check_values(self, name: str, values: tuple[str, ...]) -> None:
+        """:class:`UsageError` unless every value can be set."""
+
+
+class _Define(AxisKind):
+    """``-D``: an XML ``$name`` parameter; the scene is loaded per value."""
+
+    name, flag, example = "define", "-D", "thickness=100:800:25"
+
+    def check_name(self, name):
+        parse_defines([f"{name}=x"])  # the name check of thinfilm-render -D
+
+
+class _Traverse(AxisKind):
+    """``-P``: a ``mi.traverse`` key (a number or true/false), set on the loaded scene."""
+
+    name, flag, example = "traverse", "-P", "sphere.bsdf.layers.0.thickness=100:800:25"
+
+    def check_name(self, name):
+        if not re.fullmatch(r"[^\s=,]+", name):
+            raise UsageError(f"-P {name!r}: not a mi.traverse key (e.g. sphere.bsdf.layers.0.thickness)")
+
+    def check_values(self, name, values):
+        for v in values:
+            parse_scalar(name, v)
+
+
+DEFINE, TRAVERSE = _Define(), _Traverse()
+#: The axis kinds by name.
+AXIS_KINDS: dict[str, AxisKind] = {k.name: k for k in (DEFINE, TRAVERSE)}
+
+
 @dataclass(frozen=True)
 class Axis:
-    """One axis of the grid: ``kind`` is ``"define"`` (``-D``: an XML ``$name``
-    parameter, the scene is loaded per value) or ``"traverse"`` (``-P``: a
+    """One axis of the grid: ``kind`` is :data:`DEFINE` (``-D``: an XML ``$name``
+    parameter, the scene is loaded per value) or :data:`TRAVERSE` (``-P``: a
     ``mi.traverse`` key, set on the loaded scene)."""
 
     name: str
     values: tuple[str, ...]
-    kind: str = "define"
+    kind: AxisKind = DEFINE
 
 
 @dataclass(frozen=True)
@@ -137,11 +183,12 @@ def _value_text(value: Any, option: str) -> str:
     return _format_number(number)
 
 
-def parse_axes(items: Mapping[str, Any] | Sequence[str] | None, kind: str) -> list[Axis]:
+def parse_axes(items: Mapping[str, Any] | Sequence[str] | None, kind: AxisKind | str) -> list[Axis]:
     """``-D`` (``kind="define"``) or ``-P`` (``kind="traverse"``) items,
     ``["name=VALUES", ...]`` or a mapping ``{name: VALUES}``, -> axes; a bad name,
     a name given twice or bad values raise :class:`~thinfilm_mi.errors.UsageError`."""
-    flag = "-D" if kind == "define" else "-P"
+    kind = kind if isinstance(kind, AxisKind) else choose(AXIS_KINDS, kind, "kind")
+    flag = kind.flag
     if items is None:
         return []
     if isinstance(items, Mapping):
@@ -151,23 +198,16 @@ def parse_axes(items: Mapping[str, Any] | Sequence[str] | None, kind: str) -> li
         for item in items:
             name, sep, value = str(item).partition("=")
             if not sep:
-                example = "thickness=100:800:25" if kind == "define" else \
-                    "sphere.bsdf.layers.0.thickness=100:800:25"
-                raise UsageError(f"{flag} {item!r}: expected name=VALUES, e.g. {flag} {example}")
+                raise UsageError(f"{flag} {item!r}: expected name=VALUES, e.g. {flag} {kind.example}")
             pairs.append((name.strip(), value))
     axes, seen = [], set()
     for name, value in pairs:
-        if kind == "define":
-            parse_defines([f"{name}=x"])  # the name check of thinfilm-render -D
-        elif not re.fullmatch(r"[^\s=,]+", name):
-            raise UsageError(f"-P {name!r}: not a mi.traverse key (e.g. sphere.bsdf.layers.0.thickness)")
+        kind.check_name(name)
         if name in seen:
             raise UsageError(f"{flag} {name}: given twice")
         seen.add(name)
         values = parse_values(value, f"{flag} {name}=")
-        if kind == "traverse":
-            for v in values:
-                parse_scalar(name, v)
+        kind.check_values(name, values)
         axes.append(Axis(name, values, kind))
     return axes
 
@@ -223,8 +263,8 @@ def build_frames(axes: Sequence[Axis]) -> list[Frame]:
         pairs = list(zip(axes, combo))
         frames.append(Frame(
             index=i,
-            defines=tuple((a.name, v) for a, v in pairs if a.kind == "define"),
-            traverse=tuple((a.name, v) for a, v in pairs if a.kind == "traverse"),
+            defines=tuple((a.name, v) for a, v in pairs if a.kind is DEFINE),
+            traverse=tuple((a.name, v) for a, v in pairs if a.kind is TRAVERSE),
             exr=f"{FRAMES_DIR}/{stem}.exr", png=f"{FRAMES_DIR}/{stem}.png"))
     return frames
 

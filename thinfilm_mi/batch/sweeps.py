@@ -89,7 +89,9 @@ from typing import Any, Callable, Mapping, Sequence, TextIO
 
 from thinfilm_mi.batch.grid import (
     COLUMNS,
+    DEFINE,
     FRAMES_DIR,
+    TRAVERSE,
     Frame,
     Job,
     build_frames,
@@ -347,7 +349,7 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
     if contact_sheet:  # say so now, not after the frames are rendered
         require_extra("matplotlib", "plot",
                       "the contact sheet (skip it: --no-contact-sheet, contact_sheet=False)")
-    axes = parse_axes(defines, "define") + parse_axes(parameters, "traverse")
+    axes = parse_axes(defines, DEFINE) + parse_axes(parameters, TRAVERSE)
     frames = build_frames(axes)
     variant, notice = grid_variant(scene_file, frames, variant)
     if notice:

@@ -13,9 +13,14 @@ The colour report for designers (with colour-science) is :mod:`thinfilm_mi.colou
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+from typing import Any
+
 import numpy as np
 
-__all__ = ["channel_weights", "colour_differences", "colour_weights", "delta_e2000", "lab",
+from thinfilm_mi.optics.choices import choose
+
+__all__ = ["Channels", "CHANNELS", "channel_weights", "colour_differences", "colour_weights", "delta_e2000", "lab",
            "normalised_weights", "trapezoid_weights", "xyz_to_srgb_matrix"]
 
 
@@ -92,17 +97,50 @@ def xyz_to_srgb_matrix() -> np.ndarray:
     return np.stack(cols, axis=1)
 
 
-def channel_weights(channels: str, wavelengths: np.ndarray) -> np.ndarray:
+class Channels(ABC):
+    """The colour channels a render or table holds (Mitsuba's ``rgb`` or ``mono`` variants)."""
+
+    name: str
+
+    @abstractmethod
+    def weights(self, cmf: np.ndarray, d65: np.ndarray) -> np.ndarray:
+        """``w_c(λ)`` (C, n) from the colour-matching functions ``cmf`` (3, n) and D65 (n,)."""
+
+
+class _Rgb(Channels):
+    """Linear sRGB."""
+
+    name = "rgb"
+
+    def weights(self, cmf, d65):
+        return (xyz_to_srgb_matrix() @ cmf) * d65[None, :]
+
+
+class _Mono(Channels):
+    """Luminance Y."""
+
+    name = "mono"
+
+    def weights(self, cmf, d65):
+        return (cmf[1] * d65)[None, :]
+
+
+#: The channel sets by name.
+CHANNELS: dict[str, Channels] = {c.name: c for c in (_Rgb(), _Mono())}
+
+
+def channel_weights(channels: Channels | Any, wavelengths: np.ndarray) -> np.ndarray:
     """``w_c(λ)`` at ``wavelengths`` (shape ``(C, n)``; not normalised): linear sRGB
-    (``channels="rgb"``) or luminance Y (``"mono"``) under D65. The 1 nm data are
-    interpolated linearly, as Mitsuba interpolates its CMF table."""
+    (``channels="rgb"``) or luminance Y (``"mono"``) under D65 (a name or a
+    :class:`Channels` of :data:`CHANNELS`). The 1 nm data are interpolated
+    linearly, as Mitsuba interpolates its CMF table."""
+    if not isinstance(channels, Channels):
+        channels = choose(CHANNELS, channels, "channels")
     W = colour_weights()
     lam = W[:, 0]
     cmf = np.stack([np.interp(wavelengths, lam, W[:, i]) for i in (1, 2, 3)])
     d65 = np.interp(wavelengths, lam, W[:, 4])
-    if channels == "mono":
-        return (cmf[1] * d65)[None, :]
-    return (xyz_to_srgb_matrix() @ cmf) * d65[None, :]
+    return channels.weights(cmf, d65)
 
 
 _WHITE = None

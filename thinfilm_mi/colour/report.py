@@ -61,9 +61,11 @@ from typing import Any
 import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.optics.choices import choose
+from thinfilm_mi.optics.polarization import ALIASES, POLARIZATIONS, UNPOLARIZED, P, S
 
 __all__ = [
-    "ILLUMINANTS", "OBSERVERS", "POLARIZATIONS", "RECORD_KEYS", "Illuminant", "ColourValues",
+    "ILLUMINANTS", "OBSERVERS", "RECORD_KEYS", "Illuminant", "ColourValues",
     "ColourRecord", "ColourReport", "resolve_illuminant", "resolve_observer", "check_angles",
     "integration_wavelengths", "spectrum_colour", "colour_report",
 ]
@@ -77,8 +79,6 @@ OBSERVERS = {2: "CIE 1931 2 Degree Standard Observer", 10: "CIE 1964 10 Degree S
 #: The photopic luminous efficiency V(λ) of the luminous Y.
 PHOTOPIC_LEF = "CIE 1924 Photopic Standard Observer"
 
-#: Polarisations a report can hold: ``unpolarized`` is ``(s + p) / 2``.
-POLARIZATIONS = ("unpolarized", "s", "p")
 
 #: The keys of one record of ``--json`` / ``--csv`` (plus ``polarization``
 #: after ``quantity`` when s or p were asked for).
@@ -183,6 +183,10 @@ def check_angles(angles: Any) -> np.ndarray:
     return a
 
 
+#: What ``polarizations=`` may name: a polarisation, or ``both`` (s and p).
+_REPORTED = {**{name: (p,) for name, p in POLARIZATIONS.items()}, "both": (S, P)}
+
+
 def _check_polarizations(polarizations: Any) -> tuple[str, ...]:
     items = [polarizations] if isinstance(polarizations, str) else polarizations
     try:
@@ -191,14 +195,13 @@ def _check_polarizations(polarizations: Any) -> tuple[str, ...]:
         items = [polarizations]
     out = []
     for p in items:
-        name = p.strip().lower() if isinstance(p, str) else p
-        name = {"u": "unpolarized", "unpolarised": "unpolarized"}.get(name, name)
-        names = ("s", "p") if name == "both" else (name,)
-        for n in names:
-            if n not in POLARIZATIONS:
-                raise ThinFilmError(f"polarizations: expected unpolarized, s, p or both, got {p!r}")
-            if n not in out:
-                out.append(n)
+        try:
+            chosen = choose(_REPORTED, p, "polarizations", ALIASES)
+        except ThinFilmError:
+            raise ThinFilmError(f"polarizations: expected {', '.join(POLARIZATIONS)} or both, got {p!r}") from None
+        for n in chosen:
+            if n.name not in out:
+                out.append(n.name)
     if not out:
         raise ThinFilmError(f"polarizations: none given ({polarizations!r})")
     return tuple(out)
@@ -384,7 +387,7 @@ class ColourReport:
     @property
     def polarized(self) -> bool:
         """Whether the records name their polarisation (anything but unpolarised only)."""
-        return self.polarizations != ("unpolarized",)
+        return self.polarizations != (UNPOLARIZED.name,)
 
     def describe(self) -> str:
         obs = "CIE 1931 2°" if self.observer == 2 else "CIE 1964 10°"
@@ -463,11 +466,10 @@ def colour_report(stack: Any, angles: Any = 0.0, illuminant: Any = "D65", observ
     pols = _check_polarizations(polarizations)
     wl = _weights(illum, obs).wavelengths
     res = stack.rt(wl[None, :], np.radians(a)[:, None])
-    by_pol = {"unpolarized": (res.R, res.T), "s": (res.Rs, res.Ts), "p": (res.Rp, res.Tp)}
     spectra, colours = {}, {}
     for pol in pols:
-        for qty, spec in zip(("R", "T"), by_pol[pol]):
-            spectra[pol, qty] = np.asarray(spec, dtype=np.float64)
+        for qty in ("R", "T"):
+            spectra[pol, qty] = np.asarray(getattr(res, POLARIZATIONS[pol].label(qty)), dtype=np.float64)
             colours[pol, qty] = spectrum_colour(spectra[pol, qty], None, illum, obs, chromatic_adaptation)
     return ColourReport(stack, a, illum, obs, pols, wl.copy(), spectra, colours)
 
@@ -477,7 +479,7 @@ def colour_report(stack: Any, angles: Any = 0.0, illuminant: Any = "D65", observ
 
 
 def _label(pol: str, qty: str) -> str:
-    return qty if pol == "unpolarized" else f"{qty}{pol}"
+    return POLARIZATIONS[pol].label(qty)
 
 
 def _report_figure(report: ColourReport):

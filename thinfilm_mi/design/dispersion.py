@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from thinfilm_mi.design.targets import parse_number
+from thinfilm_mi.design.parsing import parse_number
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import MIN_INDEX, Material
 from thinfilm_mi.materials.model import ConstantMaterial, DispersiveMaterial, TabulatedIndex

@@ -45,26 +45,18 @@ from typing import Any
 import numpy as np
 
 from thinfilm_mi.design.dispersion import DispersionModel, model_class
-from thinfilm_mi.design.targets import (
-    check_keys,
-    fail,
-    locate_file,
-    parse_choice,
-    parse_number,
-    read_yaml,
-    resolve_material,
-)
+from thinfilm_mi.design.parsing import fail, parse_choice, parse_number
+from thinfilm_mi.design.targets import check_keys, locate_file, read_yaml, resolve_material
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import MIN_INDEX, Material
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL, parse_layers
+from thinfilm_mi.optics.polarization import ALIASES, POLARIZATIONS, Polarization
 
 __all__ = ["Dataset", "FitMaterial", "Parameter", "Measurement", "load_measurements", "QUANTITIES",
-           "POLARIZATIONS", "THICKNESS_MODES"]
+           "THICKNESS_MODES", "ParameterKind", "THICKNESS", "DISPERSION", "DATA_SCALE"]
 
 #: What a dataset measures: the power reflected or transmitted.
 QUANTITIES = ("R", "T")
-#: A dataset's polarisation: the s and p components it averages.
-POLARIZATIONS = {"unpolarized": ("s", "p"), "s": ("s",), "p": ("p",)}
 
 
 class ThicknessMode:
@@ -87,7 +79,7 @@ class EachThickness(ThicknessMode):
     name = "each"
 
     def parameters(self, nominal):
-        return [Parameter(f"d[{j}]", float(d), 0.0, math.inf, "thickness", j) for j, d in enumerate(nominal)]
+        return [Parameter(f"d[{j}]", float(d), 0.0, math.inf, THICKNESS, j) for j, d in enumerate(nominal)]
 
     def thicknesses(self, values, nominal):
         return np.asarray(values, dtype=np.float64).copy(), np.eye(nominal.size)
@@ -99,7 +91,7 @@ class ScaleThickness(ThicknessMode):
     name = "scale"
 
     def parameters(self, nominal):
-        return [Parameter("thickness_scale", 1.0, 0.0, math.inf, "thickness")]
+        return [Parameter("thickness_scale", 1.0, 0.0, math.inf, THICKNESS)]
 
     def thicknesses(self, values, nominal):
         return values[0] * nominal, nominal[:, None].copy()
@@ -128,7 +120,7 @@ class Dataset:
     index: int
     file: str
     quantity: str
-    polarization: str
+    polarization: Polarization
     wavelengths: np.ndarray
     angles: np.ndarray
     value: np.ndarray
@@ -142,9 +134,9 @@ class Dataset:
     def describe(self) -> str:
         a = np.unique(self.angles)
         angle = f"{a[0]:g}°" if a.size == 1 else f"{a.size} angles {a[0]:g}-{a[-1]:g}°"
-        pol = "" if self.polarization == "unpolarized" else f", {self.polarization}-pol"
-        return f"{self.quantity} at {angle}{pol}, {self.wavelengths.min():g}-{self.wavelengths.max():g} nm " \
-               f"({self.value.size} points)"
+        pol = self.polarization.describe()
+        return f"{self.quantity} at {angle}{pol and ', ' + pol}, " \
+               f"{self.wavelengths.min():g}-{self.wavelengths.max():g} nm ({self.value.size} points)"
 
 
 @dataclass
@@ -159,18 +151,29 @@ class FitMaterial:
         return self.material.wavelength_range if self.model is None else self.model.wavelength_range
 
 
+@dataclass(frozen=True)
+class ParameterKind:
+    """What a free parameter sets: :data:`THICKNESS` (of the file's
+    :class:`ThicknessMode`), :data:`DISPERSION` (``target`` (material name,
+    parameter)) or :data:`DATA_SCALE` (``target`` the dataset); the model
+    (:class:`~thinfilm_mi.design.fitmodel.FitModel`) groups the columns by it."""
+
+    name: str
+
+
+THICKNESS, DISPERSION, DATA_SCALE = ParameterKind("thickness"), ParameterKind("dispersion"), ParameterKind("data_scale")
+
+
 @dataclass
 class Parameter:
-    """A free parameter: ``name``, start ``value``, bounds, and what it is:
-    ``kind`` ``thickness`` (of the file's :class:`ThicknessMode`),
-    ``dispersion`` (``target`` (material name, parameter)) or ``data_scale``
-    (``target`` the dataset)."""
+    """A free parameter: ``name``, start ``value``, bounds, and what it sets,
+    ``kind`` (a :class:`ParameterKind`) and its ``target``."""
 
     name: str
     value: float
     lower: float
     upper: float
-    kind: str
+    kind: ParameterKind
     target: Any = None
     relative: bool = True         # multi-start spread relative to the value (else of the bounds' width)
 
@@ -258,8 +261,8 @@ def _dataset(entry: Any, i: int, base: Path | None) -> tuple[Dataset, bool]:
     if "quantity" not in entry:
         fail(where, f"missing 'quantity' ({' or '.join(QUANTITIES)})")
     quantity = parse_choice(entry["quantity"], QUANTITIES, where, "quantity")
-    polarization = parse_choice(entry.get("polarization", "unpolarized"), tuple(POLARIZATIONS), where,
-                                "polarization", {"unpolarised": "unpolarized"})
+    polarization = parse_choice(entry.get("polarization", "unpolarized"), POLARIZATIONS, where,
+                                "polarization", ALIASES)
     path = Path(str(entry["file"]))
     if not path.is_absolute() and base is not None:
         path = base / path
@@ -404,8 +407,8 @@ def _measurement(doc: Any, base: Path | None, name: str) -> Measurement:
     for key, names in free_of.items():
         model = materials[key].model
         params += [Parameter(f"{key}.{p}", model.values[p], model.lower.get(p, -math.inf), math.inf,
-                             "dispersion", (key, p)) for p in names]
-    params += [Parameter(f"data[{d.index}].scale", d.scale, 0.0, math.inf, "data_scale", d.index)
+                             DISPERSION, (key, p)) for p in names]
+    params += [Parameter(f"data[{d.index}].scale", d.scale, 0.0, math.inf, DATA_SCALE, d.index)
                for d, free in parsed if free]
     _bounds(params, doc.get("bounds"))
     bw, cone = _instrument(doc.get("instrument"))

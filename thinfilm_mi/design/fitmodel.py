@@ -39,8 +39,9 @@ import math
 
 import numpy as np
 
-from thinfilm_mi.design.fitfile import POLARIZATIONS, QUANTITIES, Measurement
+from thinfilm_mi.design.fitfile import DATA_SCALE, DISPERSION, QUANTITIES, THICKNESS, Measurement
 from thinfilm_mi.design.matrices import film_index_response, normal_index, stack_response
+from thinfilm_mi.optics.polarization import Component
 
 __all__ = ["FitModel", "BANDWIDTH_NODES", "CONE_RINGS", "CONE_AZIMUTHS"]
 
@@ -86,7 +87,7 @@ class _Group:
         self.n_sub = m.substrate.index(wl).astype(np.complex128)
         self.beta2 = (self.n_amb.real * math.sin(math.radians(angle))) ** 2
         self.fixed = {k: f.material.index(wl) for k, f in m.materials.items() if f.model is None}
-        self.pols: set[str] = set()
+        self.pols: set[Component] = set()
         if m.substrate_thickness_mm is not None:
             q = normal_index(self.n_sub, self.beta2)
             self.P = np.exp(-4.0 * math.pi * q.imag * m.substrate_thickness_mm * 1e6 / wl)
@@ -101,9 +102,12 @@ class FitModel:
         self.m = m
         self.nominal = np.array([d for _, d in m.films], dtype=np.float64)
         params = m.parameters
-        self.thick_cols = [i for i, p in enumerate(params) if p.kind == "thickness"]
-        self.disp_cols = {p.target: i for i, p in enumerate(params) if p.kind == "dispersion"}
-        self.scale_cols = {p.target: i for i, p in enumerate(params) if p.kind == "data_scale"}
+        cols: dict = {}                 # kind -> [(target, column)]
+        for i, p in enumerate(params):
+            cols.setdefault(p.kind, []).append((p.target, i))
+        self.thick_cols = [i for _, i in cols.get(THICKNESS, [])]
+        self.disp_cols = dict(cols.get(DISPERSION, []))
+        self.scale_cols = dict(cols.get(DATA_SCALE, []))
         offsets, w_bw = bandwidth_nodes(m.bandwidth_nm)
         wanted: dict[float, list[np.ndarray]] = {}
         plan = []         # per data set: [(angle key, wavelengths (N, B), weights (B,), point mask (N,))]
@@ -123,7 +127,7 @@ class FitModel:
             terms = []
             for key, wl, w, mask in rows:
                 g = self.groups[key]
-                g.pols.update(POLARIZATIONS[d.polarization])
+                g.pols.update(d.polarization.components)
                 terms.append((key, np.searchsorted(g.wl, wl), w, mask))
             self.terms.append(terms)
         self.sigma = [d.sigma if d.sigma is not None else np.ones(d.value.shape) for d in m.datasets]
@@ -192,7 +196,7 @@ class FitModel:
             return stack_response(n_in, n_out, films_, d_, g.wl, g.beta2, pol, derivatives=jac)
 
         out = {}
-        for pol in sorted(g.pols):
+        for pol in sorted(g.pols, key=lambda c: c.name):
             f = response(g.n_amb.real, g.n_sub, ns, d)
             R, T = f.R, f.T
             dR, dT = self._chain(f, L, dd, films) if jac else (None, None)
@@ -228,7 +232,7 @@ class FitModel:
         for ds, terms in zip(self.m.datasets, self.terms):
             q = np.zeros(ds.value.shape)
             dq = np.zeros(ds.value.shape + (x.size,)) if jac else None
-            pols = POLARIZATIONS[ds.polarization]
+            pols = ds.polarization.components
             what = QUANTITIES.index(ds.quantity)          # R and T, in the order the groups hold them
             for key, idx, w, mask in terms:
                 r = resp[key]

@@ -11,7 +11,8 @@ import numpy as np
 
 from thinfilm_mi.design.fitfile import Measurement
 from thinfilm_mi.design.fitmodel import FitModel
-from thinfilm_mi.design.result import format_index, json_list
+from thinfilm_mi.design.result import format_index
+from thinfilm_mi.design.target_quantities import json_list, stats
 from thinfilm_mi.design.tolerance import ToleranceSpec, draw_thicknesses, parse_tolerance
 from thinfilm_mi.materials import save_material
 from thinfilm_mi.materials.stack import format_layers
@@ -34,11 +35,6 @@ class Minimum:
     x: np.ndarray
     start: int
     evaluations: int
-
-
-def _stats(x) -> dict:
-    x = np.asarray(x, dtype=np.float64)
-    return {"mean": float(x.mean()), "std": float(x.std()), "worst": float(x.max())}
 
 
 def _file_name(prefix: str, name: str) -> str:
@@ -195,9 +191,9 @@ class FitResult:
             change.append([float(np.sqrt(np.mean((v - f) ** 2))) for v, f in zip(values, fitted)])
         change = np.array(change)
         self.tolerance = {"spec": spec.text, "sigma": spec.sigma, "relative": spec.relative, "draws": spec.draws,
-                          "distribution": spec.distribution, "seed": seed,
-                          "reduced_chi2": {"fitted": self.reduced_chi2, **_stats(chi)},
-                          "datasets": [{"data": d.index, "rms_change": _stats(change[:, i])}
+                          "distribution": spec.distribution.name, "seed": seed,
+                          "reduced_chi2": {"fitted": self.reduced_chi2, **stats(chi)},
+                          "datasets": [{"data": d.index, "rms_change": stats(change[:, i])}
                                        for i, d in enumerate(self.measurement.datasets)]}
         return self.tolerance
 
@@ -219,7 +215,7 @@ class FitResult:
                           for r in self.found],
                "warnings": self.warnings(),
                "datasets": [{"data": d.index, "file": d.file, "quantity": d.quantity,
-                             "polarization": d.polarization, "wavelengths": json_list(d.wavelengths),
+                             "polarization": d.polarization.name, "wavelengths": json_list(d.wavelengths),
                              "angles": json_list(d.angles), "measured": json_list(d.value),
                              "fitted": json_list(v), "residuals": json_list(r)}
                             for d, v, r in zip(self.measurement.datasets, self.fitted(), self.residuals())]}

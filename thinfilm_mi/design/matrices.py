@@ -8,7 +8,8 @@ conventions of :mod:`thinfilm_mi.optics.core` (``n + ik`` with ``k >= 0``, time
 dependence ``exp(-i w t)``, ``q = n cos(theta) = sqrt(n^2 - beta^2)`` with the
 decaying root, ``beta = n0 sin(theta0)``):
 
-* tilted admittances ``eta = q`` (s) and ``eta = n^2 / q`` (p), phase
+* tilted admittances ``eta = q`` (s) and ``eta = n^2 / q`` (p), the components'
+  :meth:`~thinfilm_mi.optics.polarization.Component.admittance`; phase
   ``delta = 2 pi q d / lambda``;
 * ``M = [[cos delta, -i sin delta / eta], [-i eta sin delta, cos delta]]``,
   ``[B, C] = M_1 M_2 ... M_L [1, eta_exit]`` (film 1 meets the light first);
@@ -38,7 +39,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["normal_index", "admittance", "Response", "stack_response", "film_index_response", "needle_response"]
+from thinfilm_mi.optics.polarization import Component
+
+__all__ = ["normal_index", "Response", "stack_response", "film_index_response", "needle_response"]
 
 TWO_PI = 2.0 * np.pi
 
@@ -50,11 +53,6 @@ def normal_index(n: np.ndarray, beta2: np.ndarray) -> np.ndarray:
     w = np.sqrt(np.asarray(n * n - beta2, dtype=np.complex128))
     flip = (w.imag < 0) | ((w.imag == 0) & (w.real < 0))
     return np.where(flip, -w, w)
-
-
-def admittance(n: np.ndarray, q: np.ndarray, pol: str) -> np.ndarray:
-    """Tilted admittance: ``q`` for s light, ``n^2 / q`` for p light."""
-    return q if pol == "s" else n * n / q
 
 
 def _matrix(c, s, eta):
@@ -88,18 +86,18 @@ class _Stack:
     """Films of one polarisation at P points: admittances, phases, matrices and
     the prefix / suffix products."""
 
-    def __init__(self, n_in, n_out, films, d, wl, beta2, pol):
+    def __init__(self, n_in, n_out, films, d, wl, beta2, pol: Component):
         self.pol = pol
         self.k0 = TWO_PI / wl
         self.beta2 = beta2
         q0 = normal_index(n_in.astype(np.complex128), beta2)
-        self.eta0 = admittance(n_in, q0, pol).real
+        self.eta0 = pol.admittance(n_in, q0).real
         q_out = normal_index(n_out, beta2)
-        self.eta_out = admittance(n_out, q_out, pol)
+        self.eta_out = pol.admittance(n_out, q_out)
         self.films = films
         self.d = [np.asarray(dj, dtype=np.float64) for dj in d]
         self.q = [normal_index(n, beta2) for n in films]
-        self.eta = [admittance(n, q, pol) for n, q in zip(films, self.q)]
+        self.eta = [pol.admittance(n, q) for n, q in zip(films, self.q)]
         self.delta = [self.k0 * q * dj for q, dj in zip(self.q, self.d)]
         shape = np.broadcast_shapes(wl.shape, *(x.shape for x in self.delta))
         self.c = [np.cos(x) for x in self.delta]
@@ -138,7 +136,7 @@ class _Stack:
         """dM_j / dn for a change ``dn`` of the film's complex index (1 for n, 1j for k)."""
         n, q, eta = self.films[j], self.q[j], self.eta[j]
         dq = n * dn / q
-        deta = dq if self.pol == "s" else 2.0 * n * dn / q - n * n * dq / (q * q)
+        deta = self.pol.admittance_derivative(n, q, dn, dq)
         ddelta = self.k0 * dq * self.d[j]
         c, s = self.c[j], self.s[j]
         return (-s * ddelta, -1j * (c * ddelta / eta - s * deta / (eta * eta)),
@@ -155,9 +153,10 @@ def stack_response(n_in, n_out, films, d, wl, beta2, pol, index_groups=(), deriv
     ``n_in`` (P,) real index of the medium the light comes from, ``n_out`` (P,)
     complex index of the exit medium, ``films`` a list of L complex arrays (P,)
     in the order the light meets them, ``d`` (L,) thicknesses in nm, ``wl``
-    (P,) wavelengths in nm, ``beta2`` (P,) ``(n_in sin theta)^2``, ``pol`` ``"s"``
-    or ``"p"``. ``index_groups``: for each free index a list of the films that
-    share it; its derivative is the sum over them (a change of the real part n).
+    (P,) wavelengths in nm, ``beta2`` (P,) ``(n_in sin theta)^2``, ``pol`` the
+    component (:data:`~thinfilm_mi.optics.polarization.S` or ``P``).
+    ``index_groups``: for each free index a list of the films that share it;
+    its derivative is the sum over them (a change of the real part n).
     The derivatives ``dR``, ``dT`` are (P, L + len(index_groups)). The point
     arrays may broadcast against thicknesses of another shape: points (P, 1) and
     each ``d[j]`` (B,) give R and T of B stacks at once, (P, B), and derivatives
@@ -218,7 +217,7 @@ def needle_response(n_in, n_out, films, d, wl, beta2, pol, depths, needles) -> R
     st = _Stack(n_in, n_out, films, d, wl, beta2, pol)
     P = wl.shape[0]
     q_n = [normal_index(n, beta2) for n in needles]
-    eta_n = np.stack([admittance(n, q, pol) for n, q in zip(needles, q_n)], axis=-1)   # (P, M)
+    eta_n = np.stack([pol.admittance(n, q) for n, q in zip(needles, q_n)], axis=-1)   # (P, M)
     kappa = st.k0[:, None] * np.stack(q_n, axis=-1)                                      # (P, M)
     col = (lambda a: np.asarray(a)[:, None] if np.ndim(a) else a)
     parts = []

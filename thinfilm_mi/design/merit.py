@@ -14,7 +14,10 @@ so a design whose every point is at its tolerance has merit 1. The Jacobian of
 ``sum(e^2)`` with respect to the thickness of a film inserted at each depth.
 
 All (wavelength, angle, side) points of all targets are gathered into one
-array per (side, angle), evaluated once per polarisation that some target needs.
+array per (side, angle), evaluated once per polarisation component that some
+target needs. Each target's residuals are its quantity's
+(:meth:`thinfilm_mi.design.target_quantities.TargetQuantity.residuals`); the colour
+targets of one colour space are evaluated together.
 """
 from __future__ import annotations
 
@@ -22,9 +25,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from thinfilm_mi.design.colourmath import Dual, colour_weights, delta_e2000_residuals, lab, xy_of
+from thinfilm_mi.design.colourmath import colour_weights
 from thinfilm_mi.design.matrices import Response, needle_response, stack_response
+from thinfilm_mi.design.options import Side, as_side
+from thinfilm_mi.design.target_quantities import Colour
 from thinfilm_mi.design.targets import Problem, Target
+from thinfilm_mi.optics.polarization import Component, Polarization, as_polarization
 
 __all__ = ["Design", "Merit", "TargetValues"]
 
@@ -65,16 +71,13 @@ class TargetValues:
 class _Group:
     """The points of one (side, angle): wavelengths, media and film indices."""
 
-    def __init__(self, problem: Problem, side: str, angle: float, wl: np.ndarray):
+    def __init__(self, problem: Problem, side: Side, angle: float, wl: np.ndarray):
         self.side, self.angle, self.wl = side, angle, wl
-        amb = problem.ambient.index(wl)
-        sub = problem.substrate.index(wl)
-        self.n_in = (amb if side == "front" else sub).real.astype(np.float64)
-        self.n_out = (sub if side == "front" else amb.real.astype(np.complex128)).astype(np.complex128)
+        self.n_in, self.n_out = side.media(problem.ambient.index(wl), problem.substrate.index(wl))
         self.beta2 = (self.n_in * np.sin(np.radians(angle))) ** 2
         self.index = [None if m.free else m.material.index(wl).astype(np.complex128)
                       for m in problem.materials]
-        self.pols: set[str] = set()
+        self.pols: set[Component] = set()
 
 
 class Merit:
@@ -85,7 +88,7 @@ class Merit:
         #: step (in 1 nm samples) of the colour integrals: 1 is exact, > 1 approximates (synthesis)
         self.colour_step = colour_step
         self.free = [i for i, m in enumerate(problem.materials) if m.free]
-        wanted: dict[tuple[str, float], list[np.ndarray]] = {}
+        wanted: dict[tuple[Side, float], list[np.ndarray]] = {}
         for t in problem.targets:
             for a in t.angles:
                 wanted.setdefault((t.side, float(a)), []).append(self._grid(t))
@@ -97,7 +100,7 @@ class Merit:
             rows = []
             for a in t.angles:
                 g = self.groups[(t.side, float(a))]
-                g.pols.update(("s", "p") if t.polarization == "unpolarized" else (t.polarization,))
+                g.pols.update(t.polarization.components)
                 rows.append(((t.side, float(a)), np.searchsorted(g.wl, self._grid(t))))
             self.terms.append(rows)
             self.points += t.angles.size * (t.wavelengths.size if t.wavelengths is not None else 1)
@@ -142,60 +145,46 @@ class Merit:
         out = {}
         for key, g in self.groups.items():
             films = self._films(g, design)
-            back = g.side == "back"
-            order = list(range(L))[::-1] if back else list(range(L))
+            order = g.side.order(L)
             f_films = [pts(films[j]) for j in order]
             f_d = list(d[order])
             res = {}
-            for pol in sorted(g.pols):
+            for pol in sorted(g.pols, key=lambda c: c.name):
                 if depths is None:
                     groups = [[k for k, j in enumerate(order) if design.films[j] == m] for m in self.free]
                     r = stack_response(pts(g.n_in), pts(g.n_out), f_films, f_d, pts(g.wl), pts(g.beta2), pol,
                                        groups, derivatives=jac)
-                    if back and L and jac:
-                        cols = np.r_[np.arange(L)[::-1], np.arange(L, r.dR.shape[-1])]
-                        r = Response(r.R, r.T, r.dR[..., cols], r.dT[..., cols])
+                    if L and jac:
+                        cols = np.r_[np.argsort(order), np.arange(L, r.dR.shape[-1])]
+                        r = Response(r.R, r.T, *g.side.front_order((r.dR, r.dT), cols, -1))
                 else:
                     needle_idx = [m for m, dm in enumerate(self.problem.materials) if dm.needle]
                     needles = [self._films(g, Design([m], np.zeros(1), design.n))[0] for m in needle_idx]
-                    z = [depths[j] if not back else d[j] - depths[j] for j in order] if L else [np.zeros(1)]
+                    z = [g.side.depths(depths[j], d[j]) for j in order] if L else [np.zeros(1)]
                     r = needle_response(g.n_in, g.n_out, f_films, f_d, g.wl, g.beta2, pol, z, needles)
-                    if back and L:
+                    if L:
                         sizes = [len(depths[j]) for j in range(L)]
-                        rev_starts = np.r_[0, np.cumsum([sizes[j] for j in order])[:-1]]
-                        perm = np.concatenate([rev_starts[order.index(j)] + np.arange(sizes[j]) for j in range(L)])
-                        r = Response(r.R, r.T, r.dR[:, perm], r.dT[:, perm])
+                        starts = np.r_[0, np.cumsum([sizes[j] for j in order])[:-1]]
+                        perm = np.concatenate([starts[order.index(j)] + np.arange(sizes[j]) for j in range(L)])
+                        r = Response(r.R, r.T, *g.side.front_order((r.dR, r.dT), perm, 1))
                     P = g.wl.size
                     r = Response(r.R, r.T, r.dR.reshape(P, -1), r.dT.reshape(P, -1))
                 res[pol] = r
             out[key] = res
         return out
 
-    def spectrum(self, design: Design, wavelengths, angle: float, side: str = "front",
-                 polarization: str = "unpolarized") -> tuple[np.ndarray, np.ndarray]:
-        """``(R, T)`` of ``design`` at ``wavelengths`` (nm) and ``angle`` (degrees)."""
+    def spectrum(self, design: Design, wavelengths, angle: float, side: Side | str = "front",
+                 polarization: Polarization | str = "unpolarized") -> tuple[np.ndarray, np.ndarray]:
+        """``(R, T)`` of ``design`` at ``wavelengths`` (nm) and ``angle`` (degrees),
+        lit from ``side`` in ``polarization`` (objects or their names)."""
+        side = as_side(side)
         g = _Group(self.problem, side, float(angle), np.asarray(wavelengths, dtype=np.float64))
         films = self._films(g, design)
-        order = list(range(len(films)))[::-1] if side == "back" else list(range(len(films)))
-        pols = ("s", "p") if polarization == "unpolarized" else (polarization,)
+        order = side.order(len(films))
+        pols = as_polarization(polarization).components
         res = [stack_response(g.n_in, g.n_out, [films[j] for j in order], [design.d[j] for j in order],
                               g.wl, g.beta2, p, derivatives=False) for p in pols]
         return sum(r.R for r in res) / len(res), sum(r.T for r in res) / len(res)
-
-    @staticmethod
-    def _quantity(res: dict, t: Target, what: str, idx: np.ndarray, jac: bool):
-        """R, T or A (``what``) of target ``t``'s polarisation at ``idx``, and its derivatives."""
-        pols = ("s", "p") if t.polarization == "unpolarized" else (t.polarization,)
-        w = 1.0 / len(pols)
-        val = sum(getattr(res[p], "R" if what == "R" else "T")[idx] for p in pols) * w if what != "A" else \
-            1.0 - sum(res[p].R[idx] + res[p].T[idx] for p in pols) * w
-        if not jac:
-            return val, None
-        if what == "A":
-            der = -sum(res[p].dR[idx] + res[p].dT[idx] for p in pols) * w
-        else:
-            der = sum(getattr(res[p], "d" + what)[idx] for p in pols) * w
-        return val, der
 
     # -- residuals -----------------------------------------------------------
     def evaluate(self, design: Design, jac: bool = True, depths=None, report: bool = False):
@@ -204,67 +193,28 @@ class Merit:
         batch (``design.d`` of shape (L, B)) ``e`` is (N, B) and ``J`` (N, B, K)."""
         resp = self._responses(design, depths, jac)
         parts: list = [None] * len(self.terms)      # per target: (e, de, achieved, error)
-        pending: dict[str, list] = {"Lab": [], "xy": []}
+        pending: dict = {}                           # colour space: its targets, evaluated together
         for i, (t, rows) in enumerate(zip(self.problem.targets, self.terms)):
-            what = t.quantity if t.quantity in ("R", "T", "A") else t.of
-            pairs = [self._quantity(resp[key], t, what, idx, jac) for key, idx in rows]
+            spectral = t.quantity.spectral(t)
+            pairs = [spectral.power(resp[key], t.polarization.components, idx, jac) for key, idx in rows]
             q = np.stack([p[0] for p in pairs])                      # (angles, n[, B])
             dq = np.stack([p[1] for p in pairs]) if jac else None    # (angles, n[, B], K)
-            if t.quantity in ("R", "T", "A"):
-                tol = t.tolerance.reshape((-1,) + (1,) * (q.ndim - 2))
-                e, de = self._kind(t, (q - t.value.reshape(tol.shape)) / tol,
-                                   None if dq is None else dq / tol[..., None])
-                parts[i] = (e, de, q, np.abs(e) * tol)
-                continue
-            _, W, white = colour_weights(t.illuminant, t.observer, self.colour_step)
-            XYZ = np.moveaxis(q, 1, -1) @ W                             # (angles[, B], 3)
-            # (angles[, B], 3, K)
-            dXYZ = None if dq is None else np.swapaxes(np.tensordot(dq, W, axes=([1], [0])), -1, -2)
-            if t.quantity == "Y":
-                tol = t.tolerance[0]
-                e, de = self._kind(t, (XYZ[..., 1] - t.value[0]) / tol,
-                                   None if dXYZ is None else dXYZ[..., 1, :] / tol)
-                parts[i] = (e, de, XYZ[..., 1], np.abs(e) * tol)
-            else:
-                pending[t.space].append((i, XYZ, dXYZ, white))
+            parts[i] = t.quantity.residuals(t, q, dq, self.colour_step, pending)
+        index = {id(t): i for i, t in enumerate(self.problem.targets)}
         for space, items in pending.items():       # every colour target of a space in one pass
-            if not items:
-                continue
-            shaped = lambda a, like: np.broadcast_to(a, like.shape[:-1] + a.shape[-1:])
-            XYZ = np.concatenate([it[1] for it in items])
-            ref = np.concatenate([shaped(self.problem.targets[it[0]].reference, it[1]) for it in items])
-            if space == "Lab":
-                c = lab(Dual.variables(XYZ), np.concatenate([shaped(it[3], it[1]) for it in items]))
-                r = delta_e2000_residuals(c, ref)
-            else:
-                c = xy_of(Dual.variables(XYZ))
-                r = Dual(c.val - ref, c.der)
-            start = 0
-            for i, xyz, dXYZ, _ in items:
-                sl = slice(start, start + xyz.shape[0])
-                start = sl.stop
-                tol = self.problem.targets[i].tolerance[0]
-                e = np.moveaxis(r.val[sl], -1, 1) / tol                          # (angles, 3|2[, B])
-                de = None if dXYZ is None else np.moveaxis(r.der[sl] @ dXYZ, -2, 1) / tol
-                parts[i] = (e, de, c.val[sl], np.sqrt(np.sum(r.val[sl] ** 2, axis=-1)))
+            for it, part in zip(items, Colour.evaluate(space, items)):
+                parts[index[id(it[0])]] = part
         e_all, j_all, values = [], [], []
         for t, (e, de, achieved, error) in zip(self.problem.targets, parts):
-            e = e.reshape((-1,) + e.shape[2:]) if t.quantity != "Y" else e
+            e = e.reshape((-1,) + e.shape[2:])
             e_all.append(e)
             if jac:
-                j_all.append(de.reshape((-1,) + de.shape[2:]) if t.quantity != "Y" else de)
+                j_all.append(de.reshape((-1,) + de.shape[2:]))
             if report:
                 values.append(TargetValues(t, achieved, error, np.sum(e ** 2, axis=0)))
         e = np.concatenate(e_all)
         J = np.concatenate(j_all, axis=0) if jac else None
         return (e, J, values) if report else (e, J)
-
-    @staticmethod
-    def _kind(t: Target, e: np.ndarray, de):
-        if t.kind == "=":
-            return e, de
-        active = e > 0 if t.kind == "<=" else e < 0
-        return np.where(active, e, 0.0), None if de is None else de * active[..., None]
 
     def merit(self, design: Design) -> float:
         """``sqrt(sum(e^2) / points)``."""

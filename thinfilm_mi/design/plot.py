@@ -13,10 +13,10 @@ MAX_CURVES = 12
 def _spectra(ax, result):
     tol = result.tolerance
     drawn = 0
-    spectral = [v for v in result.values if v.target.quantity in ("R", "T", "A")]
+    spectral = [v for v in result.values if v.target.wavelengths is not None]     # R, T, A
     for i, v in enumerate(result.values):
         t = v.target
-        if t.quantity not in ("R", "T", "A"):
+        if t.wavelengths is None:
             continue
         lo, hi = float(t.wavelengths.min()), float(t.wavelengths.max())
         pad = max(20.0, 0.1 * (hi - lo))
@@ -25,15 +25,10 @@ def _spectra(ax, result):
             if drawn == MAX_CURVES:
                 break
             R, T = result.spectrum(grid, angle, t.side, t.polarization)
-            curve = {"R": R, "T": T, "A": 1.0 - R - T}[t.quantity]
-            line, = ax.plot(grid, curve, lw=1.1, label=f"targets[{t.index}] {t.quantity} {angle:g}°")
+            curve = t.quantity.curve(R, T)
+            line, = ax.plot(grid, curve, lw=1.1, label=f"targets[{t.index}] {t.quantity.name} {angle:g}°")
+            t.kind.draw(ax, t.wavelengths, t.value, t.tolerance, line.get_color())
             c = line.get_color()
-            if t.kind == "=":
-                ax.errorbar(t.wavelengths, t.value, yerr=t.tolerance, fmt="none", ecolor=c, alpha=0.5, lw=0.8)
-            else:
-                bound = t.value + (t.tolerance if t.kind == "<=" else -t.tolerance)
-                ax.plot(t.wavelengths, t.value, ls="none", marker="v" if t.kind == "<=" else "^", ms=4, color=c)
-                ax.plot(t.wavelengths, bound, ls=":", color=c, lw=0.8)
             if tol is not None:
                 spread = tol.achieved[i][a]                      # (wavelengths, draws)
                 lo_, hi_ = np.percentile(spread, [5, 95], axis=-1)
@@ -58,7 +53,7 @@ def _chromaticity(ax, result):
     from thinfilm_mi.colour.report import OBSERVERS
     from thinfilm_mi.design.colourmath import colour_weights
 
-    targets = [v for v in result.values if v.target.quantity == "colour"]
+    targets = [v for v in result.values if v.target.space is not None]            # colour targets
     observer = targets[0].target.observer
     locus = colour.XYZ_to_xy(colour.MSDS_CMFS[OBSERVERS[observer]].values)
     ax.plot(np.append(locus[:, 0], locus[0, 0]), np.append(locus[:, 1], locus[0, 1]), color="0.3", lw=1)
@@ -66,7 +61,7 @@ def _chromaticity(ax, result):
     pts, paths = [], {}
     for i, v in enumerate(result.values):
         t = v.target
-        if t.quantity != "colour":
+        if t.space is None:
             continue
         wl, W, white = colour_weights(t.illuminant, t.observer)
         key = (t.of, t.illuminant, t.observer, t.side, t.polarization)
@@ -74,19 +69,16 @@ def _chromaticity(ax, result):
             path = []
             for angle in angles:
                 R, T = result.spectrum(wl, angle, t.side, t.polarization)
-                XYZ = (R if t.of == "R" else T) @ W
+                XYZ = t.of.curve(R, T) @ W
                 path.append(XYZ[:2] / XYZ.sum())
             path = np.array(path)
-            side = "" if t.side == "front" else ", from the substrate"
-            line, = ax.plot(path[:, 0], path[:, 1], lw=1, label=f"{t.of} under {t.illuminant}{side}, 0-85°")
+            side = t.side.describe()
+            line, = ax.plot(path[:, 0], path[:, 1], lw=1,
+                            label=f"{t.of.name} under {t.illuminant}{side and ', ' + side}, 0-85°")
             paths[key] = (path, line.get_color())
             pts.append(path)
         c = paths[key][1]
-        if t.space == "Lab":
-            wanted = colour.XYZ_to_xy(colour.Lab_to_XYZ(t.reference, colour.XYZ_to_xy(white)))
-            got = colour.XYZ_to_xy(colour.Lab_to_XYZ(v.achieved, colour.XYZ_to_xy(white)))
-        else:
-            wanted, got = t.reference, v.achieved
+        wanted, got = t.space.to_xy(t.reference, white), t.space.to_xy(v.achieved, white)
         wanted = np.broadcast_to(wanted, (t.angles.size, 2))
         ax.scatter(wanted[:, 0], wanted[:, 1], marker="x", color=c, s=40, zorder=4)
         ax.scatter(got[:, 0], got[:, 1], facecolors="none", edgecolors=c, s=40, zorder=4)
@@ -94,7 +86,7 @@ def _chromaticity(ax, result):
             ax.annotate(f"{angle:g}°", got[a], fontsize=6, xytext=(4, 2), textcoords="offset points")
         if result.tolerance is not None:
             ach = result.tolerance.achieved[i]                   # (angles, draws, 3|2)
-            spread = colour.XYZ_to_xy(colour.Lab_to_XYZ(ach, colour.XYZ_to_xy(white))) if t.space == "Lab" else ach
+            spread = t.space.to_xy(ach, white)
             ax.scatter(spread[..., 0].ravel(), spread[..., 1].ravel(), s=2, color=c, alpha=0.3, lw=0)
         pts += [wanted, got]
     pts = np.concatenate(pts)
@@ -117,7 +109,7 @@ def _spread(ax, result):
     ax.set_xlabel("merit")
     ax.set_ylabel("draws")
     size = f"{100 * tol.spec.sigma:g} %" if tol.spec.relative else f"{tol.spec.sigma:g} nm"
-    ax.set_title(f"merit over {tol.spec.draws} draws of {size} thickness errors ({tol.spec.distribution})",
+    ax.set_title(f"merit over {tol.spec.draws} draws of {size} thickness errors ({tol.spec.distribution.name})",
                  fontsize=8)
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
@@ -128,7 +120,7 @@ def design_figure(result):
     from matplotlib.figure import Figure
 
     panels = [_spectra]
-    if any(v.target.quantity == "colour" for v in result.values):
+    if any(v.target.space is not None for v in result.values):
         panels.append(_chromaticity)
     if result.tolerance is not None:
         panels.append(_spread)

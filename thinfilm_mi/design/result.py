@@ -9,10 +9,13 @@ from typing import Any
 import numpy as np
 
 from thinfilm_mi.design.merit import Design, Merit, TargetValues
+from thinfilm_mi.design.options import Side
+from thinfilm_mi.design.target_quantities import json_list
 from thinfilm_mi.design.targets import Problem, Target
 from thinfilm_mi.materials.stack import format_layers
+from thinfilm_mi.optics.polarization import Polarization
 
-__all__ = ["DesignResult", "design_layers", "film_specs", "format_index", "json_list"]
+__all__ = ["DesignResult", "design_layers", "film_specs", "format_index"]
 
 
 def format_index(z: complex) -> str:
@@ -34,19 +37,6 @@ def film_specs(problem: Problem, design: Design) -> list[str]:
 def design_layers(problem: Problem, design: Design) -> str:
     """``"MATERIAL NM; ..."`` (thicknesses to 0.1 pm): what every plugin's ``layers`` accepts."""
     return format_layers(zip(film_specs(problem, design), design.d))
-
-
-def json_list(a) -> Any:
-    """An array as a JSON list (floats to 1e-10)."""
-    return np.round(np.asarray(a, dtype=np.float64), 10).tolist()
-
-
-def _wanted(t: Target) -> str:
-    if t.quantity == "colour":
-        return f"{t.space} {', '.join(f'{v:g}' for v in t.reference)}"
-    v = t.value
-    text = f"{v[0]:.4g}" if np.all(v == v[0]) else f"{v.min():.4g}..{v.max():.4g}"
-    return f"{t.kind} {text}"
 
 
 @dataclass
@@ -84,9 +74,10 @@ class DesignResult:
 
         return Stack(self.layers, substrate=self.problem.substrate_spec, ambient=self.problem.ambient_spec)
 
-    def spectrum(self, wavelengths, angle: float = 0.0, side: str = "front",
-                 polarization: str = "unpolarized") -> tuple[np.ndarray, np.ndarray]:
-        """``(R, T)`` of the design at ``wavelengths`` (nm) and ``angle`` (degrees)."""
+    def spectrum(self, wavelengths, angle: float = 0.0, side: Side | str = "front",
+                 polarization: Polarization | str = "unpolarized") -> tuple[np.ndarray, np.ndarray]:
+        """``(R, T)`` of the design at ``wavelengths`` (nm) and ``angle`` (degrees),
+        lit from ``side`` in ``polarization`` (objects or their names)."""
         return self.merit_function.spectrum(self.design, wavelengths, angle, side, polarization)
 
     # -- reports -------------------------------------------------------------
@@ -95,20 +86,10 @@ class DesignResult:
         out = []
         for v in self.values:
             t = v.target
-            rec: dict[str, Any] = {"target": t.index, "quantity": t.quantity, "kind": t.kind,
-                                   "polarization": t.polarization, "side": t.side,
+            rec: dict[str, Any] = {"target": t.index, "quantity": t.quantity.name, "kind": t.kind.name,
+                                   "polarization": t.polarization.name, "side": t.side.name,
                                    "angles": json_list(t.angles)}
-            if t.quantity in ("R", "T", "A"):
-                rec.update(wavelengths=json_list(t.wavelengths), wanted=json_list(t.value),
-                           tolerance=json_list(t.tolerance), achieved=json_list(v.achieved))
-            else:
-                rec.update(illuminant=t.illuminant, observer=t.observer, of=t.of,
-                           tolerance=float(t.tolerance[0]))
-                if t.quantity == "Y":
-                    rec.update(wanted=float(t.value[0]), achieved=json_list(v.achieved))
-                else:
-                    rec.update(space=t.space, wanted=json_list(t.reference), achieved=json_list(v.achieved),
-                               **{"delta_e2000" if t.space == "Lab" else "distance": json_list(v.error)})
+            rec.update(t.quantity.record(t, v.achieved, v.error))
             within = v.within
             rec.update(error=json_list(v.error), within=bool(np.all(within)),
                        points_within=int(np.sum(within)), points=int(within.size),
@@ -135,23 +116,12 @@ class DesignResult:
         for v in self.values:
             t = v.target
             lines.append("")
-            lines.append(f"{t.name}: {t.describe()}; wanted {_wanted(t)}, tolerance "
+            lines.append(f"{t.name}: {t.describe()}; wanted {t.quantity.wanted(t)}, tolerance "
                          f"{_tol_text(t)}")
             lines.append(f"  {'angle':>6} {'achieved':>44} {'error':>10} {'within':>8}")
             for a, angle in enumerate(t.angles):
                 ach, err, ok = v.achieved[a], np.atleast_1d(v.error[a]), np.atleast_1d(v.within[a])
-                if t.quantity in ("R", "T", "A"):
-                    if ach.size == 1:
-                        text = f"{ach[0]:.5f} at {t.wavelengths[0]:g} nm"
-                    else:
-                        worst = int(np.argmax(err / t.tolerance))
-                        text = (f"{ach.mean():.5f} mean, {ach.min():.5f}..{ach.max():.5f}; "
-                                f"worst {t.wavelengths[worst]:g} nm")
-                        err = err[worst:worst + 1]
-                elif t.quantity == "Y":
-                    text = f"{float(ach):.5f}"
-                else:
-                    text = ", ".join(f"{x:.4g}" for x in np.atleast_1d(ach))
+                text, err = t.quantity.achieved_text(t, ach, err)
                 within = f"{int(ok.sum())}/{ok.size}" if ok.size > 1 else ("yes" if ok[0] else "NO")
                 lines.append(f"  {angle:>6g} {text:>44} {float(err.max()):>10.4g} {within:>8}")
         if self.tolerance is not None:
@@ -169,5 +139,5 @@ class DesignResult:
 
 def _tol_text(t: Target) -> str:
     tol = t.tolerance
-    unit = {"Lab": " ΔE2000", "xy": " in xy"}.get(t.space or "", "")
+    unit = t.quantity.tolerance_unit(t)
     return (f"{tol[0]:.4g}" if np.all(tol == tol[0]) else f"{tol.min():.4g}..{tol.max():.4g}") + unit

@@ -322,7 +322,7 @@ def run(problem: Problem, *, start: Design | None = None, time_limit: float | No
     (seconds): no new start begins after it (the one running finishes its
     current refinement)."""
     merit = Merit(problem)
-    colour = any(t.quantity in ("Y", "colour") for t in problem.targets)
+    colour = any(t.quantity.colour_integral for t in problem.targets)
     fast = Merit(problem, colour_step=SYNTHESIS_COLOUR_STEP) if colour else merit
     t0 = time.perf_counter()
     deadline = t0 + time_limit if time_limit is not None else math.inf

@@ -58,9 +58,7 @@ the entry (``targets[2] (colour): ...``).
 """
 from __future__ import annotations
 
-import math
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -68,28 +66,25 @@ from typing import Any
 import numpy as np
 
 from thinfilm_mi import materials as _materials
-from thinfilm_mi.colour.report import integration_wavelengths, resolve_illuminant, resolve_observer
+from thinfilm_mi.design.options import FRONT, KIND_ALIASES, KINDS, SIDES, Kind, Side
+from thinfilm_mi.design.parsing import fail, parse_choice, parse_grid, parse_number
+from thinfilm_mi.design.target_quantities import (
+    TARGET_QUANTITIES,
+    TARGET_QUANTITY_ALIASES,
+    ColourSpace,
+    Power,
+    TargetQuantity,
+)
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.sources import is_material_file
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL, MAX_FILMS, parse_layers
+from thinfilm_mi.optics.choices import choose
+from thinfilm_mi.optics.polarization import ALIASES, POLARIZATIONS, UNPOLARIZED, Polarization
 
-__all__ = ["DesignMaterial", "Target", "Problem", "load_problem", "films_from_layers", "QUANTITIES", "KINDS"]
-
-QUANTITIES = ("R", "T", "A", "Y", "colour")
-KINDS = ("=", "<=", ">=")
-POLARIZATIONS = ("unpolarized", "s", "p")
-SIDES = ("front", "back")
+__all__ = ["DesignMaterial", "Target", "Problem", "load_problem", "films_from_layers", "check_keys", "locate_file",
+           "read_yaml", "resolve_material"]
 
 _TOP_KEYS = ("ambient", "substrate", "materials", "max_layers", "start", "seeds", "seed", "targets")
-_COMMON = ("quantity", "angles", "tolerance", "kind", "polarization", "side")
-_KEYS = {
-    "R": _COMMON + ("wavelengths", "value"),
-    "Y": _COMMON + ("value", "illuminant", "observer", "of"),
-    "colour": _COMMON + ("Lab", "xy", "illuminant", "observer", "of"),
-}
-_KEYS["T"] = _KEYS["A"] = _KEYS["R"]
-#: Most wavelengths one target may list (a 0.001 nm grid over the visible).
-MAX_POINTS = 500_000
 
 
 @dataclass
@@ -114,41 +109,33 @@ class DesignMaterial:
 class Target:
     """One parsed target. ``value``/``tolerance`` hold one number per
     wavelength for R/T/A and one number otherwise; ``reference`` is the Lab or xy
-    of a colour target."""
+    of a colour target. ``quantity``, ``kind``, ``polarization``, ``side``,
+    ``of`` and ``space`` are the objects of their registries (each has a ``name``)."""
 
     index: int
-    quantity: str
+    quantity: TargetQuantity
     angles: np.ndarray
     tolerance: np.ndarray
-    kind: str = "="
-    polarization: str = "unpolarized"
-    side: str = "front"
+    kind: Kind = KINDS["="]
+    polarization: Polarization = UNPOLARIZED
+    side: Side = FRONT
     wavelengths: np.ndarray | None = None
     value: np.ndarray | None = None
     illuminant: str = "D65"
     observer: int = 2
-    of: str = "R"
-    space: str | None = None          # "Lab" or "xy" for colour targets
+    of: Power | None = None           # R or T: what Y and colour targets integrate
+    space: ColourSpace | None = None  # Lab or xy for colour targets
     reference: np.ndarray | None = None
 
     @property
     def name(self) -> str:
         """``targets[i] (quantity)``, as errors and tables name it."""
-        return f"targets[{self.index}] ({self.quantity})"
+        return f"targets[{self.index}] ({self.quantity.name})"
 
     def describe(self) -> str:
         """A short human description (the table's heading)."""
-        bits = [self.quantity if self.quantity in ("R", "T", "A") else f"{self.quantity} of {self.of}"]
-        if self.wavelengths is not None:
-            w = self.wavelengths
-            bits.append(f"{w[0]:g} nm" if w.size == 1 else f"{w[0]:g}-{w[-1]:g} nm ({w.size})")
-        if self.quantity in ("Y", "colour"):
-            bits.append(f"{self.illuminant}, {self.observer}°")
-        if self.polarization != "unpolarized":
-            bits.append(f"{self.polarization}-pol")
-        if self.side != "front":
-            bits.append("from the substrate")
-        return ", ".join(bits)
+        bits = self.quantity.describe(self) + [self.polarization.describe(), self.side.describe()]
+        return ", ".join(b for b in bits if b)
 
 
 @dataclass
@@ -168,60 +155,6 @@ class Problem:
     substrate_spec: str = ""
     base: Path | None = None          # the targets file's folder (relative material files)
     start_n: dict | None = None       # free index values the start gives {material index: n}
-
-
-def fail(where: str, message: str):
-    raise ThinFilmError(f"{where}: {message}")
-
-
-def parse_number(value: Any, where: str, what: str) -> float:
-    if isinstance(value, bool):
-        fail(where, f"{what} must be a number, got {value!r}")
-    try:
-        x = float(value)
-    except (TypeError, ValueError):
-        fail(where, f"{what} must be a number, got {value!r}")
-    if not math.isfinite(x):
-        fail(where, f"{what} must be finite, got {value!r}")
-    return x
-
-
-def parse_grid(value: Any, where: str, what: str) -> np.ndarray:
-    """``"START:STOP:STEP"``, one number, a list, or a string of numbers -> floats."""
-    if isinstance(value, str) and ":" in value:
-        parts = value.split(":")
-        if len(parts) != 3:
-            fail(where, f"{what} {value!r}: expected START:STOP:STEP, e.g. 420:680:5")
-        start, stop, step = (parse_number(p, where, f"{what} {value!r}") for p in parts)
-        if step <= 0 or stop < start:
-            fail(where, f"{what} {value!r}: need STOP >= START and STEP > 0")
-        count = int(math.floor((stop - start) / step + 1e-9)) + 1
-        if count > MAX_POINTS:
-            fail(where, f"{what} {value!r}: {count} values; at most {MAX_POINTS}")
-        return start + step * np.arange(count)
-    if isinstance(value, str):
-        value = [t for t in re.split(r"[,\s]+", value.strip()) if t]
-    items = value if isinstance(value, (list, tuple)) else [value]
-    if not items:
-        fail(where, f"{what}: none given")
-    return np.array([parse_number(v, where, what) for v in items], dtype=np.float64)
-
-
-def _per_point(value: Any, count: int, where: str, what: str) -> np.ndarray:
-    arr = parse_grid(value, where, what) if isinstance(value, (list, tuple)) else \
-        np.array([parse_number(value, where, what)])
-    if arr.size not in (1, count):
-        fail(where, f"{what}: give one number or one per wavelength ({count}), got {arr.size}")
-    return np.broadcast_to(arr, (count,)).copy()
-
-
-def parse_choice(value: Any, options: tuple[str, ...], where: str, what: str, aliases=None) -> str:
-    text = str(value).strip()
-    key = (aliases or {}).get(text.lower(), text)
-    for option in options:
-        if key.lower() == option.lower():
-            return option
-    fail(where, f"{what}: expected one of {', '.join(options)}, got {value!r}")
 
 
 def locate_file(spec: Any, base: Path | None) -> Any:
@@ -294,17 +227,17 @@ def _target(entry: Any, i: int, media, back_ok: str | None) -> Target:
         fail(where, f"expected a mapping such as {{quantity: R, wavelengths: '420:680:5', value: 0, "
                      f"tolerance: 0.005}}, got {entry!r}")
     if "quantity" not in entry:
-        fail(where, f"missing 'quantity' (one of {', '.join(QUANTITIES)})")
-    raw = str(entry["quantity"]).strip()
-    quantity = {"r": "R", "t": "T", "a": "A", "y": "Y", "colour": "colour", "color": "colour"}.get(raw.lower())
-    if quantity is None:
-        fail(where, f"unknown quantity {entry['quantity']!r}; expected one of {', '.join(QUANTITIES)}")
-    where = f"targets[{i}] ({quantity})"
-    unknown = [k for k in entry if k not in _KEYS[quantity]]
+        fail(where, f"missing 'quantity' (one of {', '.join(TARGET_QUANTITIES)})")
+    try:
+        quantity = choose(TARGET_QUANTITIES, entry["quantity"], "quantity", TARGET_QUANTITY_ALIASES)
+    except ThinFilmError:
+        fail(where, f"unknown quantity {entry['quantity']!r}; expected one of {', '.join(TARGET_QUANTITIES)}")
+    where = f"targets[{i}] ({quantity.name})"
+    unknown = [k for k in entry if k not in quantity.keys]
     if unknown:
-        fail(where, f"unknown key {unknown[0]!r} for quantity {quantity}; expected "
-                     f"{', '.join(k for k in _KEYS[quantity] if k != 'quantity')}")
-    for key in ("tolerance",) + (("value",) if quantity != "colour" else ()):
+        fail(where, f"unknown key {unknown[0]!r} for quantity {quantity.name}; expected "
+                     f"{', '.join(k for k in quantity.keys if k != 'quantity')}")
+    for key in quantity.required:
         if key not in entry:
             fail(where, f"missing {key!r}")
     angles = parse_grid(entry.get("angles", [0.0]), where, "angles")
@@ -312,47 +245,12 @@ def _target(entry: Any, i: int, media, back_ok: str | None) -> Target:
     if bad.size:
         fail(where, f"angles: each must be in [0, 90) degrees, got {bad[0]:g}")
     t = Target(i, quantity, angles, np.zeros(1))
-    t.kind = parse_choice(entry.get("kind", "="), KINDS, where, "kind", {"==": "="})
+    t.kind = parse_choice(entry.get("kind", "="), KINDS, where, "kind", KIND_ALIASES)
     t.polarization = parse_choice(entry.get("polarization", "unpolarized"), POLARIZATIONS, where, "polarization",
-                             {"unpolarised": "unpolarized", "u": "unpolarized"})
+                                  ALIASES)
     t.side = parse_choice(entry.get("side", "front"), SIDES, where, "side")
-    if t.side == "back" and back_ok:
-        fail(where, f"side: back needs light coming from the substrate, but {back_ok}")
-    if quantity in ("R", "T", "A"):
-        if "wavelengths" not in entry:
-            fail(where, "missing 'wavelengths' (e.g. \"420:680:5\" or 550)")
-        t.wavelengths = parse_grid(entry["wavelengths"], where, "wavelengths")
-        count = t.wavelengths.size
-        t.value = _per_point(entry["value"], count, where, "value")
-        t.tolerance = _per_point(entry["tolerance"], count, where, "tolerance")
-        need = t.wavelengths
-    else:
-        try:
-            t.illuminant = resolve_illuminant(entry.get("illuminant", "D65")).name
-            t.observer = resolve_observer(entry.get("observer", 2))
-        except ThinFilmError as e:
-            fail(where, str(e))
-        t.of = parse_choice(entry.get("of", "R"), ("R", "T"), where, "of")
-        t.tolerance = np.array([parse_number(entry["tolerance"], where, "tolerance")])
-        need = integration_wavelengths(t.illuminant)
-        if quantity == "Y":
-            t.value = np.array([parse_number(entry["value"], where, "value")])
-        else:
-            given = [k for k in ("Lab", "xy") if k in entry]
-            if len(given) != 1:
-                fail(where, "give exactly one of Lab: [L, a, b] or xy: [x, y]")
-            t.space = given[0]
-            ref = entry[t.space]
-            size = 3 if t.space == "Lab" else 2
-            if not isinstance(ref, (list, tuple)) or len(ref) != size:
-                fail(where, f"{t.space}: expected {size} numbers, got {ref!r}")
-            t.reference = np.array([parse_number(v, where, t.space) for v in ref])
-            if t.space == "Lab" and not 0 <= t.reference[0] <= 100:
-                fail(where, f"Lab: L* must be in [0, 100], got {t.reference[0]:g}")
-            if t.space == "xy" and not (0 < t.reference[0] < 1 and 0 < t.reference[1] < 1):
-                fail(where, f"xy: x and y must be in (0, 1), got {list(t.reference)}")
-            if t.kind != "=":
-                fail(where, f"kind: colour targets are '=' only (a colour difference), got {t.kind!r}")
+    t.side.check(back_ok, lambda message: fail(where, message))
+    need = quantity.parse(t, entry, where)
     if np.any(t.tolerance <= 0):
         fail(where, f"tolerance must be > 0, got {float(t.tolerance[t.tolerance <= 0][0]):g}")
     if t.value is not None and np.any((t.value < 0) | (t.value > 1)):

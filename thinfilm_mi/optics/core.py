@@ -552,6 +552,15 @@ def prepare_stack(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmi
     return cos0, q0, media, qs, E, e1, tpow, zero_pairs, adm
 
 
+#: Per polarisation: the transmission amplitude from the recursion's ``T / D``
+#: (times the interfaces' factors 2) and the media. s: as it is; p (whose
+#: admittances are ``q / n^2``): times the telescoped product of ``n_j / n_{j+1}``.
+_AMPLITUDE_T = {
+    "s": lambda t, media: t,
+    "p": lambda t, media: cmul(t, cmul(media[0], cinv(media[-1]))),
+}
+
+
 def stack_amplitudes(
     n0,
     cos0,
@@ -602,9 +611,7 @@ def stack_amplitudes(
         r = cmul(N, invD)
         t = None
         if T is not None:
-            t = cmul(T, invD) * two_l
-            if pol == "p":  # the telescoped product of n_j / n_{j+1}
-                t = cmul(t, cmul(media[0], cinv(media[-1])))
+            t = _AMPLITUDE_T[pol](cmul(T, invD) * two_l, media)
         r = Cx(-1.0, 0.0).select(grazing, r)
         if t is not None:
             t = Cx(0.0, 0.0).select(grazing, t)
@@ -794,12 +801,16 @@ def stack_loop_terms(n0, cos0, count, film, n_exit, wavelength, *, transmission:
              *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
     k = 6 if exponents else 5     # state entries per polarisation
 
+    def components(st) -> list:
+        """``(pol, (Nr, Ni, Dr, Di, T[, e]), admittance below)`` of s, then p, in the state ``st``."""
+        return [(pol, st[i * k:(i + 1) * k], Cx(*st[2 * k + 2 * i:2 * k + 2 * i + 2]))
+                for i, pol in enumerate(("s", "p"))]
+
     def step(j, *st):
         j = j - 1
         a, E, mag2 = film_terms(j)
         out = []
-        for pol, (Nr, Ni, Dr, Di, T, *e) in (("s", st[:k]), ("p", st[k:2 * k])):
-            b = Cx(*st[2 * k:2 * k + 2]) if pol == "s" else Cx(*st[2 * k + 2:2 * k + 4])
+        for pol, (Nr, Ni, Dr, Di, T, *e), b in components(st):
             N, D = rouard_step(a[pol], b, Cx(*st[2 * k + 4:]), Cx(Nr, Ni), Cx(Dr, Di))
             if smooth:
                 N, D, T = _smooth_scale(a[pol], b, N, D, T if transmission else None, mag2)
@@ -820,8 +831,7 @@ def stack_loop_terms(n0, cos0, count, film, n_exit, wavelength, *, transmission:
     a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
     E_top = Cx(*st[2 * k + 4:])
     results = {}
-    for pol, (Nr, Ni, Dr, Di, T, *e) in (("s", st[:k]), ("p", st[k:2 * k])):
-        b = Cx(*st[2 * k:2 * k + 2]) if pol == "s" else Cx(*st[2 * k + 2:2 * k + 4])
+    for pol, (Nr, Ni, Dr, Di, T, *e), b in components(st):
         N, D = rouard_step(a0[pol], b, E_top, Cx(Nr, Ni), Cx(Dr, Di))
         if smooth:
             N, D, T = _smooth_scale(a0[pol], b, N, D, T if transmission else None, 1.0)

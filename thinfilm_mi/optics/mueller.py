@@ -199,11 +199,11 @@ def amplitude_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: b
     E_b = Cx(st[2 * k + 4], st[2 * k + 5])
     a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
     out = {"q0": q0, "q_exit": q_ex, "n_exit": n_ex, "grazing": grazing}
+    # t_p carries the telescoped product n0 / n_exit of the p admittances q / n^2
+    t_scale = {"s": lambda T: T, "p": lambda T: cmul(T, cinv(n_ex) * n0)}
     for pol in ("s", "p"):
         N, D, T = step(a0[pol], below[pol], E_b, None, *cur[pol], last=True)
-        if T is not None and pol == "p":
-            T = cmul(T, cinv(n_ex) * n0)
-        out[pol] = (N, D, T)
+        out[pol] = (N, D, T if T is None else t_scale[pol](T))
     return out
 
 

@@ -4,6 +4,7 @@ r"""
 Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
 ----------------------------------------------------------------
 
+.. shared-rows: conductor
 .. pluginparameters::
 
  * - layers
@@ -33,9 +34,10 @@ Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
    - Optional factor on the reflectance; physically it should stay 1 (default: 1.0).
  * - thickness
    - |float| or |texture|
-   - Optional scale on every film's thickness, evaluated at the hit (e.g. a
-     ``bitmap`` with ``raw="true"``): soap-film and oil-slick looks. Forces
-     exact evaluation.
+   - Optional scale on every film's thickness at the hit, e.g. a ``bitmap`` with
+     ``raw="true"`` (clamped to >= 0; default: 1). In spectral variants the stack is
+     then evaluated exactly (no table); RGB and mono variants tabulate the colour over
+     its range, read at load.
  * - tabulate
    - |string| or |bool|
    - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
@@ -44,34 +46,32 @@ Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
      medium can totally reflect): its cost does not grow with the number of films.
      ``auto`` tabulates every stack with films in vectorised variants, unless a
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
-     within 2^19 texels, a table that still fits the cache, by a table of the exact
+     within 2^19 texels (a table that still fits the cache), by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact),
      or in a build of ~2 s (70 films or more on a metal: not started); ``true`` waits up
      to 10x longer (100 films: ~2.5 s). Built tables are kept on disk (the table store).
-     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
-     components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
-     within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
-     cheap exact) within 2^21 floats.
+     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller components
+     (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each within
+     ``table_error``, and ``auto`` tabulates from 40 films (fewer are as cheap exact)
+     within 2^21 floats.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
  * - spectral_resolution
    - |float|
-   - Spectral resolution (nm) tables may assume, for stacks whose exact values no
-     table resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide):
-     their ``R`` and ``T`` are tabulated convolved with a Gaussian in wavenumber
-     whose standard deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm),
-     i.e. light of coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is
-     verified within ``table_error`` against the convolved values and kept only if
-     the colours of the exact and the convolved values under D65, A and F11 differ
-     by ΔE2000 <= 0.5 (default: 1; 0: tables of the exact values only). Under
-     lasers or line-spectrum emitters narrower than the resolution pass 0, or
-     ``tabulate=false``.
+   - Spectral resolution (nm) tables may assume, for stacks whose exact values no table
+     resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide): their ``R``
+     and ``T`` are tabulated convolved with a Gaussian in wavenumber whose standard
+     deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm), i.e. light of
+     coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is verified within
+     ``table_error`` against the convolved values and kept only if the colours of the
+     exact and the convolved values under D65, A and F11 differ by ΔE2000 <= 0.5
+     (default: 1; 0: tables of the exact values only). Under lasers or line-spectrum
+     emitters narrower than the resolution pass 0, or ``tabulate=false``.
  * - coherence_thickness
    - |float|
-   - Films thicker than this (nm) are averaged incoherently, as tmm's
-     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
-     shows (default: 5000).
+   - Films thicker than this (nm) are averaged incoherently, as tmm's ``inc_tmm`` does,
+     instead of showing ~1 nm fringes no broadband light shows (default: 5000).
 
 A perfectly smooth conductor (metal or semiconductor substrate) under a stack of
 thin films, each of which may be dielectric, metallic or semiconducting (complex

@@ -4,6 +4,7 @@ r"""
 Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
 -------------------------------------------------------------
 
+.. shared-rows: diffuse
 .. pluginparameters::
 
  * - reflectance
@@ -14,7 +15,9 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
    - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."``, e.g.
      ``"SiO2 500; Au 2"``. The innermost film is normally the paper's absorbing
      film (a thin metal or semiconductor). Default: ``""`` (no films: exactly
-     Mitsuba's ``diffuse``).
+     Mitsuba's ``diffuse``; with model ``"exact"`` and a ``base_ior`` unlike
+     ``ext_ior``, the bare interface over the base, as Mitsuba's ``plastic`` with
+     ``nonlinear=true``).
  * - thin_film_ior, thin_film_thickness
    - |string| or |float|, |float|
    - Shorthand for one film (index or material name, thickness in nm). Not
@@ -34,9 +37,9 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
      the base (default: ``ext_ior``).
  * - thickness
    - |float| or |texture|
-   - Optional scale on every film's thickness at the hit (e.g. a ``bitmap`` with
-     ``raw="true"``); ``R_dh``, ``T_hemi`` (RGB/mono: the integrated diffuse term)
-     are tabulated over its range, read at load.
+   - Optional scale on every film's thickness at the hit, e.g. a ``bitmap`` with
+     ``raw="true"`` (clamped to >= 0; default: 1). ``R_dh``, ``T_hemi`` (RGB/mono: the
+     integrated diffuse term) are tabulated over its range, read at load.
  * - roughness
    - |float| or |texture|
    - Oren–Nayar roughness ``σ`` of the base (radians, the standard deviation of the
@@ -51,39 +54,39 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
      ``T`` where needed) is read from a verified table over (angle, wavelength) instead
      of the recursion (a cubic B-spline, split at the critical angle where the exit
      medium can totally reflect): its cost does not grow with the number of films.
-     ``auto`` tabulates in vectorised variants by measured cost (``R`` alone of films that
-     do not absorb from 1 film, ``R`` and ``T`` from 5), unless a ``thickness`` texture is
-     given, gradients are tracked, or the target cannot be met within 2^19 texels (a table
-     that still fits the cache), by a table of the exact values or one of the band-limited
-     values (``spectral_resolution``) (then: exact), or in a build of ~2 s (70 films or
-     more on a metal: not started); ``true`` waits up to 10x longer. Built tables are kept on disk.
-     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller
-     components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each
-     within ``table_error``, and ``auto`` tabulates from 40 films (fewer are as
-     cheap exact) within 2^21 floats.
+     ``auto`` tabulates in vectorised variants by measured cost (``R`` alone of films
+     that do not absorb from 1 film, ``R`` and ``T`` from 5), unless a ``thickness``
+     texture is given, gradients are tracked, or the target cannot be met within 2^19
+     texels (a table that still fits the cache), by a table of the exact values or one
+     of the band-limited values (``spectral_resolution``) (then: exact), or in a build
+     of ~2 s (70 films or more on a metal: not started); ``true`` waits up to 10x longer
+     (100 films: ~2.5 s). Built tables are kept on disk (the table store). In
+     ``*_spectral_polarized`` variants a table holds each lobe's Mueller components
+     (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each within
+     ``table_error``, and ``auto`` tabulates from 40 films (fewer are as cheap exact)
+     within 2^21 floats.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
  * - spectral_resolution
    - |float|
-   - Spectral resolution (nm) tables may assume, for stacks whose exact values no
-     table resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide):
-     their ``R`` and ``T`` are tabulated convolved with a Gaussian in wavenumber
-     whose standard deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm),
-     i.e. light of coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is
-     verified within ``table_error`` against the convolved values and kept only if
-     the colours of the exact and the convolved values under D65, A and F11 differ
-     by ΔE2000 <= 0.5 (default: 1; 0: tables of the exact values only). Under
-     lasers or line-spectrum emitters narrower than the resolution pass 0, or
-     ``tabulate=false``.
+   - Spectral resolution (nm) tables may assume, for stacks whose exact values no table
+     resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide): their ``R``
+     and ``T`` are tabulated convolved with a Gaussian in wavenumber whose standard
+     deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm), i.e. light of
+     coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is verified within
+     ``table_error`` against the convolved values and kept only if the colours of the
+     exact and the convolved values under D65, A and F11 differ by ΔE2000 <= 0.5
+     (default: 1; 0: tables of the exact values only). Under lasers or line-spectrum
+     emitters narrower than the resolution pass 0, or ``tabulate=false``.
  * - coherence_thickness
    - |float|
-   - Films thicker than this (nm) are averaged incoherently, as tmm's
-     ``inc_tmm`` does, instead of showing ~1 nm fringes no broadband light
-     shows (default: 5000).
+   - Films thicker than this (nm) are averaged incoherently, as tmm's ``inc_tmm`` does,
+     instead of showing ~1 nm fringes no broadband light shows (default: 5000).
 
 A diffuse base (Lambertian, or Oren–Nayar with ``roughness``) under a stack of thin
-films, after Hirayama et al. section 2.4. Component 0 is the delta reflection of the
+films, after Hirayama et al. section 2.4 (the coated-diffuse model and its ``model``
+registry: ``thinfilm_mi/render/coated_diffuse.py``). Component 0 is the delta reflection of the
 coating, component 1 the diffuse lobe; the films are evaluated at the path's wavelengths
 in the render kernel (float32), for unpolarised light. In ``*_spectral_polarized``
 variants component 0 is the Mueller matrix of the coating's amplitudes (exact or
@@ -109,7 +112,10 @@ If the innermost film does not absorb (or there are no films), there is no film 
 the coating is the whole stack, its exit medium is the base medium (index ``ext_ior``,
 see below), ``k_a = 1``, and ``k_r``, ``t = k_t`` are the exact composite reflectance
 and transmittance of all films. With no films ``k_r = 0`` and ``t = 1``, and every model
-*is* Mitsuba's ``diffuse``, bit for bit (the kernel does no stack work there).
+*is* Mitsuba's ``diffuse``, bit for bit (the kernel does no stack work there), except
+model ``"exact"`` over a ``base_ior`` unlike ``ext_ior``: no films there is still the
+interface between the two media, the limit of a film of vanishing thickness (its albedo
+is ``plastic``'s with ``nonlinear=true``, up to that plugin's fitted ``F_dr``).
 
 **model = "single"** (eq. 8-10). With ``ω_i`` the viewing direction (the
 paper's ``θ_i``) and ``ω_o`` the light direction (``θ_l``)::
@@ -248,7 +254,7 @@ gradient with respect to a constant ``reflectance`` treats the series as constan
 estimate's); through a texture it is exact. Under a ``thickness`` texture varying over
 the surface the table is 3-D, over ``(θ_i, θ_o, s)``, ``s`` in the texture's range, cubic
 over nodes uniform in ``sqrt(s)``, within 3e-3 of ``π f`` at their midpoints (at most 128
-MiB, else refused; ``tabulate/diffuse_texture.py``); the texture's gradient is the table's.
+MiB, else refused; ``tabulate/diffuse.py``); the texture's gradient is the table's.
 
 **Gradients.** Film thicknesses and indices (``layers.N.thickness``,
 ``layers.N.eta``/``k``): in spectral variants exact, per wavelength, for both
@@ -289,90 +295,46 @@ there is no run-time warning.
 """
 from __future__ import annotations
 
-import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.colour import attach_gradient, colour_channels, prepare_gradients
-from thinfilm_mi.render.diffuse import (
-    absorbs,
-    colour_estimate,
-    reflectance_from_props,
-    update_derivative_table,
-)
-from thinfilm_mi.render.diffuse_exact import (
-    SpectralTerms,
-    coating_transmission,
-    colour_diffuse,
-    colour_gradients,
-    colour_scale,
-    constant_albedo,
-    diffuse_factors,
-    prob_specular,
-    r_dh_with_derivatives,
-    texture_gradients_refused,
-)
-from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.coated_diffuse import DIFFUSE_MODELS, CoatedDiffuse, diffuse_model
+from thinfilm_mi.render.diffuse import reflectance_from_props
 from thinfilm_mi.render.media import real_index
-from thinfilm_mi.render.orennayar import OrenNayar, coated, coated_integrated, series_term
+from thinfilm_mi.render.orennayar import OrenNayar
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
 from thinfilm_mi.render.variant import check_variant
-from thinfilm_mi.tabulate.base import opaque_float
+
+__all__ = ["ThinFilmDiffuse", "NAME"]
 
 NAME = "thinfilm_diffuse"
-MODELS = ("single", "multiple", "exact")
 
 
 class ThinFilmDiffuse(mi.BSDF):
+    """The ``thinfilm_diffuse`` plugin: its properties read into a
+    :class:`~thinfilm_mi.render.coated_diffuse.CoatedDiffuse` (:attr:`coated`), which
+    does the work."""
+
     def __init__(self, props):
         check_variant(NAME)
         mi.BSDF.__init__(self, props)
-        self.mode = modes.current()
-        model = props.get("model", "exact")
-        if model not in MODELS:
-            raise ThinFilmError(f"{NAME}: 'model' must be 'single', 'multiple' or 'exact', "
-                                f"got {model!r}")
-        self.model = model
+        model = diffuse_model(props.get("model", next(iter(DIFFUSE_MODELS))), NAME)
         films = films_from_props(props, NAME)
         ext = ext_ior_from_props(props)
-        if "base_ior" in props and model != "exact":
-            raise ThinFilmError(f"{NAME}: 'base_ior' is a parameter of model 'exact' only "
-                                f"(model is {model!r})")
+        if "base_ior" in props and not model.takes_base_ior:
+            names = " or ".join(repr(m) for m, o in DIFFUSE_MODELS.items() if o.takes_base_ior)
+            raise ThinFilmError(f"{NAME}: 'base_ior' is a parameter of model {names} only "
+                                f"(model is {model.name!r})")
         base = real_index(props.get("base_ior"), "base_ior") if "base_ior" in props else ext
-        self.reflectance = reflectance_from_props(props, NAME)
+        reflectance = reflectance_from_props(props, NAME)
         options = stack_options_from_props(props, NAME)
-        self.texture = options["thickness_texture"]
-        self.base = OrenNayar(props, NAME)   # roughness: render/orennayar.py
+        rough = OrenNayar(props, NAME)   # roughness: render/orennayar.py
         check_unqueried(props, NAME)
-
-        self.no_films = len(films) == 0
-        # RGB/mono: only k_r from the colour table; t enters through coated_diffuse
-        sides = {False: not self.mode.integrated}
-        if model == "exact":
-            # The whole stack, coherent, over the base medium.
-            self.coating = KernelStack(films, ext, base, sides=sides, **options)
-            self.film_n = self.film_n_thickness = None
-        elif films and absorbs(films[-1][0]):
-            # The paper's split: films 1..N-1 over film N (semi-infinite), plus k_a of film N.
-            self.coating = KernelStack(films[:-1], ext, films[-1][0], sides=sides, **options)
-            self.film_n = films[-1][0]
-            self.film_n_thickness = opaque_float(films[-1][1])
-        else:
-            # No absorbing film N: all films over the base medium (matched to the ambient).
-            self.coating = KernelStack(films, ext, ext, sides=sides, **options)
-            self.film_n = None
-            self.film_n_thickness = None
-
-        #: spectral variants: R_dh and T_hemi (SpectralTerms)
-        self.terms = None
-        #: model "exact" over a base medium that differs from the ambient: t carries n_0/n_b
-        self.base_ratio = model == "exact" and base is not ext
-        #: RGB/mono variants: the diffuse term integrated as a product (coated_diffuse)
-        self.colour = None
-        self._update_hemispherical()
-
+        #: the coated-diffuse model (stack, base, model; render/coated_diffuse.py)
+        self.coated = CoatedDiffuse(model, films, ext, base, reflectance, rough, options,
+                                    modes.current(), NAME)
         self.m_components = [
             mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide,
             mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide,
@@ -380,221 +342,32 @@ class ThinFilmDiffuse(mi.BSDF):
         self.m_flags = self.m_components[0] | self.m_components[1]
         self.guard = ParameterGuard(self, NAME)
 
-    # -- load-time tables ----------------------------------------------------
-    def _update_hemispherical(self) -> None:
-        """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters;
-        in RGB/mono variants the integrated diffuse tables instead. In AD variants
-        (model "multiple") also ``R_dh``'s derivatives (:attr:`r_dh_grad`)."""
-        factors = diffuse_factors(self)
-        self.r_dh_grad = None
-        self._update_derivatives()
-        if self.mode.integrated:
-            if factors is not None:
-                self.colour = colour_diffuse(factors, self.texture, self.model, colour_channels(),
-                                             constant_albedo(self.reflectance, self.base.rough), NAME)
-                if self.film_n is not None and dr.is_diff_v(mi.Float):
-                    prepare_gradients([self.film_n])
-            return
-        self.terms = SpectralTerms(factors, self.texture, NAME, self.terms)
+    # the model's parts, for inspection
+    model = property(lambda self: self.coated.model, doc="The :class:`DiffuseModel`.")
+    coating = property(lambda self: self.coated.coating, doc="The coating's ``KernelStack``.")
+    film_n = property(lambda self: self.coated.film_n, doc="The paper's absorbing film N, or ``None``.")
+    base = property(lambda self: self.coated.base, doc="The base's ``OrenNayar`` roughness.")
+    terms = property(lambda self: self.coated.terms, doc="Spectral variants: ``R_dh``, ``T_hemi``.")
+    colour = property(lambda self: self.coated.colour, doc="RGB/mono variants: the diffuse table.")
+    r_dh_grad = property(lambda self: self.coated.r_dh_grad, doc="``R_dh``'s derivative table or ``None``.")
 
-    def _update_derivatives(self) -> None:
-        """``R_dh``'s derivative table, built or dropped
-        (:func:`thinfilm_mi.render.diffuse.update_derivative_table`)."""
-        self.r_dh_grad = update_derivative_table(self, diffuse_factors(self), self.model,
-                                                 self.r_dh_grad)
-        if self.r_dh_grad is not None and self.texture is not None:
-            self.r_dh_grad = None
-            raise ThinFilmError(texture_gradients_refused(NAME, self.model))
-
-    # -- kernel helpers ------------------------------------------------------
-    def _factors(self, si, cos_theta, active, transmission: bool):
-        """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
-        and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
-        resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
-        k_r = mi.UnpolarizedSpectrum(resp.R)
-        if not transmission:
-            return k_r, None, resp.reflection
-        return k_r, coating_transmission(self, si, cos_theta, resp.T, active), resp.reflection
-
-    def _series(self, si, kd, active):
-        """``1/(1 - k_d R_dh)`` for "multiple", ``1`` for "single"."""
-        if self.model == "single":
-            return mi.UnpolarizedSpectrum(1.0)
-        return dr.rcp(1.0 - kd * self._r_dh(si, active))
-
-    def _r_dh(self, si, active):
-        return r_dh_with_derivatives(self, self.terms.lookup(si, self.coating, active)[0], si, si.wavelengths,
-                                      lambda ix: ix.eval(si, active), active)
-
-    def _diffuse(self, si, kd, cos_i, wo, t_i, series, active):
-        """``π f`` towards ``wo``: ``k_d t_i t_o S`` per wavelength (a rough base:
-        :func:`~thinfilm_mi.render.orennayar.coated`), or its integral over wavelengths
-        in RGB/mono variants."""
-        cos_o = mi.Frame3f.cos_theta(wo)
-        base = self.base.terms(si, kd, wo, active) if self.base.rough else None
-        if self.colour is not None:
-            multiple = self.model != "single"
-            scale = colour_scale(self, si, active)
-            if base is None:
-                value = self.colour.value(cos_i, cos_o, kd, active, scale)
-                g = lambda c, r_dh: self.colour.series(kd[c], r_dh)
-            else:
-                value = coated_integrated(self.colour.node_values(cos_i, cos_o, active, scale), base,
-                                          multiple)
-                g = lambda c, r_dh: series_term(base.channel(c), r_dh, multiple)
-            if colour_gradients(self, si, active):
-                value = attach_gradient(value, self._colour_estimate(si, cos_i, cos_o, active, g))
-            return value
-        _, t_o, _ = self._factors(si, cos_o, active, transmission=True)
-        if base is not None:
-            r_dh = self._r_dh(si, active) if self.model != "single" else None
-            return coated(base, t_i, t_o, r_dh, self.model != "single")
-        return kd * t_i * t_o * series
-
-    def _bare(self, si, wo, active):
-        """``π f`` without films: ``k_d`` (exactly Mitsuba's ``diffuse``) or the rough base's."""
-        kd = self.reflectance.eval(si, active)
-        return self.base.terms(si, kd, wo, active).pi_f if self.base.rough else kd
-
-    def _colour_estimate(self, si, cos_i, cos_o, active, g):
-        """:func:`~thinfilm_mi.render.diffuse.colour_estimate` of this BSDF."""
-        return colour_estimate(self.coating, self.film_n, self.film_n_thickness, self.colour.r_dh_at,
-                               lambda *a: r_dh_with_derivatives(self, *a), si, cos_i, cos_o, active, g,
-                               self.base_ratio)
-
-    # -- BSDF interface ------------------------------------------------------
     def sample(self, ctx, si, sample1, sample2, active=True):
-        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
-        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
-        self.base.check_lambertian()
-        bs = dr.zeros(mi.BSDFSample3f)
-        cos_i = mi.Frame3f.cos_theta(si.wi)
-        active = mi.Bool(active) & (cos_i > 0)
-        if not (has_spec or has_diff) or (self.no_films and not has_diff):
-            return bs, mi.Spectrum(0.0)
-
-        if self.no_films:  # exactly Mitsuba's diffuse (component index 1 here)
-            bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
-            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
-            bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
-            bs.sampled_component = mi.UInt32(1)
-            value = self.mode.value(self._bare(si, bs.wo, active), self.mode.depolarized,
-                                    ctx, si.wi, bs.wo)
-            return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
-
-        spectral = self.colour is None
-        k_r, t_i, spec_lobe = self._factors(si, cos_i, active,
-                                            transmission=has_diff and spectral)
-        kd = series = None
-        if has_diff:
-            kd = self.reflectance.eval(si, active)
-            series = self._series(si, kd, active) if spectral else None
-        if has_spec and has_diff:
-            # detached: a sampling decision divides the weight as a constant
-            # (the weight's gradient is then that of k_r, resp. the diffuse term)
-            prob_spec = dr.detach(prob_specular(self, si, k_r, t_i, kd, series, active, cos_i))
-        else:
-            prob_spec = mi.Float(1.0 if has_spec else 0.0)
-        sel_spec = active & (sample1 < prob_spec)
-        sel_diff = active & (sample1 >= prob_spec)   # not ~sel_spec: a Python bool in scalar variants
-
-        wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
-        bs.wo = dr.select(sel_spec, mi.reflect(si.wi), wo_diff)
-        bs.eta = 1.0
-        bs.sampled_component = dr.select(sel_spec, mi.UInt32(0), mi.UInt32(1))
-        bs.sampled_type = dr.select(sel_spec, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
-                                    mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
-        pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo_diff)
-        bs.pdf = dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff)
-
-        weight = mi.UnpolarizedSpectrum(0.0)
-        if has_spec:
-            weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
-        if has_diff:
-            # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
-            w_diff = (self._diffuse(si, kd, cos_i, wo_diff, t_i, series, sel_diff)
-                      / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0))
-            weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
-        # the film's reflection is polarized, the light through the base depolarized
-        lobe = self.mode.select(sel_spec, spec_lobe, self.mode.depolarized)
-        return bs, dr.select(active & (bs.pdf > 0),
-                             self.mode.value(weight, lobe, ctx, si.wi, bs.wo), 0.0)
-
-    def _eval_pdf(self, ctx, si, wo, active, want_value: bool, want_pdf: bool):
-        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
-        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
-        if not has_diff:
-            return mi.Spectrum(0.0), mi.Float(0.0)
-        self.base.check_lambertian()
-        cos_i = mi.Frame3f.cos_theta(si.wi)
-        cos_o = mi.Frame3f.cos_theta(wo)
-        active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0)
-        pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo) if want_pdf else mi.Float(0.0)
-
-        if self.no_films:  # exactly Mitsuba's diffuse
-            value = (self._bare(si, wo, active) * dr.inv_pi * cos_o) if want_value \
-                else mi.UnpolarizedSpectrum(0.0)
-            value = self.mode.value(value, self.mode.depolarized, ctx, si.wi, wo)
-            return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
-
-        need_prob = want_pdf and has_spec
-        value = mi.Spectrum(0.0)
-        if want_value or need_prob:
-            spectral = self.colour is None
-            kd = self.reflectance.eval(si, active)
-            series = self._series(si, kd, active) if spectral else None
-            k_r, t_i, _ = self._factors(si, cos_i, active, transmission=spectral)
-        if want_value:
-            value = self.mode.value(
-                self._diffuse(si, kd, cos_i, wo, t_i, series, active) * dr.inv_pi * cos_o,
-                self.mode.depolarized, ctx, si.wi, wo)
-        if need_prob:
-            pdf = pdf * (1.0 - prob_specular(self, si, k_r, t_i, kd, series, active, cos_i))
-        return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+        return self.coated.sample(ctx, si, sample1, sample2, active)
 
     def eval(self, ctx, si, wo, active=True):
-        return self._eval_pdf(ctx, si, wo, active, True, False)[0]
+        return self.coated.eval_pdf(ctx, si, wo, active, True, False)[0]
 
     def pdf(self, ctx, si, wo, active=True):
-        return self._eval_pdf(ctx, si, wo, active, False, True)[1]
+        return self.coated.eval_pdf(ctx, si, wo, active, False, True)[1]
 
     def eval_pdf(self, ctx, si, wo, active=True):
-        return self._eval_pdf(ctx, si, wo, active, True, True)
+        return self.coated.eval_pdf(ctx, si, wo, active, True, True)
 
     def traverse(self, callback):
-        self.coating.traverse(callback)
-        if self.film_n is not None:
-            i = len(self.coating)
-            callback.put(f"layers.{i}.thickness", self.film_n_thickness,
-                         mi.ParamFlags.Differentiable)
-            self.film_n.traverse(callback, f"layers.{i}.")
-        callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
-        self.base.traverse(callback)
+        self.coated.traverse(callback)
 
     def parameters_changed(self, keys):
-        def refresh(changed):
-            self.coating.parameters_changed()
-            if self.film_n is not None:
-                self.film_n.parameters_changed(NAME, f"layers.{len(self.coating)}.")
-            if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
-                dr.make_opaque(self.film_n_thickness)
-            colour_albedo = self.colour is not None and self.colour.fixed
-            if self.base.refresh() or changed is None or any(
-                    k.startswith(("layers.", "thickness")) or (colour_albedo and k.startswith("reflectance"))
-                    for k in changed):
-                self._update_hemispherical()
-            else:
-                # gradients enabled or disabled on an unchanged value (the guard
-                # compares values, not their AD state)
-                self._update_derivatives()
-        self.guard.changed(self, refresh, keys)
+        self.guard.changed(self, self.coated.parameters_changed, keys)
 
     def to_string(self):
-        layers = self.coating.describe()
-        if self.film_n is not None:
-            d = self.film_n_thickness
-            d = float(dr.ravel(d)[0]) if dr.is_array_v(d) else d
-            layers = f"{layers} over absorbing film {self.film_n.label} {d:g} nm"
-        return (f"ThinFilmDiffuse[\n  model = {self.model},\n{self.base.describe()}  layers = {layers},\n"
-                f"  ext_ior = {self.coating.ambient.label}\n]")
+        return f"ThinFilmDiffuse[\n{self.coated.describe()}]"

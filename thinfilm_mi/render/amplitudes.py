@@ -41,6 +41,9 @@ from thinfilm_mi.optics.unpolarised import unpolarised_powers
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
 
+__all__ = ["Polarised", "Shape", "depolarizing_shape", "jones_shape", "physical",
+           "polarised_response", "table_response", "table_shape"]
+
 
 @dataclass
 class Shape:
@@ -144,7 +147,7 @@ def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised
     mi = mitsuba_module()
     table = side.table
     n0 = side.n0.eval_real(si, active)
-    n_exit = side.exit.eval_real(si, active) if table.kind == "tir" else None
+    n_exit = side.exit.eval_real(si, active) if table.axis.needs_n_exit else None
     ch = table.lookup_channels(cos_theta, n0, n_exit, si.wavelengths, active)
     if table.channels == 8:
         R, *refl = physical(ch[0], *ch[2:5], 1.0)
@@ -162,7 +165,7 @@ def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised
 def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
           thickness_scale) -> Polarised:
     mi = mitsuba_module()
-    side = stack.evaluation_side(inside, transmission, stack.index_gradients(si, active))
+    side = stack.current_plan(inside, transmission, stack.index_gradients(si, active))
     if side.table is not None and thickness_scale is None and (
             not transmission or side.opaque or side.table.channels == 8):
         return table_response(side, si, cos_theta, active, transmission)

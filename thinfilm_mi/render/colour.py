@@ -19,7 +19,6 @@ obtained (no plugin classes here; below :mod:`kernel`, which calls it).
 """
 from __future__ import annotations
 
-import hashlib
 import threading
 from dataclasses import replace
 
@@ -29,11 +28,17 @@ import numpy as np
 from thinfilm_mi.colour import cie
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
+from thinfilm_mi.render.tabulation import table_key
 from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar, texture_range, uniform
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate import colour as integrated
+from thinfilm_mi.tabulate.axes import TIR
 from thinfilm_mi.tabulate.base import grid_coordinate, linear_texture
 from thinfilm_mi.tabulate.refine import LinearAxis, optical_thickness
+
+__all__ = ["COLOUR_CACHE", "GradientSampler", "attach_gradient", "channel_mean_texture",
+           "colour_channels", "colour_table", "index_on_wavelengths", "prepare_gradients",
+           "with_absorbing"]
 
 
 def colour_channels() -> str | None:
@@ -51,7 +56,7 @@ def channel_mean_texture(wavelengths: np.ndarray, values: np.ndarray, channels: 
     index of a dataset on ``wavelengths``): per sRGB channel, or Y in mono."""
     w = cie.channel_weights(channels, wavelengths) * np.gradient(wavelengths)[None, :]
     means = (w @ values) / w.sum(axis=1)
-    if channels == "mono":
+    if means.size == 1:     # mono: Y
         return uniform(float(means[0]))
     mi = mitsuba_module()
     return new_object("srgb", color=mi.ScalarColor3f(*[float(x) for x in means]),
@@ -79,8 +84,7 @@ def colour_table(stack, side, side_data):
     to the index of the channel built)."""
     channels = colour_channels()
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]
-    h = hashlib.sha1()
-    per_channel = {}
+    arrays, per_channel = [], {}
     for ix in media:
         v = ix.spectral_values(GRID)
         if v is None:
@@ -96,7 +100,7 @@ def colour_table(stack, side, side_data):
                     "constant (number, rgb) is required there, so that the films can "
                     "be integrated over wavelengths at load time (or use a spectral "
                     "variant)")
-        h.update(np.ascontiguousarray(v).tobytes())
+        arrays.append(np.asarray(v))
     if per_channel and not side.films:
         return None   # per-channel Fresnel, exactly as Mitsuba's conductor
     transmission = side.transmission and not side.opaque
@@ -105,7 +109,7 @@ def colour_table(stack, side, side_data):
     if side.exit_real and not per_channel:
         n_exit = side.exit.spectral_values(GRID, real=True)
         if (np.all(n0 == n0[0]) and np.all(n_exit == n_exit[0]) and n_exit[0] < n0[0]):
-            axis = LinearAxis("tir", float(n0[0]), float(n_exit[0]))
+            axis = LinearAxis(TIR, float(n0[0]), float(n_exit[0]))
     scale_max = fixed_scale = None
     tex = stack.thickness_texture
     if tex is not None and not tex.is_spatially_varying():
@@ -117,11 +121,9 @@ def colour_table(stack, side, side_data):
             raise ThinFilmError(f"{stack.plugin}: 'thickness': its range cannot be evaluated "
                                 f"at load time, which the {mitsuba_module().variant()!r} variant needs "
                                 "(a table over the thickness scale)")
-    h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
-    h.update(repr((mitsuba_module().variant(), channels, transmission, side.exit_real, side.opaque, axis,
-                   scale_max, fixed_scale,
-                   integrated.settings())).encode())
-    key = h.hexdigest()
+    key = table_key(arrays, side.films, (mitsuba_module().variant(), channels, transmission,
+                                         side.exit_real, side.opaque, axis, scale_max, fixed_scale,
+                                         integrated.settings()))
     found, table = COLOUR_CACHE.get(key)
     if found:
         return table
@@ -142,7 +144,7 @@ def colour_table(stack, side, side_data):
             * optical_thickness(data.films, GRID, np.real)
         return integrated.Source(evaluate, chans, integrated.first_step(optical))
 
-    C = 1 if channels == "mono" else 3
+    C = integrated.channel_count(channels)
     if per_channel:
         sources = [source(side_data(side, transmission,
                                      {k: v[c] for k, v in per_channel.items()}), [c])

@@ -1,15 +1,28 @@
-"""What ``thinfilm_diffuse`` needs beyond its kernel stack.
+"""The spectral factors and load-time terms of the coated-diffuse model
+(:mod:`thinfilm_mi.render.coated_diffuse`; no plugin classes here).
 
-* :class:`DiffuseFactors`: its spectral factors as its colour tables
-  (:mod:`thinfilm_mi.tabulate.diffuse`) integrate them: the coating's transmittance at
-  any (angle, wavelength) and its hemispherical terms, read from the plugin's
+* :class:`DiffuseFactors` — the factors of the paper's models as the colour tables
+  (:mod:`thinfilm_mi.tabulate.diffuse`) and the load-time terms integrate them: the
+  coating's transmittance ``t`` at any (angle, wavelength) and its hemispherical terms
+  (:mod:`thinfilm_mi.tabulate.hemispherical`), read from the model's
   :class:`~thinfilm_mi.render.kernel.KernelStack` and media.
-* :func:`update_derivative_table`, :func:`with_derivatives`: ``R_dh`` carrying its
-  derivatives with respect to the films' thicknesses and indices (model "multiple"
-  in AD variants), from a table built when a film parameter carries gradients.
-* :func:`colour_estimate`: the estimate whose gradients an RGB/mono diffuse term takes.
-* :func:`absorbs`, :func:`reflectance_from_props`, :func:`grid_spectrum`: the plugin's
-  reading of its films and albedo, and its spectra on the 1 nm grid.
+* :class:`ExactFactors` — the same for model ``"exact"`` (the whole stack, coherent,
+  over a base medium of index ``base_ior``). The radiance factor ``(n_0/n_b)²`` of a
+  base medium that differs from the ambient is split evenly between the two crossings:
+  ``t = T n_0/n_b`` and ``T_hemi`` (the base's escape fraction) divided by ``n_0/n_b``,
+  so that ``k_d t_i t_o S`` is the diffuse term and ``t_i k_d T_hemi S`` its albedo.
+* :class:`SpectralTerms` — ``R_dh`` and ``T_hemi`` in the spectral kernels: ``regular``
+  spectra (no texture), or a :class:`~thinfilm_mi.tabulate.hemispherical.ScaleTable`
+  over the thickness scale with ``∂R_dh/∂s`` for the texture's gradients.
+* :func:`with_derivatives` — ``R_dh`` carrying its derivatives with respect to the
+  films' thicknesses and indices, from a
+  :class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`.
+* :func:`colour_diffuse`, :func:`constant_albedo` — the RGB/mono tables of the diffuse
+  term; :func:`scale_bounds` — the largest value of a ``thickness`` texture, read at load;
+  :func:`texture_gradients_refused` — why film gradients and a texture do not go together.
+* :func:`absorbs`, :func:`reflectance_from_props`, :func:`grid_spectrum` — the reading of
+  the films and the albedo, and spectra on the 1 nm grid; :func:`side_rt` — a kernel
+  stack's exact float64 ``R``, ``T`` as the colour tables see them.
 """
 from __future__ import annotations
 
@@ -20,22 +33,29 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.optics.core import Cx, film_attenuation
-from thinfilm_mi.render.colour import GradientSampler, index_on_wavelengths, with_absorbing
+from thinfilm_mi.render.colour import with_absorbing
 from thinfilm_mi.render.kernel import KernelStack, side_data
+from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.params import ALBEDO_SLACK
-from thinfilm_mi.render.textures import checked_texture, mitsuba_module, regular, scalar, uniform
+from thinfilm_mi.render.textures import checked_texture, mitsuba_module, regular, scalar, texture_range, uniform
 from thinfilm_mi.tabulate import base as tabulate_base
-from thinfilm_mi.tabulate.diffuse_scale import exact_hemispherical, paper_hemispherical
-from thinfilm_mi.tabulate.hemispherical import PER_FILM, DerivativeTable, hemispherical_factors, r_dh_partials
+from thinfilm_mi.tabulate.diffuse import ColourDiffuse, ScaledColourDiffuse
+from thinfilm_mi.tabulate.hemispherical import (
+    PER_FILM,
+    ScaleTable,
+    exact_hemispherical,
+    hemispherical_factors,
+    paper_terms,
+    r_dh_partials,
+)
 
-__all__ = ["DiffuseFactors", "film_gradients", "update_derivative_table", "with_derivatives", "absorbs",
-           "colour_estimate",
-           "reflectance_from_props", "grid_spectrum"]
-
+__all__ = ["DiffuseFactors", "ExactFactors", "SpectralTerms", "with_derivatives", "colour_diffuse",
+           "constant_albedo", "scale_bounds", "texture_gradients_refused", "absorbs",
+           "reflectance_from_props", "grid_spectrum", "side_rt"]
 
 class DiffuseFactors:
-    """The spectral factors of a ``thinfilm_diffuse`` for :class:`ColourDiffuse`:
+    """The spectral factors of the paper's models for
+    :class:`~thinfilm_mi.tabulate.diffuse.ColourDiffuse` and :class:`SpectralTerms`:
     ``t(cos, wl)`` (shape ``(len cos, len wl)``) and ``hemispherical(wl) ->
     (R_dh, T_hemi)`` (over ``wl``), for the coating ``coating`` (a
     :class:`~thinfilm_mi.render.kernel.KernelStack`) over the absorbing film ``film_n``
@@ -57,10 +77,10 @@ class DiffuseFactors:
         n0, coat, n_exit, fn = self.at_scale(1.0)._arguments(wl)
         if fn is None:   # the coating over the (matched) base medium: the exact terms
             return exact_hemispherical(n0, coat, n_exit.real, wl, scales)
-        return paper_hemispherical(n0, coat, fn, wl, scales)
+        return paper_terms(n0, coat, n_exit, fn, wl, scales)
 
     def t(self, cos, wl):
-
+        """``t = k_t k_a`` at every angle ``cos`` and wavelength ``wl``: shape ``(len cos, len wl)``."""
         _, T = side_rt(self.coating, False, cos, wl, self.scale)
         if self.film_n is None:
             return T
@@ -74,7 +94,6 @@ class DiffuseFactors:
 
     def _arguments(self, wl):
         """:func:`~thinfilm_mi.tabulate.hemispherical.hemispherical_factors`'s arguments at ``wl``."""
-
         c = self.coating
         n0 = c.ambient.spectral_values(wl, real=True)
         coat = [(ix.spectral_values(wl), scalar(d) * self.scale)
@@ -84,36 +103,114 @@ class DiffuseFactors:
         return n0, coat, c.substrate.spectral_values(wl), fn
 
     def hemispherical(self, wl):
-
+        """``(R_dh, T_hemi)`` at ``wl`` (at :attr:`scale`)."""
         t_hemi, r_dh = hemispherical_factors(*self._arguments(wl), wavelengths=wl)
         return r_dh, t_hemi
 
     def r_dh_partials(self, wl):
         """``∂R_dh/∂x`` at ``wl`` (:func:`~thinfilm_mi.tabulate.hemispherical.r_dh_partials`):
         per film of the coating, then film ``N``, its thickness, ``Re n``, ``Im n``."""
-
         return r_dh_partials(*self._arguments(wl), wavelengths=wl)
 
 
-def film_gradients(bsdf) -> bool:
-    """Whether a film parameter of ``bsdf`` (a ``layers.*`` value) carries gradients."""
-    mi = mitsuba_module()
-    if not dr.is_diff_v(mi.Float):
-        return False
-    params = mi.traverse(bsdf)
-    return any(dr.grad_enabled(params[k]) for k in params.keys()
-               if k.startswith("layers.") and dr.is_diff_v(params[k]))
+class ExactFactors(DiffuseFactors):
+    """The factors of model ``"exact"`` for the stack ``coating`` (a
+    :class:`~thinfilm_mi.render.kernel.KernelStack` of every film over the base
+    medium, its substrate), every thickness times ``scale``."""
+
+    def __init__(self, coating, scale: float = 1.0):
+        super().__init__(coating, None, None, scale)
+
+    def at_scale(self, scale: float) -> "ExactFactors":
+        return ExactFactors(self.coating, scale)
+
+    def _ratio(self, wl):
+        """``n_0 / n_b`` at ``wl``."""
+        c = self.coating
+        return (c.ambient.spectral_values(wl, real=True)
+                / c.substrate.spectral_values(wl, real=True))
+
+    def t(self, cos, wl):
+        return super().t(cos, wl) * self._ratio(wl)[None, :]
+
+    def hemispherical(self, wl):
+        r, t = self.hemispherical_scales(wl, [self.scale])
+        return r[0], t[0]
+
+    def hemispherical_scales(self, wl, scales):
+        c = self.coating
+        films = [(ix.spectral_values(wl), scalar(d)) for ix, d in zip(c.indices, c.thickness)]
+        R_dh, T_hemi = exact_hemispherical(c.ambient.spectral_values(wl, real=True), films,
+                                           c.substrate.spectral_values(wl, real=True), wl,
+                                           scales)
+        return R_dh, T_hemi / self._ratio(wl)[None, :]
+
+    def r_dh_partials(self, wl):
+        if not np.allclose(self._ratio(wl), 1.0, rtol=0, atol=1e-12):
+            raise ThinFilmError(
+                f"{self.coating.plugin}: gradients of the films' parameters with model 'exact' "
+                "need 'base_ior' equal to 'ext_ior' (R_dh's derivatives are computed for a base "
+                "medium matched to the ambient)")
+        return super().r_dh_partials(wl)
 
 
-def update_derivative_table(bsdf, factors, model: str, table):
-    """``R_dh``'s derivative table for ``bsdf`` now: built from ``factors`` (a
-    :class:`DiffuseFactors`) if a film parameter carries gradients and ``table`` is
-    missing, kept if it is there, ``None`` when nothing carries gradients (or for
-    model "single", or no films). Never needed at scene load, where nothing carries
-    gradients: the reverse-mode pass then never runs on Mitsuba's loader threads."""
-    if factors is None or model == "single" or not film_gradients(bsdf):
-        return None
-    return table if table is not None else DerivativeTable(factors.r_dh_partials(GRID))
+def scale_bounds(tex, plugin: str) -> float:
+    """The largest value (>= 0) of the ``thickness`` texture ``tex``, read at load."""
+    rng = texture_range(tex, mono=True)
+    if rng is None:
+        raise ThinFilmError(f"{plugin}: 'thickness': its range cannot be evaluated at load "
+                            "time, which the hemispherical terms need (a table over the "
+                            "thickness scale)")
+    return max(float(rng[1]), 0.0)
+
+
+class SpectralTerms:
+    """``R_dh`` and ``T_hemi`` of a ``thinfilm_diffuse`` in spectral variants, from
+    ``factors`` (``None``: no films, ``R_dh = 0``, ``T_hemi = 1``). ``texture``: the
+    ``thickness`` texture or ``None``; with one, a table over the scale in ``[0,
+    max]`` (:class:`ScaleTable`), whose lookup carries ``∂R_dh/∂s`` in AD variants."""
+
+    def __init__(self, factors, texture=None, plugin: str = "thinfilm_diffuse", old=None):
+        self.table = None
+        self.r_dh = self.t_hemi = None
+        #: film N's index as a film-loop buffer (its textures' binary searches cost
+        #: the "single" model more than its coating's table: issue 44)
+        film_n = getattr(factors, "film_n", None)
+        self.film_n = None
+        if film_n is not None and film_n.knots is not None and dr.is_jit_v(mitsuba_module().Float):
+            self.film_n = LoopFilms([(film_n, 0.0, False)], factors.coating.ambient)
+        if factors is not None and texture is not None:
+            s_max = scale_bounds(texture, plugin)
+            self.table = ScaleTable(lambda s: factors.hemispherical_scales(GRID, s), s_max)
+            return
+        if factors is None:
+            t_hemi, r_dh = np.ones(len(GRID)), np.zeros(len(GRID))
+        else:
+            r_dh, t_hemi = factors.hemispherical(GRID)
+        self.t_hemi = grid_spectrum(None if old is None else old.t_hemi, t_hemi)
+        self.r_dh = grid_spectrum(None if old is None else old.r_dh, r_dh)
+
+    def lookup(self, si, stack, active=True):
+        """``(R_dh, T_hemi)`` at the hit's wavelengths and the thickness scale of the
+        :class:`~thinfilm_mi.render.kernel.KernelStack` ``stack`` there (its texture's
+        gradient reaches ``R_dh`` through ``∂R_dh/∂s``)."""
+        if self.table is None:
+            return self.r_dh.eval(si, active), self.t_hemi.eval(si, active)
+        scale = stack.thickness_scale_at(si, active)
+        out = self.table.lookup(si.wavelengths, scale, active)
+        r_dh = out[0]
+        if dr.grad_enabled(scale):
+            r_dh = r_dh + out[2] * (scale - dr.detach(scale))
+        return r_dh, out[1]
+
+
+def texture_gradients_refused(plugin: str, model) -> str:
+    """Why film-parameter gradients are refused together with a ``thickness`` texture
+    (``model``: one with interreflection, whose ``R_dh``'s derivative table holds scale 1
+    only)."""
+    return (f"{plugin}: gradients of the films' parameters together with a 'thickness' "
+            f"texture are not supported with model {model.name!r} (R_dh's derivatives are "
+            "tabulated at scale 1); differentiate the texture, or use model 'single'")
 
 
 def with_derivatives(table, r_dh, films, si, wavelengths, index_at, active, plugin: str):
@@ -140,6 +237,31 @@ def with_derivatives(table, r_dh, films, si, wavelengths, index_at, active, plug
             "was not built: call params.update() after enabling gradients "
             "(dr.enable_grad(params[key]); params.update()), as mi.ad optimisers do")
     return r_dh + table.tangent(wavelengths, carriers, active)
+
+
+def colour_diffuse(factors, texture, model, channels: str, kd, plugin: str):
+    """The RGB/mono diffuse table of ``factors`` for ``model`` (a coated-diffuse model,
+    :class:`~thinfilm_mi.tabulate.diffuse.ColourDiffuse`; ``kd``: :func:`constant_albedo`)
+    under a ``thickness`` texture: at its scale where it is constant, else over the scale
+    in its range ``[min, max]`` (:class:`~thinfilm_mi.tabulate.diffuse.ScaledColourDiffuse`)."""
+    if texture is None:
+        return ColourDiffuse(factors, model, channels, kd)
+    s_max = scale_bounds(texture, plugin)
+    if not texture.is_spatially_varying():
+        return ColourDiffuse(factors.at_scale(s_max), model, channels, kd)
+    s_min = float(texture_range(texture, mono=True)[0])
+    return ScaledColourDiffuse(factors, model, channels, kd, s_max, plugin, s_min)
+
+
+def constant_albedo(reflectance, rough: bool) -> np.ndarray | None:
+    """The base albedo per colour channel where it does not vary over the surface and
+    the base is Lambertian (the colour tables then integrate the series with it), else
+    ``None``."""
+    if reflectance.is_spatially_varying() or rough:
+        return None
+    mi = mitsuba_module()
+    si = dr.zeros(mi.SurfaceInteraction3f)
+    return np.array(dr.ravel(reflectance.eval(si)), np.float64).reshape(-1)
 
 
 def absorbs(index) -> bool:
@@ -184,37 +306,6 @@ def grid_spectrum(tex, values):
         params.update()
         return tex
     return regular(values, GRID[0], GRID[-1])
-
-
-def colour_estimate(coating, film_n, film_n_thickness, r_dh_at, with_derivatives, si, cos_i, cos_o,
-                    active, g, base_ratio: bool = False):
-    """An unbiased estimate of the integrated diffuse term of a ``thinfilm_diffuse`` (its
-    ``coating``, absorbing film ``film_n`` or ``None``, the colour table's ``r_dh_at``) at
-    stratified wavelengths (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose
-    gradients the table's value takes; ``R_dh`` with its derivatives (``with_derivatives``,
-    the plugin's :func:`with_derivatives`); ``g(c, R_dh)``: the base's term of channel ``c``
-    (``G(k_d,c, R_dh)`` for Lambert's). ``base_ratio``: ``t`` carries ``n_0/n_b`` (model
-    "exact" over a base medium unlike the ambient); the thickness texture scales every film."""
-    mi = mitsuba_module()
-    sampler = GradientSampler.get()
-    wl = sampler.wavelengths(si)
-    scale = coating.thickness_scale_at(si, active)
-    n0, _ = index_on_wavelengths(coating.ambient, si, wl, active)
-
-    def t(cos):
-        _, k_t = coating.at_wavelengths(False, si, cos, active, True, scale, wl)
-        if base_ratio:
-            k_t = k_t * n0 / index_on_wavelengths(coating.substrate, si, wl, active)[0]
-        if film_n is None:
-            return k_t
-        d = film_n_thickness if scale is None else film_n_thickness * scale
-        return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(film_n, si, wl, active)),
-                                      d, wl)
-    product = t(cos_i) * t(cos_o)
-    r_dh = with_derivatives(r_dh_at(wl, active), si, wl,
-                            lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)
-    channels = [sampler.estimate(wl, product * g(c, r_dh))[c] for c in range(dr.size_v(mi.Spectrum))]
-    return mi.Spectrum(*channels)
 
 
 def side_rt(stack: KernelStack, inside: bool, cos: np.ndarray, wavelengths: np.ndarray,

@@ -18,7 +18,7 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.optics.core import Cx
-from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
+from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt
 from thinfilm_mi.render import mirror
 from thinfilm_mi.render.colour import (
     GradientSampler,
@@ -30,32 +30,22 @@ from thinfilm_mi.render.colour import (
 )
 from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.media import SpectralIndex
+from thinfilm_mi.render.tabulation import Route, table_key, tabulate_option
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
-from thinfilm_mi.tabulate import band as _band_tables
+from thinfilm_mi.tabulate import band
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.mueller import MUELLER
+from thinfilm_mi.tabulate.quantities import POWERS
 from thinfilm_mi.tabulate.store import default_store
+
+__all__ = ["DEFAULT_COHERENCE_THICKNESS", "DEFAULT_SPECTRAL_RESOLUTION", "DEFAULT_TABLE_ERROR",
+           "KernelStack", "OPAQUE_AMPLITUDE", "REAL_LOOP_MIN_FILMS", "STORE_MIN_POINTS",
+           "SidePlan", "TABLE_CACHE", "side_data"]
 
 #: Default coherence thickness (nm): thicker films are averaged incoherently.
 DEFAULT_COHERENCE_THICKNESS = 5000.0
 #: Default target for the tables: max abs error in R and T.
 DEFAULT_TABLE_ERROR = 1e-3
-#: ``tabulate="auto"`` tabulates a side of ``R`` only from this many films (after the
-#: skips): one film on a conductor renders at 0.98x ``conductor`` tabulated against
-#: 1.07x exact (issue 32), within ``table_error`` (~3e-4 at the default 1e-3).
-AUTO_MIN_FILMS = 1
-#: The same for a side of ``R`` and ``T`` (two channels): such a lookup costs what 4-5
-#: films of the exact loop do (issue 44, sphere scene, tabulated / exact: ``dielectric``
-#: "Au 20" 1.96x / 1.87x, "SiO2 500; Au 20; Al 10" 2.15x (outside) / 1.92x, six films of
-#: SiO2 / Au / Ag 2.41x / 2.79x; ``diffuse`` "SiO2 500; Au 5" 2.49x / 2.27x, 4 films
-#: 2.85x / 2.69x).
-RT_AUTO_MIN_FILMS = 5
-#: ``tabulate="auto"`` keeps tables of at most this many texels (over all
-#: channels, 2 MiB of float32): a cubic lookup in a table that fits the cache
-#: costs 3-4.6 ns per point, beyond it 7-12 ns, as much as the exact recursion
-#: of 3-10 films (benchmarks/SPEED.md). ``tabulate=true`` allows
-#: :data:`~thinfilm_mi.tabulate.base.MAX_TEXELS` per channel.
-AUTO_MAX_TEXELS = 1 << 19
 #: Default ``spectral_resolution`` (nm): a stack whose exact ``R`` and ``T`` no
 #: table resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide)
 #: gets a table of them convolved with a Gaussian in wavenumber of this standard
@@ -78,13 +68,13 @@ OPAQUE_AMPLITUDE = 1e-9
 REAL_LOOP_MIN_FILMS = 1
 
 
-class _Side:
+class SidePlan:
     """How one lighting side of a stack is evaluated, after the skips.
 
     ``films`` are ``(SpectralIndex, thickness, incoherent)`` from the side the
     light comes from; ``exit`` is the exit medium (the substrate, the ambient,
     or the first optically opaque film, in which case ``opaque`` is true and
-    ``T = 0``); ``table`` is a :class:`~thinfilm_mi.tabulate.exact.Table` or ``None``.
+    ``T = 0``); ``table`` is a :class:`~thinfilm_mi.tabulate.base.Table` or ``None``.
     """
 
     def __init__(self, n0: SpectralIndex, films, exit_: SpectralIndex, exit_real: bool,
@@ -142,14 +132,15 @@ class KernelStack:
         #: Optional Mitsuba texture; every film's thickness is multiplied by its
         #: value at the hit (clamped to >= 0).
         self.thickness_texture = thickness_texture
-        self.tabulate = tabulate
+        #: the ``tabulate`` option (:data:`~thinfilm_mi.render.tabulation.TABULATE_OPTIONS`)
+        self.tabulate = tabulate_option(tabulate)
         self.table_error = table_error
         self.spectral_resolution = spectral_resolution
         self.coherence_thickness = coherence_thickness
         self.sides = dict(sides) if sides is not None else {False: False}
         self.plugin = plugin
         self._gave_up = set()   # sides whose table could not be built
-        if tabulate is True and thickness_texture is not None:
+        if self.tabulate.required and thickness_texture is not None:
             raise ThinFilmError(f"{plugin}: 'tabulate' is true but a 'thickness' texture is "
                                 "given: a table over (angle, wavelength) cannot follow a "
                                 "thickness that varies over the surface (use 'auto' or false)")
@@ -169,7 +160,7 @@ class KernelStack:
         k = n.imag if n is not None else texture_on_grid(index.k)
         return bool(np.max(np.exp(-2.0 * math.pi * k * d / GRID)) < OPAQUE_AMPLITUDE)
 
-    def _side(self, inside: bool, transmission: bool, films: list, opaque: list) -> _Side:
+    def _side_plan(self, inside: bool, transmission: bool, films: list, opaque: list) -> SidePlan:
         """The plan of one side from the non-zero ``films`` ``(index, thickness,
         incoherent)`` and their ``opaque`` flags, both listed from the ambient."""
         if inside:
@@ -179,8 +170,8 @@ class KernelStack:
             n0, exit_, exit_real = self.ambient, self.substrate, False
         if any(opaque):
             j = opaque.index(True)
-            return _Side(n0, films[:j], films[j][0], False, True, transmission)
-        return _Side(n0, films, exit_, exit_real, False, transmission)
+            return SidePlan(n0, films[:j], films[j][0], False, True, transmission)
+        return SidePlan(n0, films, exit_, exit_real, False, transmission)
 
     def _plan(self) -> None:
         # Zero-thickness films dropped; opacity decided once per film for all sides.
@@ -196,7 +187,7 @@ class KernelStack:
         lossless = {i: real and (not i or mirror.real_on_grid(self.substrate)) for i in self.sides}
         self.mirrored = (set(self.sides) == {False, True} and spectral
                          and mirror.mirror_applies(self.ambient, films, self.substrate))
-        self.plan = {inside: self._side(inside, t and not lossless[inside], films, opaque)
+        self.plan = {inside: self._side_plan(inside, t and not lossless[inside], films, opaque)
                      for inside, t in self.sides.items()}
         for inside, side in self.plan.items():
             side.lossless = lossless[inside]
@@ -211,9 +202,9 @@ class KernelStack:
         # Polarized variants read tables of the Mueller components
         # (thinfilm_mi.tabulate.mueller) or evaluate the complex amplitudes
         # (thinfilm_mi.render.amplitudes; their film loop has no real-amplitude form)
-        quantity = MUELLER if polarized else None
+        quantity = MUELLER if polarized else POWERS
         self._plan_tables(quantity)
-        reflection_channels = quantity.channels(False) if quantity else 1
+        reflection_channels = quantity.channels(False)
         if dr.is_jit_v(mitsuba_module().Float):
             for side in self.plan.values():
                 # A side whose table serves the calls its plan is for (R, and T
@@ -231,31 +222,28 @@ class KernelStack:
                     if len(side.films) >= (LOOP_MIN_FILMS if complex_ else REAL_LOOP_MIN_FILMS):
                         side.loop = loop
 
-    def _plan_tables(self, quantity=None) -> None:
+    def _plan_tables(self, quantity=POWERS) -> None:
         # "auto" tabulates in vectorised variants only: in scalar variants every
         # call is Python anyway and the load-time build would dominate.
-        # ``quantity``: what the tables hold (None: the powers; tabulate.mueller.MUELLER)
-        auto = self.tabulate == "auto"
+        # ``quantity``: what the tables hold (tabulate.quantities.QUANTITIES)
+        option = self.tabulate
 
         def few(side):   # "auto": fewer films than a table of this side pays for
-            if quantity:
-                return len(side.films) < quantity.auto_min_films
             if self.mirrored and mirror.exact_mirrors(self.ambient, self.substrate):
                 return len(side.films) < mirror.AUTO_MIN_FILMS
-            two = side.transmission and not side.opaque
-            return len(side.films) < (RT_AUTO_MIN_FILMS if two else AUTO_MIN_FILMS)
-        want = self.tabulate is True or (
-            auto and self.thickness_texture is None and dr.is_jit_v(mitsuba_module().Float)
-            and not all(few(s) for s in self.plan.values()))
+            return len(side.films) < quantity.auto_min_films(side.transmission and not side.opaque)
+        want = option.builds and (not option.selective or (
+            self.thickness_texture is None and dr.is_jit_v(mitsuba_module().Float)
+            and not all(few(s) for s in self.plan.values())))
         self.table_failed = []
         if not want or self._differentiating():
-            return   # (thicknesses with gradients read every film: evaluation_side)
+            return   # (thicknesses with gradients read every film: current_plan)
         for inside, side in self.plan.items():
             if inside and self.mirrored and self.plan[False].table is None:
                 # no table to mirror: this side is planned (and tabulated) on its own
                 self.mirrored = False
                 side.transmission = self.sides[True] and not side.lossless
-            if side.films and not (auto and (inside in self._gave_up or few(side))) \
+            if side.films and not (option.selective and (inside in self._gave_up or few(side))) \
                     and self.mirror_table(side) is None:
                 side.table = _tables_cache(self, side, quantity)
                 if side.table is None:
@@ -264,24 +252,22 @@ class KernelStack:
                     # build may cost up to the budget (tabulate.base.MAX_BUILD_WORK,
                     # ~2 s) where the rejection cannot be predicted before the work.
                     self._gave_up.add(inside)
-        if self.tabulate is True and self.table_failed:
+        if option.required and self.table_failed:
             import warnings
             why = "; ".join(sorted({str((self.plan[i].build_report or {}).get("result"))
                                     for i in self.table_failed}))
             warnings.warn(f"{self.plugin}: the stack {self.describe()} cannot be tabulated "
                           f"within table_error={self.table_error:g} in {tabulate_base.MAX_TEXELS} "
-                          f"texels and {REQUESTED_BUDGET_SCALE:g}x the build budget of 'auto' "
+                          f"texels and {option.budget_scale:g}x the build budget of 'auto' "
                           f"({why}); it is evaluated exactly", stacklevel=3)
 
-    def mode(self) -> str:
-        """``"table"`` if every planned side reads a table, ``"exact"`` if none, else ``"mixed"``."""
-        tabled = [s.table is not None or self.mirror_table(s) is not None
-                  for s in self.plan.values() if s.films]
-        if tabled and all(tabled):
-            return "table"
-        return "mixed" if any(tabled) else "exact"
+    def mode(self) -> Route:
+        """The :class:`~thinfilm_mi.render.tabulation.Route` of the planned sides: ``"table"``
+        if every one reads a table, ``"exact"`` if none, else ``"mixed"``."""
+        return Route.of([s.table is not None or self.mirror_table(s) is not None
+                         for s in self.plan.values() if s.films])
 
-    def mirror_table(self, side: _Side):
+    def mirror_table(self, side: SidePlan):
         """The table that serves ``side`` lit from the substrate through the ambient
         side's (:mod:`thinfilm_mi.render.mirror`), or ``None``."""
         outside = self.plan.get(False)
@@ -323,10 +309,10 @@ class KernelStack:
     def _differentiating(self) -> bool:
         return any(dr.grad_enabled(d) for d in self.thickness if dr.is_diff_v(d))
 
-    def _full_side(self, inside: bool, transmission: bool) -> _Side:
+    def _full_plan(self, inside: bool, transmission: bool) -> SidePlan:
         """Every film, no skips, no table (for gradients through every film)."""
         films = [(ix, d, False) for ix, d in zip(self.indices, self.thickness)]
-        return self._side(inside, transmission, films, [False] * len(films))
+        return self._side_plan(inside, transmission, films, [False] * len(films))
 
     def index_gradients(self, si, active=True) -> bool:
         """Whether an index of this stack (ambient, films, substrate) carries
@@ -337,8 +323,8 @@ class KernelStack:
         media = [self.ambient, self.substrate] + list(self.indices)
         return any(ix.carries_gradients(si, active) for ix in media)
 
-    def evaluation_side(self, inside: bool, transmission: bool,
-                        index_gradients: bool = False) -> _Side:
+    def current_plan(self, inside: bool, transmission: bool,
+                     index_gradients: bool = False) -> SidePlan:
         """The plan of the side lit from the ambient (``inside`` false) or the
         substrate, as evaluated now: every film, without skips or table, when a
         thickness (or, with ``index_gradients``, an index) carries gradients or the
@@ -346,7 +332,7 @@ class KernelStack:
         derivatives)."""
         side = self.plan.get(inside)
         if side is None or self._differentiating() or index_gradients:
-            side = self._full_side(inside, transmission)
+            side = self._full_plan(inside, transmission)
         return side
 
     def side_response(self, inside: bool, si, cos_theta, active, transmission: bool,
@@ -355,12 +341,12 @@ class KernelStack:
         mi = mitsuba_module()
         # RGB/mono variants come here only for a side without films: any wavelength will do
         wl = si.wavelengths if mi.is_spectral else mi.Spectrum(550.0)
-        side = self.evaluation_side(inside, transmission, self.index_gradients(si, active))
+        side = self.current_plan(inside, transmission, self.index_gradients(si, active))
         n0 = side.n0.eval_real(si, active)
         table = side.table
         if table is not None and thickness_scale is None and (
                 not transmission or side.opaque or table.channels > 1 or side.lossless):
-            n_exit = side.exit.eval_real(si, active) if table.kind == "tir" else None
+            n_exit = side.exit.eval_real(si, active) if table.axis.needs_n_exit else None
             res = table.lookup(cos_theta, n0, n_exit, wl, active)
             if not transmission:
                 return res[0]
@@ -384,7 +370,7 @@ class KernelStack:
         """Exact ``R`` [, ``T``] at the wavelengths ``wl`` (``mi.Spectrum``) in an
         RGB/mono variant, through every film (the colour gradients)."""
         mi = mitsuba_module()
-        side = self._full_side(inside, transmission)
+        side = self._full_plan(inside, transmission)
 
         def index(ix):
             return Cx(*index_on_wavelengths(ix, si, wl, active))
@@ -454,7 +440,7 @@ class KernelStack:
         """
         if thickness_scale is None:
             thickness_scale = self.thickness_scale_at(si, active)
-        if (self.mirrored and thickness_scale is None and self.evaluation_side(
+        if (self.mirrored and thickness_scale is None and self.current_plan(
                 False, False, self.index_gradients(si, active)) is self.plan[False]):
             out = mirror.mirrored_rt(self, si, cos_theta, inside, active, transmission)
             if out is not None:
@@ -477,27 +463,20 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
 
 #: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).
 TABLE_CACHE = tabulate_base.TableCache()
-#: ``tabulate=true`` lets a build spend this many times the evaluations and work
-#: ``"auto"`` allows (``tabulate.base.MAX_BUILD_WORK``, ~2 s): a table asked for
-#: is worth a longer wait, paid once with the table store. A 70-film stack's
-#: band-limited table (``auto`` expects 2e8 film units and does not start it)
-#: then builds in ~1.2 s, a 100-film one in ~2.5 s; a 300-film one is refused after
-#: its first rows (~3 s; the whole build took 175 s before the sheared axis).
-REQUESTED_BUDGET_SCALE = 10.0
 #: Builds of at least this many exact evaluations (~30 ms and more: the probes of
 #: 10 films and more, every band-limited build) are kept in the table store
 #: (:mod:`thinfilm_mi.tabulate.store`) for later processes; cheaper ones are rebuilt.
 STORE_MIN_POINTS = 50_000
 
 
-def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
+def _tables_cache(stack: KernelStack, side: SidePlan, quantity=POWERS):
     """The table of ``side``, shared between stacks with identical optics.
 
     The key is the stack's numbers (every index on the 1 nm grid, thicknesses,
     incoherent flags, what is tabulated, the target, the texel cap), so two
     BSDFs with the same films share one texture. Tables are never modified in
-    place. ``quantity``: what the table holds (``None``: the powers; else, e.g.
-    :data:`~thinfilm_mi.tabulate.mueller.MUELLER`, its channels).
+    place. ``quantity``: what the table holds
+    (:data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`).
 
     Not in this process's cache, the table is looked up in the table store on
     disk (:func:`~thinfilm_mi.tabulate.store.default_store`, the report then says
@@ -505,30 +484,23 @@ def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
     a build of :data:`STORE_MIN_POINTS` evaluations or more is kept there for
     later processes.
     """
-    import hashlib
-
     mi = mitsuba_module()
-    h = hashlib.sha1()
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]
-    values = {}
+    values, arrays = {}, []
     for ix in media:
         if id(ix) not in values:
             if ix.eta.is_spatially_varying() or ix.k.is_spatially_varying():
                 return None   # an index that varies over the surface: not tabulable
             values[id(ix)] = (texture_on_grid(ix.eta), texture_on_grid(ix.k))
-        for v in values[id(ix)]:
-            h.update(v.tobytes())
-    h.update(repr([(scalar(d), inc) for _, d, inc in side.films]).encode())
+        arrays += values[id(ix)]
     transmission = side.transmission and not side.opaque
-    channels = quantity.channels(transmission) if quantity else (2 if transmission else 1)
-    budget = quantity.auto_max_floats if quantity else AUTO_MAX_TEXELS
-    auto = stack.tabulate == "auto"
-    max_texels = budget // channels if auto else tabulate_base.MAX_TEXELS
-    budget_scale = 1.0 if auto else REQUESTED_BUDGET_SCALE
-    h.update(repr((mi.variant(), side.transmission, side.exit_real, side.opaque,
-                   stack.table_error, stack.spectral_resolution, max_texels, budget_scale,
-                   quantity.name if quantity else "powers")).encode())
-    key = h.hexdigest()
+    channels = quantity.channels(transmission)
+    option = stack.tabulate
+    max_texels = quantity.auto_max_floats // channels if option.selective else tabulate_base.MAX_TEXELS
+    budget_scale = option.budget_scale
+    key = table_key(arrays, side.films, (mi.variant(), side.transmission, side.exit_real, side.opaque,
+                                         stack.table_error, stack.spectral_resolution, max_texels,
+                                         budget_scale, quantity.name))
     found, table = TABLE_CACHE.get(key)
     if found:
         side.build_report = tabulate_base.BuildReport(result="from the cache")
@@ -544,9 +516,9 @@ def _tables_cache(stack: KernelStack, side: _Side, quantity=None):
 
     data = side_data(side, transmission, quantity=quantity)
     side.build_report = report = tabulate_base.BuildReport()
-    table = _band_tables.build_table(data, stack.table_error, GRID, max_texels,
-                                     stack.spectral_resolution, report=report,
-                                     budget_scale=budget_scale)
+    table = band.build_table(data, stack.table_error, GRID, max_texels,
+                             stack.spectral_resolution, report=report,
+                             budget_scale=budget_scale)
     TABLE_CACHE.put(key, table)
     work = report.get("points", 0) + (report.get("exact_attempt") or {}).get("points", 0)
     if disk is not None and work >= STORE_MIN_POINTS:
@@ -571,30 +543,23 @@ def _index_function(ix: SpectralIndex, real: bool = False, channel: complex | No
     return f
 
 
-def side_data(side: _Side, transmission: bool, channel: dict | None = None,
-              quantity=None) -> tabulate_base.SideData:
+def side_data(side: SidePlan, transmission: bool, channel: dict | None = None,
+              quantity=POWERS) -> tabulate_base.SideData:
     """The float64 build data (:class:`~thinfilm_mi.tabulate.base.SideData`) of ``side``; ``channel`` maps
     media (by ``id``) given per channel to their index in the channel built;
-    ``quantity``: what is tabulated (``None``: the powers ``R`` [, ``T``])."""
+    ``quantity``: what is tabulated (:data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`)."""
     channel = channel or {}
 
     def on(ix, real=False):
         return _index_function(ix, real, channel.get(id(ix)))
 
     incoherent = side.incoherent
-
-    def rt(n0_, cos0, films, n_exit, wl, transmission):
-        return _rt(n0_, cos0, films, n_exit, wl, incoherent, transmission)
-    loop = unpolarised_rt_loop
-    if quantity is not None:
-        rt, loop = quantity.rt(incoherent), quantity.rt_loop
-
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]
     return tabulate_base.SideData(
         n0=on(side.n0, real=True), films=[(on(ix), scalar(d)) for ix, d, _ in side.films],
         n_exit=on(side.exit, real=True) if side.exit_real else on(side.exit),
-        transmission=transmission, rt=rt, quantity=quantity,
-        rt_loop=None if any(incoherent) else loop,
+        transmission=transmission, rt=quantity.rt(incoherent), quantity=quantity,
+        rt_loop=None if any(incoherent) else quantity.rt_loop,
         kinks=np.unique(np.concatenate([ix.kinks for ix in media])),
         fringe_films=[j for j, f in enumerate(side.films) if not f[2]])
 

@@ -13,6 +13,8 @@ from thinfilm_mi.optics.unpolarised import unpolarised_rt_loop
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 
+__all__ = ["LoopFilms"]
+
 
 class LoopFilms:
     """The films of one side as kernel buffers for :func:`optics.stack_rt_loop`.
@@ -143,7 +145,7 @@ class LoopFilms:
     def index(self, wl, j=0) -> Cx:
         """Film ``j``'s index at the wavelengths ``wl`` (one search per wavelength, one
         gather per film and wavelength), what its textures give up to float32 rounding:
-        e.g. ``thinfilm_diffuse``'s absorbing film ``N`` (``render/diffuse_exact.py``)."""
+        e.g. ``thinfilm_diffuse``'s absorbing film ``N`` (``render/coated_diffuse.py``)."""
         mi = mitsuba_module()
         if self.constant:
             return Cx(mi.UnpolarizedSpectrum(dr.gather(mi.Float, self.buffer, mi.UInt32(j))), 0.0)

@@ -30,6 +30,9 @@ import numpy as np
 
 from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
 
+__all__ = ["AUTO_MIN_FILMS", "branches", "either_side", "exact_mirrors", "literal_outside",
+           "mirror_applies", "mirrored_rt", "real_on_grid"]
+
 #: ``tabulate="auto"`` tabulates a mirrored stack between media of constant index
 #: (exactly: one evaluation of real amplitudes per lane, no branch) from this many films. A
 #: cubic lookup costs a dielectric's render about what ~5 films do there (issue 44,

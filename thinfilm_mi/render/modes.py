@@ -43,6 +43,8 @@ from thinfilm_mi.render.colour import colour_channels
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
 
+__all__ = ["ColourMode", "PolarizedMode", "Response", "SpectralMode", "current", "sp_matrix"]
+
 
 @dataclass
 class Response:

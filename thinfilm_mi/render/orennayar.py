@@ -1,11 +1,12 @@
-"""The Oren–Nayar base of ``thinfilm_diffuse`` (its ``roughness``; no plugin classes here).
+"""The Oren–Nayar base of the coated-diffuse model (``thinfilm_diffuse``'s ``roughness``
+and ``roughness_model``; no plugin classes here).
 
 Two base BRDFs of albedo ``ρ`` (``reflectance``) and roughness ``σ`` (radians, the
 standard deviation of the facet slope angles; :data:`MAX_ROUGHNESS` at most), with
 ``A = 1 - 0.5 σ²/(σ² + 0.33)``, ``B = 0.45 σ²/(σ² + 0.09)``, ``μ = cos θ`` and
 ``s = sin θ_i sin θ_o cos(φ_o - φ_i)`` (``wi.x wo.x + wi.y wo.y``, no trigonometry):
 
-* ``"qualitative"``: the seed's formula (Oren and Nayar 1994, their qualitative model),
+* ``"qualitative"`` (:class:`Qualitative`): the seed's formula (Oren and Nayar 1994, their qualitative model),
   ``f = ρ/π (A + B max(0, cos φ) sin α tan β)``, written as
   ``ρ/π (A + B max(0, s)/max(μ_i, μ_o))`` (``sin α tan β = sin θ_i sin θ_o / cos β``).
   Its directional albedo is ``E(μ) = ρ (A + B h(μ))`` with
@@ -13,7 +14,7 @@ standard deviation of the facet slope angles; :data:`MAX_ROUGHNESS` at most), wi
   (:func:`qualitative_h`; the second term is ``(2/3) tan θ (1 - S³)`` without its
   ``0·∞`` at grazing), and its hemispherical albedo ``Ē = ρ (A + B H)``,
   ``H = 2∫h μ dμ = 2/3 - 64/(45π)`` (:data:`H_AVG`).
-* ``"eon"``: the energy-preserving Oren–Nayar model (Portsmouth, Kutz and Hill,
+* ``"eon"`` (:class:`EON`): the energy-preserving Oren–Nayar model (Portsmouth, Kutz and Hill,
   "EON: A practical energy-preserving rough diffuse BRDF", JCGT 14(1), 2025; OpenPBR's
   ``base_diffuse_roughness``): Fujii's single-scattering lobe
   ``f_ss = ρ/π A_F (1 + r s/t)`` (``s/t = s/max(μ_i, μ_o)`` for ``s > 0``, ``s``
@@ -26,9 +27,11 @@ standard deviation of the facet slope angles; :data:`MAX_ROUGHNESS` at most), wi
   qualitative model's: ``r`` grows from 0 to 0.777 at ``σ = π/2`` (OpenPBR's ``r``
   above that is out of reach).
 
-:class:`OrenNayar` reads and validates the parameters and gives, per hit, the base's
-:class:`BaseTerms`; :func:`coated` and :func:`coated_integrated` put them under the
-films (the model is written in the plugin's doc block).
+:data:`ROUGHNESS_MODELS` holds one object per value of ``roughness_model``
+(:func:`roughness_model` looks one up); :class:`OrenNayar` reads and validates the
+parameters and gives, per hit, the base's :class:`BaseTerms`, which the coated-diffuse
+model (:mod:`thinfilm_mi.render.coated_diffuse`) puts under the films (the model is
+written in the plugin's doc block).
 """
 from __future__ import annotations
 
@@ -38,13 +41,12 @@ from typing import NamedTuple
 import drjit as dr
 
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.optics.choices import choose
 from thinfilm_mi.render.textures import checked_texture, mitsuba_module, texture_range, uniform
 
-__all__ = ["ROUGHNESS_MODELS", "MAX_ROUGHNESS", "H_AVG", "C1_FON", "C2_FON", "BaseTerms", "OrenNayar",
-           "coefficients", "qualitative_h", "coated", "coated_integrated", "series_term"]
+__all__ = ["ROUGHNESS_MODELS", "RoughnessModel", "Qualitative", "EON", "roughness_model", "MAX_ROUGHNESS",
+           "H_AVG", "C1_FON", "C2_FON", "BaseTerms", "OrenNayar", "coefficients", "qualitative_h"]
 
-#: The base models (``roughness_model``); the first is the default.
-ROUGHNESS_MODELS = ("qualitative", "eon")
 #: Largest ``roughness`` accepted (radians): a slope angle's standard deviation beyond
 #: 90° means nothing, and larger values are most likely degrees given by mistake.
 MAX_ROUGHNESS = math.pi / 2
@@ -93,6 +95,56 @@ def _fon_albedo(mu, r, a_f):
     return a_f * (1.0 + r * (qualitative_h(mu) - (2.0 / (3.0 * math.pi)) * _sin(mu)))
 
 
+class RoughnessModel:
+    """One value of ``roughness_model``: the base BRDF at roughness ``σ`` (its
+    qualitative coefficients ``a``, ``b``, :func:`coefficients`)."""
+    #: the value of ``roughness_model`` that names it
+    name = ""
+
+    def terms(self, kd, a, b, mu_i, mu_o, s, t) -> BaseTerms:
+        """:class:`BaseTerms` of albedo ``kd`` for ``μ_i``, ``μ_o``, ``s = sin θ_i sin θ_o
+        cos(φ_o - φ_i)`` and ``t = max(μ_i, μ_o)`` (module docstring)."""
+        raise NotImplementedError
+
+
+class Qualitative(RoughnessModel):
+    """Oren and Nayar's qualitative model (module docstring)."""
+    name = "qualitative"
+
+    def terms(self, kd, a, b, mu_i, mu_o, s, t) -> BaseTerms:
+        pi_f = kd * (a + b * dr.maximum(s, 0.0) / t)
+        return BaseTerms(pi_f, kd * (a + b * qualitative_h(mu_i)),
+                         kd * (a + b * qualitative_h(mu_o)), kd * (a + b * H_AVG))
+
+
+class EON(RoughnessModel):
+    """The energy-preserving Oren–Nayar model, with ``r = B/A`` (module docstring)."""
+    name = "eon"
+
+    def terms(self, kd, a, b, mu_i, mu_o, s, t) -> BaseTerms:
+        r = b / a
+        a_f = dr.rcp(1.0 + C1_FON * r)
+        e_fi, e_fo = _fon_albedo(mu_i, r, a_f), _fon_albedo(mu_o, r, a_f)
+        e_favg = a_f * (1.0 + C2_FON * r)
+        rho_ms = kd * kd * e_favg / (1.0 - kd * (1.0 - e_favg))
+        ms = (dr.maximum(1.0 - e_fi, 0.0) * dr.maximum(1.0 - e_fo, 0.0)
+              / dr.maximum(1.0 - e_favg, 1e-20))
+        pi_f = kd * a_f * (1.0 + r * dr.select(s > 0, s / t, s)) + rho_ms * ms
+        return BaseTerms(pi_f, kd * e_fi + rho_ms * (1.0 - e_fi), kd * e_fo + rho_ms * (1.0 - e_fo),
+                         kd * e_favg + rho_ms * (1.0 - e_favg))
+
+
+#: The base models by their ``roughness_model`` value; the first is the default.
+ROUGHNESS_MODELS = {m.name: m for m in (Qualitative(), EON())}
+
+
+def roughness_model(value, plugin: str) -> RoughnessModel:
+    """The :data:`ROUGHNESS_MODELS` entry named ``value`` (:func:`~thinfilm_mi.optics.choices.choose`:
+    case-insensitive); a ``ThinFilmError`` naming ``plugin``'s ``roughness_model``, the
+    value and the choices otherwise."""
+    return choose(ROUGHNESS_MODELS, value, f"{plugin}: 'roughness_model'")
+
+
 class OrenNayar:
     """``roughness`` (a texture, radians) and ``roughness_model`` of a ``thinfilm_diffuse``.
 
@@ -103,11 +155,8 @@ class OrenNayar:
 
     def __init__(self, props, plugin: str):
         self.plugin = plugin
-        model = props.get("roughness_model", ROUGHNESS_MODELS[0])
-        if model not in ROUGHNESS_MODELS:
-            raise ThinFilmError(f"{plugin}: 'roughness_model' must be one of "
-                                f"{', '.join(map(repr, ROUGHNESS_MODELS))}, got {model!r}")
-        self.model = model
+        #: the :class:`RoughnessModel`
+        self.model = roughness_model(props.get("roughness_model", next(iter(ROUGHNESS_MODELS))), plugin)
         self.texture = self._texture(props)
         self.rough = False
         self.refresh()
@@ -151,7 +200,7 @@ class OrenNayar:
         callback.put("roughness", self.texture, mitsuba_module().ParamFlags.Differentiable)
 
     def describe(self) -> str:
-        return f"  roughness = {self.texture},\n  roughness_model = {self.model},\n"
+        return f"  roughness = {self.texture},\n  roughness_model = {self.model.name},\n"
 
     def terms(self, si, kd, wo, active) -> BaseTerms:
         """:class:`BaseTerms` at ``si`` for light towards ``wo`` (local frame, upper
@@ -162,48 +211,4 @@ class OrenNayar:
         a, b = coefficients(sigma)
         s = wi.x * wo.x + wi.y * wo.y
         t = dr.maximum(dr.maximum(mu_i, mu_o), 1e-20)
-        if self.model == "qualitative":
-            pi_f = kd * (a + b * dr.maximum(s, 0.0) / t)
-            return BaseTerms(pi_f, kd * (a + b * qualitative_h(mu_i)),
-                             kd * (a + b * qualitative_h(mu_o)), kd * (a + b * H_AVG))
-        r = b / a
-        a_f = dr.rcp(1.0 + C1_FON * r)
-        e_fi, e_fo = _fon_albedo(mu_i, r, a_f), _fon_albedo(mu_o, r, a_f)
-        e_favg = a_f * (1.0 + C2_FON * r)
-        rho_ms = kd * kd * e_favg / (1.0 - kd * (1.0 - e_favg))
-        ms = (dr.maximum(1.0 - e_fi, 0.0) * dr.maximum(1.0 - e_fo, 0.0)
-              / dr.maximum(1.0 - e_favg, 1e-20))
-        pi_f = kd * a_f * (1.0 + r * dr.select(s > 0, s / t, s)) + rho_ms * ms
-        return BaseTerms(pi_f, kd * e_fi + rho_ms * (1.0 - e_fi), kd * e_fo + rho_ms * (1.0 - e_fo),
-                         kd * e_favg + rho_ms * (1.0 - e_favg))
-
-
-def series_term(terms: BaseTerms, r_dh, multiple: bool):
-    """``π f / (t_i t_o)`` of the coated rough base at ``R_dh``:
-    ``π f_b + E_i E_o R_dh/(1 - Ē R_dh)`` ("multiple"), ``π f_b`` ("single")."""
-    if not multiple:
-        return terms.pi_f
-    return terms.pi_f + terms.e_i * terms.e_o * r_dh * dr.rcp(1.0 - terms.e_avg * r_dh)
-
-
-def coated(terms: BaseTerms, t_i, t_o, r_dh, multiple: bool):
-    """``π f`` per wavelength: ``t(θ_i) t(θ_o)`` times :func:`series_term`."""
-    return t_i * t_o * series_term(terms, r_dh, multiple)
-
-
-def coated_integrated(node_values, terms: BaseTerms, multiple: bool):
-    """``π f`` per colour channel from the integrated diffuse table's terms
-    ``node_values = [(r_j, M_j)]`` (a table built without a fixed albedo,
-    :meth:`thinfilm_mi.tabulate.diffuse.ColourDiffuse.node_values`; the Lagrange basis
-    sums to 1): ``π f_b Σ M_j + E_i E_o Σ r_j/(1 - Ē r_j) M_j``, the integral of
-    :func:`coated` against colour matching."""
-    mi = mitsuba_module()
-    single = mi.Spectrum(0.0)
-    rest = mi.Spectrum(0.0)
-    for r, m in node_values:
-        single += m
-        if multiple:
-            rest += r * dr.rcp(1.0 - terms.e_avg * r) * m
-    if not multiple:
-        return terms.pi_f * single
-    return terms.pi_f * single + terms.e_i * terms.e_o * rest
+        return self.model.terms(kd, a, b, mu_i, mu_o, s, t)

@@ -23,6 +23,8 @@ from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
 from thinfilm_mi.render.orennayar import MAX_ROUGHNESS
 from thinfilm_mi.render.textures import mitsuba_module, texture_range
 
+__all__ = ["ALBEDO_SLACK", "MAX_ALPHA", "ParameterGuard", "RULES", "check_value", "unchanged"]
+
 #: Largest microfacet roughness accepted (``alpha``, ``alpha_u``, ``alpha_v``):
 #: beyond ~1 a Beckmann/GGX surface is already near-uniform; 100 leaves room
 #: while keeping the distribution's terms in float32 range.
@@ -141,7 +143,9 @@ class ParameterGuard:
 
     def __init__(self, bsdf, plugin: str):
         self.plugin = plugin
-        self._restoring = None
+        #: while :meth:`_restore` writes the last valid values back: whether a refresh ran
+        #: on the rejected ones (``None``: not restoring)
+        self._restoring: bool | None = None
         params = mitsuba_module().traverse(bsdf)
         self._valid = {k: _copy(params[k]) for k in params.keys()}
 
@@ -161,10 +165,10 @@ class ParameterGuard:
         the last valid snapshot instead (:func:`unchanged`: a comparison of JIT
         indices, no evaluation), which is the same through a scene or a BSDF.
         """
-        if self._restoring:
+        if self._restoring is not None:
             # writing the last valid values back: the BSDF's state is refreshed
             # only if a refresh ran on the rejected values
-            if self._restoring == "refresh":
+            if self._restoring:
                 refresh(None)
             return
         mi = mitsuba_module()
@@ -196,7 +200,7 @@ class ParameterGuard:
     def _restore(self, params, refreshed: bool) -> None:
         """Write the last valid values back (their textures are notified again);
         the BSDF refreshes its state from them only if ``refreshed``."""
-        self._restoring = "refresh" if refreshed else "values"
+        self._restoring = refreshed
         try:
             for key, value in self._valid.items():
                 if key in params.keys():

@@ -25,6 +25,10 @@ import numpy as np
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID, SPECTRAL_RANGE
 
+__all__ = ["GRID", "LUMINANCE", "check_texture_range", "checked_texture", "irregular",
+           "mitsuba_module", "new_object", "regular", "scalar", "texture_on_grid", "texture_range",
+           "uniform"]
+
 
 def mitsuba_module():
     import mitsuba as mi

@@ -8,6 +8,8 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.llvm import require_llvm
 from thinfilm_mi.render.textures import mitsuba_module
 
+__all__ = ["check_variant", "spectral_mean"]
+
 
 def check_variant(plugin: str) -> None:
     """Raise if the current Mitsuba variant cannot run the thin-film plugins.

@@ -2,10 +2,16 @@
 
 The shared base, used by every builder:
 
-* :mod:`thinfilm_mi.tabulate.base` -- a lit side of a stack (:class:`SideData`) and its
-  exact float64 evaluation in batches, the cubic tables' angle and wavelength axes,
-  B-splines and their midpoint prediction, the :class:`Table` lookup, :class:`BuildReport`
-  and the :class:`TableCache`.
+* :mod:`thinfilm_mi.tabulate.axes` -- the angle axes of the tables (:data:`~thinfilm_mi.tabulate.axes.AXES`:
+  plain, split at a critical angle, warped for band-limited tables) and how the ghost
+  nodes beyond their ends are made.
+* :mod:`thinfilm_mi.tabulate.base` -- a lit side of a stack (:class:`~thinfilm_mi.tabulate.base.SideData`)
+  and its exact float64 evaluation in batches, the wavelength axis, B-splines and their
+  midpoint prediction, the :class:`~thinfilm_mi.tabulate.base.Table` lookup,
+  :class:`~thinfilm_mi.tabulate.base.BuildReport` and the :class:`~thinfilm_mi.tabulate.base.TableCache`.
+* :mod:`thinfilm_mi.tabulate.quantities` -- what a table holds
+  (:data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`: the powers, or the Mueller
+  components of :mod:`thinfilm_mi.tabulate.mueller`).
 * :mod:`thinfilm_mi.tabulate.store` -- built tables kept on disk between processes (the
   table store, ``THINFILM_MI_TABLE_CACHE``).
 * :mod:`thinfilm_mi.tabulate.refine` -- the :class:`~thinfilm_mi.tabulate.refine.Budget` a
@@ -16,7 +22,7 @@ The shared base, used by every builder:
 The builders on top:
 
 * :mod:`thinfilm_mi.tabulate.exact` -- cubic B-spline tables of the exact ``R``/``T`` over
-  (angle, wavelength), their verification, and the table cache.
+  (angle, wavelength) and their verification.
 * :mod:`thinfilm_mi.tabulate.band` -- tables of ``R``/``T`` convolved with a Gaussian in
   wavenumber (deep stacks), on a sheared axis (:mod:`thinfilm_mi.tabulate.shear`), from
   rows (:mod:`thinfilm_mi.tabulate.band_rows`) sampled through the stack's smooth
@@ -25,11 +31,8 @@ The builders on top:
   matching over the angle (RGB and mono variants).
 * :mod:`thinfilm_mi.tabulate.diffuse` -- the coated-diffuse product film-in x base x film-out.
 * :mod:`thinfilm_mi.tabulate.hemispherical` -- hemispherical terms ``R_dh``, ``T_hemi``.
-"""
-from thinfilm_mi.tabulate.band import build_table
-from thinfilm_mi.tabulate.base import SideData, Table, TableCache, evaluate_side
-from thinfilm_mi.tabulate.colour import ColourTable
-from thinfilm_mi.tabulate.hemispherical import hemispherical_factors, r_dh_partials
 
-__all__ = ["ColourTable", "SideData", "Table", "TableCache", "build_table", "evaluate_side",
-           "hemispherical_factors", "r_dh_partials"]
+The subpackage exports no names of its own: each is imported from its module.
+"""
+
+__all__: list[str] = []

@@ -45,8 +45,8 @@ of ``σ_ν`` to its fourth cumulant), one FFT per row.
 of exact values on a 0.0005 nm grid (measured within 1e-5).
 
 **The table** is the cubic B-spline of :mod:`thinfilm_mi.tabulate.exact` (same lookup;
-the angle axis warped to put more nodes at mid angles, ``kind="band"`` of
-:func:`tables.u_texel`, where ``R_σ``'s features move fastest with the angle),
+the angle axis warped to put more nodes at mid angles,
+:data:`~thinfilm_mi.tabulate.axes.BAND`, where ``R_σ``'s features move fastest with the angle),
 its error ``table_error`` still the interpolation error, now against ``R_σ``,
 verified outside the same grazing sliver; the angle rows are refined until the
 spline through them predicts the midpoint rows within the target. Lit from the
@@ -70,28 +70,28 @@ import numpy as np
 
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate import exact as _tables
+from thinfilm_mi.tabulate.axes import BAND, GHOST, AngleAxis, axis_for, band_cos
 from thinfilm_mi.tabulate.band_rows import ILLUMINANTS, V_SPACING, Rows, sigma_nu
 from thinfilm_mi.tabulate.base import (
-    GHOST,
     GRAZING_COS,
     MAX_U,
     MAX_V,
     SIGMA_MAX,
     SIGMA_MIN,
-    SPLIT_ENDS,
     BuildReport,
     SideData,
     Table,
-    band_cos,
     bspline_coefficients,
     bspline_midpoints,
     build_work,
     side_indices,
-    tir_kind,
     with_ghosts,
 )
 from thinfilm_mi.tabulate.refine import Budget, convergence_factor
 from thinfilm_mi.tabulate.shear import REFERENCE_WAVELENGTH, Shear
+
+__all__ = ["COLOUR_TOLERANCE", "EXPECTED_TOTAL", "FIRST_NU", "FIRST_ORDER", "KNOT_SHARE",
+           "MAX_ROUNDS", "SAMPLE_ROWS", "build_band_table", "build_table"]
 
 #: Bins are half a v-node spacing wide, 0.3 σ_ν: the bins' B-spline departs
 #: from a Gaussian by its fourth cumulant, ~1e-6 of ``R_σ``.
@@ -147,20 +147,6 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     return table
 
 
-def _axis(kind: str, nu: int):
-    """Row coordinates of a table with ``nu`` angle nodes: ``(nodes, mids)``; a
-    ``"band"`` axis's nodes include its ghosts (evaluated), a split axis's do not,
-    and its critical cell has no midpoint."""
-    g = GHOST
-    if kind == "band":
-        s = np.arange(-g, nu + g, dtype=np.float64)
-        return s / (nu - 1), (np.arange(nu - 1) + 0.5) / (nu - 1)
-    m = nu // 2
-    seg = np.arange(m, dtype=np.float64) / (m - 1)
-    mid = (np.arange(m - 1) + 0.5) / (m - 1)
-    return np.concatenate([seg, 2.0 + seg]), np.concatenate([mid, 2.0 + mid])
-
-
 def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
                      max_texels: int, resolution: float, report: BuildReport | None = None,
                      budget_scale: float = 1.0) -> Table | None:
@@ -179,28 +165,29 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     ``error``, the angle nodes are multiplied by the factor the error's
     convergence order predicts (the v spacing is reduced instead, all rows
     computed again, where ``err_v`` alone exceeds half the target)."""
-    kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
+    axis = axis_for(side.n0(wavelengths), side.n_exit(wavelengths))
     stats = report if report is not None else BuildReport()
-    stats.update({"kind": kind, "rounds": 0, "points": 0, "result": "critical angle varies",
-                  "resolution": resolution, "colour_error": None, "errors": []})
-    if kind is None:
+    stats.update({"kind": axis.name if axis is not None else None, "rounds": 0, "points": 0,
+                  "result": "critical angle varies", "resolution": resolution,
+                  "colour_error": None, "errors": []})
+    if axis is None:
         return None
     side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)
                       + (bool(np.any(np.asarray(side.n_exit(wavelengths)).imag)),))
-    if kind == "plain":
-        kind = "band"     # the angle axis with more nodes at mid angles
-    split = kind == "tir"
+    axis = axis.band_limited     # a plain axis: more nodes at mid angles
+    split = axis.split
     # a quantity whose channels vary faster along v (tabulate.mueller) starts finer
-    spacing = getattr(side.quantity, "v_spacing", V_SPACING)
-    # lit from the ambient: the v axis follows the films' fringes (tabulate.shear)
+    spacing = side.quantity.v_spacing
+    # lit from the ambient (rows that do not depend on the indices): the v axis
+    # follows the films' fringes (tabulate.shear)
     shear = None
-    if kind == "band":
+    if not axis.needs_n_exit:
         shear = Shear.of([side.films[i] for i in side.fringe_films],
                          complex(np.asarray(side.n0(np.array([REFERENCE_WAVELENGTH])))[0]))
-    rows = _rows(side, kind, resolution, spacing, shear)
+    rows = _rows(side, axis, resolution, spacing, shear)
     nu = 2 * FIRST_NU if split else FIRST_NU
     budget = Budget.scaled(budget_scale, texels=max_texels, point_work=build_work(side, 1))
-    first = EXPECTED_TOTAL * sum(len(x) for x in _axis(kind, nu)) * ((rows.nb - 1) / rows.step + 1)
+    first = EXPECTED_TOTAL * sum(len(x) for x in axis.rows(nu)) * ((rows.nb - 1) / rows.step + 1)
     stats["expected_work"] = build_work(side, first)
     if not budget.allows(first):
         stats["result"] = "over budget (expected)"
@@ -208,7 +195,7 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     last, per_row = None, 0.0
     for _ in range(MAX_ROUNDS + 1):
         nv = rows.nv if shear is None else _sheared_nv(shear, rows.sigma, spacing)
-        coords = np.concatenate(_axis(kind, nu))
+        coords = np.concatenate(axis.rows(nu))
         if not per_row:
             # the cost per row measured on SAMPLE_ROWS of the first round's rows (then
             # part of it) before the rest is spent: the expectation is a bound from the
@@ -221,7 +208,7 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
             stats["result"] = "over budget"
             stats["points"] = budget.spent + rows.points
             return None
-        table, err_u, err_v = (_round(rows, kind, nu) if shear is None
+        table, err_u, err_v = (_round(rows, axis, nu) if shear is None
                                else _round_sheared(rows, shear, nu, nv))
         per_row = max(per_row, rows.points / rows.computed)
         stats["rounds"] += 1
@@ -234,14 +221,14 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
             return None
         if err_u + err_v <= error:
             stats["result"] = "table"
-            return Table(table, kind, err_u + err_v, table.shape[-1], resolution, shear=shear)
+            return Table(table, axis, err_u + err_v, table.shape[-1], resolution, shear=shear)
         if not budget.allows(rows.points):
             break
         if err_v > 0.5 * error:      # a finer v axis (unsheared: every row again)
             spacing *= 0.75 * (0.5 * error / err_v) ** 0.25
             if shear is None:
                 budget.spend(rows.points)
-                rows = Rows(side, kind, resolution, spacing)
+                rows = Rows(side, axis, resolution, spacing)
         if err_u > 0.5 * error or err_u + min(err_v, 0.5 * error) > error:
             goal = 0.8 * error - min(err_v, 0.4 * error)
             factor = convergence_factor(nu, err_u, goal, last, FIRST_ORDER, margin=1.1, cap=6.0,
@@ -267,14 +254,15 @@ def _sheared_nv(shear: Shear, sigma: float, spacing: float) -> int:
     return max(int(math.ceil(span / (spacing * sigma * shear.min_factor))) + 1, 16)
 
 
-def _rows(side: SideData, kind: str, resolution: float, spacing: float, shear: Shear | None) -> Rows:
+def _rows(side: SideData, axis: AngleAxis, resolution: float, spacing: float,
+          shear: Shear | None) -> Rows:
     """The rows of a build: on a sheared axis, bins over every wavenumber a node
     ``ν'_t / P`` of any row (ghosts included) can ask for."""
     if shear is None:
-        return Rows(side, kind, resolution, spacing)
+        return Rows(side, axis, resolution, spacing)
     dv = (SIGMA_MAX - shear.low) / (_sheared_nv(shear, sigma_nu(resolution), spacing) - 1)
     margin = (GHOST + 1) * dv
-    return Rows(side, kind, resolution, spacing,
+    return Rows(side, axis, resolution, spacing,
                 extent=((shear.low - margin) / shear.max_factor, (SIGMA_MAX + margin) / shear.min_factor))
 
 
@@ -284,7 +272,7 @@ def _round_sheared(rows: Rows, shear: Shear, nu: int, nv: int):
     wavelength is within a node of 360-830 nm (the lookups' range) and outside
     the grazing sliver."""
     g = GHOST
-    xn, xm = _axis("band", nu)
+    xn, xm = BAND.rows(nu)
     pn = shear.factor_np(1.0 - band_cos(xn) ** 2)
     pm = shear.factor_np(1.0 - band_cos(xm) ** 2)
     t = np.arange(-g, nv + g, dtype=np.float64)
@@ -310,11 +298,11 @@ def _round_sheared(rows: Rows, shear: Shear, nu: int, nv: int):
     return coeffs, err_u, err_v
 
 
-def _round(rows: Rows, kind: str, nu: int):
+def _round(rows: Rows, axis: AngleAxis, nu: int):
     """The spline coefficients of a table with ``nu`` angle nodes and ``rows.nv``
     wavelength nodes, and its errors ``(coefficients, err_u, err_v)``."""
-    g, split, nv, b0 = GHOST, kind == "tir", rows.nv, rows.b0
-    xn, xm = _axis(kind, nu)
+    g, split, nv, b0 = GHOST, axis.split, rows.nv, rows.b0
+    xn, xm = axis.rows(nu)
     vn, vm = rows.values(xn), rows.values(xm)
     tv = b0 + 2 * np.arange(-g, nv + g)                      # the v nodes' bins
     nodes = np.swapaxes(vn[:, tv], 0, 1)                      # (nv + 2g, rows, C)
@@ -323,7 +311,7 @@ def _round(rows: Rows, kind: str, nu: int):
     if split:
         m = nu // 2
         segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *ends), 0, 1)
-                for part, ends in zip((nodes[:, :m], nodes[:, m:]), SPLIT_ENDS)]
+                for part, ends in zip((nodes[:, :m], nodes[:, m:]), axis.ends)]
         cu = [bspline_coefficients(s, axis=1) for s in segs]
         approx_u = np.concatenate([bspline_midpoints(c[g:-g], 1, g, m) for c in cu], axis=1)
         cu = np.concatenate(cu, axis=1)

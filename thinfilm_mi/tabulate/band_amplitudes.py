@@ -64,7 +64,7 @@ class Amplitudes:
             scale = np.exp2(shift.reshape(R * P, 2))
             flat[:, 0:4] *= scale[:, 0:1]
             flat[:, 4:8] *= scale[:, 1:2]
-            if quantity is None and K > 8:
+            if quantity.squared_terms and K > 8:
                 flat[:, 8:10] *= scale * scale
         self.flat = flat
         self._buffer = None
@@ -101,9 +101,8 @@ class Amplitudes:
         dr.eval(*out)
         out = np.stack([np.array(v, dtype=np.float64) for v in out], axis=-1)
         q, tr = self.quantity, self.transmission
-        f = q.values(out, tr) if q else powers_of(out, tr)
-        C = f.shape[-1]
-        grazing = q.grazing(tr) if q else np.array([1.0, 0.0][:C])
+        f = q.values(out, tr)
+        grazing = q.grazing(tr)
         near = np.clip(np.rint(s).astype(np.int64), 0, P - 1)
         return np.where((self.cos.reshape(-1)[r * P + near] <= 0.0)[:, None], grazing, f)
 

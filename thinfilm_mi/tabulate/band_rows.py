@@ -13,26 +13,25 @@ import math
 import numpy as np
 
 from thinfilm_mi.colour import cie
+from thinfilm_mi.tabulate.axes import GHOST, AngleAxis
 from thinfilm_mi.tabulate.band_amplitudes import (
     GRADING,
     Amplitudes,
-    amplitudes,
     near_zeros,
-    powers_of,
     samples_amplitudes,
 )
 from thinfilm_mi.tabulate.base import (
-    GHOST,
     GRAZING_COS,
-    HALF_PI,
     SIGMA_MAX,
     SIGMA_MIN,
     SideData,
-    band_cos,
     evaluate_side,
     side_indices,
 )
 from thinfilm_mi.tabulate.refine import optical_thickness, power_of_two_step
+
+__all__ = ["ILLUMINANTS", "MAX_STEP", "MIN_PANEL", "MIN_PANEL_GRAZING", "REFERENCE_WAVELENGTH",
+           "Rows", "TAIL", "TOLERANCE", "V_SPACING", "first_step", "fringe_step", "sigma_nu"]
 
 #: The wavelength (nm) at which ``spectral_resolution`` is the Gaussian's
 #: standard deviation in nm (it scales as λ² elsewhere).
@@ -65,19 +64,6 @@ def sigma_nu(resolution: float) -> float:
     ``spectral_resolution`` of ``resolution`` nm at :data:`REFERENCE_WAVELENGTH`."""
     return resolution / REFERENCE_WAVELENGTH ** 2
 
-
-def _row_cos(x: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str) -> np.ndarray:
-    """cos(θ_i) of angle rows at ``x`` (broadcasting with the real indices ``n0``,
-    ``n_exit``): a ``"band"`` axis's coordinate (:func:`tables.band_cos`, ghosts
-    beyond [0, 1]); a split axis's transmit segment at ``x`` in [0, 1] (fraction
-    of θ_t's quarter turn) and its total-reflection segment at ``2 + w``."""
-    if kind == "band":
-        return band_cos(x)
-    t = np.clip(x, 0.0, 1.0) * HALF_PI
-    cos_t = np.sqrt(np.maximum(1.0 - (n_exit * np.sin(t) / n0) ** 2, 0.0))
-    rho = np.sqrt(np.maximum(n0 * n0 - n_exit * n_exit, 0.0))
-    w = np.clip(x - 2.0, 0.0, 1.0)
-    return np.where(x < 1.5, cos_t, rho * np.sin((1.0 - w) ** 2 * HALF_PI) / n0)
 
 
 _GL3_X = (-0.5 * math.sqrt(0.6), 0.0, 0.5 * math.sqrt(0.6))
@@ -156,15 +142,15 @@ class Rows:
     """Band-limited angle rows of one side: ``R_σ`` [, ``T_σ``] on a grid of bins
     uniform in ``ν`` whose every other bin is a v node of a table of ``nv`` nodes.
 
-    ``rows.values(xs)`` gives, per row coordinate (:func:`_row_cos`), ``R_σ`` at
+    ``rows.values(xs)`` gives, per row coordinate (the angle axis's ``row_cos``), ``R_σ`` at
     the bins (shape ``(len xs, nb, C)``), computing the rows it has not seen.
     Bin ``b`` sits at ``ν = SIGMA_MAX - (b - b0) w``, so v node ``t`` (of a table
     of ``nv`` nodes) is bin ``b0 + 2 t``.
     """
 
-    def __init__(self, side: SideData, kind: str, resolution: float,
+    def __init__(self, side: SideData, axis: AngleAxis, resolution: float,
                  spacing: float = V_SPACING, extent: tuple | None = None):
-        self.side, self.kind = side, kind
+        self.side, self.axis = side, axis
         self.sigma = sigma_nu(resolution)
         # the wavenumbers the bins cover (a sheared table's rows reach beyond
         # 360-830 nm, :meth:`sample`), SIGMA_MIN .. SIGMA_MAX by default
@@ -188,10 +174,10 @@ class Rows:
         self.b0 = b0
         self.nb = nb = 2 * (self.nv - 1) + 2 * b0 + 1
         self.wavenumbers = self.top - (np.arange(nb) - b0) * w          # decreasing ν
-        #: what is tabulated: ``None`` for the powers, else the side's quantity
-        #: (the Mueller components, :mod:`thinfilm_mi.tabulate.mueller`)
+        #: what is tabulated: the side's quantity (the powers, or the Mueller
+        #: components, :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`)
         self.quantity = q = side.quantity
-        self.channels = q.channels(side.transmission) if q else 2 if side.transmission else 1
+        self.channels = q.channels(side.transmission)
         self.points = 0
         self._bins_of: dict = {}     # the rows computed: their bins I_b
         self._smooth: dict = {}      # R_σ at the bins of the rows values() was asked for
@@ -217,14 +203,14 @@ class Rows:
 
     def _cos(self, xs, r, idx, inv):
         """cos θ_i at the points of rows ``xs[r]`` at the wavelengths ``inv`` of the
-        indices ``idx`` (per row on a ``"band"`` axis, where it does not depend on λ)."""
-        if self.kind == "band":
+        indices ``idx`` (per row on an axis that does not depend on the indices)."""
+        if not self.axis.needs_n_exit:
             key = xs.tobytes()
             if key not in self._row_cos:
-                self._row_cos = {key: _row_cos(xs, None, None, self.kind)}
+                self._row_cos = {key: self.axis.row_cos(xs, None, None)}
             return self._row_cos[key][r]
-        return _row_cos(xs[r], np.asarray(idx[0], np.float64)[inv],
-                        np.asarray(idx[2]).real[inv], self.kind)
+        return self.axis.row_cos(xs[r], np.asarray(idx[0], np.float64)[inv],
+                                 np.asarray(idx[2]).real[inv])
 
     def _first(self, xs: np.ndarray, nu_pts: np.ndarray):
         """The first level: exact ``R`` [, ``T``] of every row at ``nu_pts`` (shape
@@ -249,12 +235,12 @@ class Rows:
         idx = side_indices(self.side, wl)
         cos = self._cos(xs, rows_of, idx, np.tile(np.arange(P), R)).reshape(R, P)
         q, tr = self.quantity, self.side.transmission
-        terms, exps = (q.smooth_terms if q else amplitudes)(
+        terms, exps = q.smooth_terms(
             self.side, np.ascontiguousarray(cos).ravel(), np.tile(np.arange(P), R), wl, idx)
         self.points += cos.size
         terms, exps = terms.reshape(R, P, -1), exps.reshape(R, P, 2)
-        f = q.values(terms, tr) if q else powers_of(terms, tr)
-        f = np.where((cos <= 0.0)[..., None], q.grazing(tr) if q else np.array([1.0, 0.0][:C]), f)
+        f = q.values(terms, tr)
+        f = np.where((cos <= 0.0)[..., None], q.grazing(tr), f)
         # zeros of D_s and D_p within RESOLVE_DISTANCE sample steps of the axis
         # (positions and distances in bins)
         r, pos, d = (np.concatenate(v) for v in zip(*(near_zeros(terms, k, exps[..., e])
@@ -466,8 +452,7 @@ class Rows:
         if not keep.any():
             return np.zeros(3)
         bins = bins[keep]
-        if self.quantity:    # the powers among its channels
-            bins = self.quantity.colour_terms(bins, self.side.transmission)
+        bins = self.quantity.colour_terms(bins, self.side.transmission)   # its powers
         cw = cie.colour_weights()
         grid = cw[:, 0]
         inside = (wl_b >= grid[0]) & (wl_b <= grid[-1])

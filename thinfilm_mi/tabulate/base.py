@@ -6,10 +6,10 @@ float64 batches, the table axes, cubic B-splines, the lookup object and the cach
   which evaluates ``R`` (and ``T``) at any set of (angle, wavelength) points in
   batches (looping over the films for deep stacks, whose indices
   :func:`film_gather` gathers from one buffer inside the kernel).
-* Axes: :func:`u_texel` / :func:`u_nodes_cos` (the angle axis, split at the
-  critical angle where the exit medium totally reflects; ``kind="band"`` warps it
-  for band-limited tables) and :func:`v_texel` (the wavelength axis, uniform in
-  wavenumber).
+* Axes: the angle axis is one of :data:`~thinfilm_mi.tabulate.axes.AXES` (plain,
+  split at the critical angle where the exit medium totally reflects, or warped for
+  band-limited tables); :func:`v_texel` is the wavelength axis, uniform in
+  wavenumber.
 * Splines: :func:`bspline_coefficients` (interpolating cubic B-splines with
   :data:`GHOST` nodes), :func:`bspline_midpoints` (the values a table predicts
   between its nodes, which the builders verify against exact values).
@@ -33,19 +33,22 @@ import numpy as np
 
 from thinfilm_mi.materials.model import GRID, SPECTRAL_RANGE
 from thinfilm_mi.optics.core import Cx
+from thinfilm_mi.tabulate.axes import GHOST, AngleAxis, GhostEnd
+
+__all__ = ["BUILD_LOOP_MIN_FILMS", "BuildReport", "GRAZING_COS", "MAX_BUILD_POINTS",
+           "MAX_BUILD_WORK", "MAX_ROUNDS", "MAX_TEXELS", "MAX_U", "MAX_V", "MIN_U", "MIN_V",
+           "POINT_WORK", "REFINE_SHARE", "SIGMA_MAX", "SIGMA_MIN", "SideData", "Table",
+           "TableCache", "bspline_at", "bspline_coefficients", "bspline_midpoints", "build_work",
+           "evaluate_side", "film_gather", "grid_coordinate", "linear_texture", "opaque_float",
+           "side_indices", "v_nodes_wl", "v_texel", "with_ghosts"]
 
 SIGMA_MAX = 1.0 / SPECTRAL_RANGE[0]   # 1/nm at 360 nm
 SIGMA_MIN = 1.0 / SPECTRAL_RANGE[1]   # 1/nm at 830 nm
-HALF_PI = 0.5 * math.pi
 
 #: Largest table (texels per channel) built; beyond it a stack is evaluated exactly.
 MAX_TEXELS = 1 << 22
 MIN_U, MIN_V = 16, 16
 MAX_U, MAX_V = 4096, 8192
-#: Nodes beyond each edge of a cubic table (evaluated exactly, outside the
-#: tabulated range): the spline's end conditions perturb it by a factor
-#: (2 - sqrt 3) = 0.27 less per node inwards, 2 % at the first real node.
-GHOST = 3
 #: The verification ignores incidence within ~1.1 degrees of grazing
 #: (cos(theta) < GRAZING_COS). There, a dielectric film over a metal or a
 #: high-index film is a cavity whose inner walls reflect almost totally (the
@@ -105,132 +108,24 @@ class SideData:
     which the build checks the table too. ``absorbing`` (set by
     :func:`build_table`): whether each film and the exit medium absorb
     anywhere in the range, so that every evaluation of a build traces the same
-    kernel whatever its wavelengths. ``quantity``: ``None`` for the powers ``R``
-    [, ``T``]; else what is tabulated instead (the Mueller components of polarized
-    variants, :data:`thinfilm_mi.tabulate.mueller.MUELLER`), whose ``rt`` and
-    ``rt_loop`` return its channels.
+    kernel whatever its wavelengths. ``quantity``: what is tabulated, one of
+    :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES` (the powers ``R`` [, ``T``],
+    or the Mueller components of polarized variants), whose channels ``rt`` and
+    ``rt_loop`` return.
     """
     n0: object                      # callable wl -> real ndarray
     films: list                     # [(callable wl -> complex ndarray, thickness)]
     n_exit: object                  # callable wl -> complex ndarray
     transmission: bool
     rt: object
+    quantity: object
     fringe_films: list = field(default_factory=list)  # indices of coherent films
     rt_loop: object = None
     kinks: np.ndarray = field(default_factory=lambda: np.empty(0))
     absorbing: tuple | None = None
-    quantity: object = None
 
 
-def tir_kind(n0: np.ndarray, n_exit: np.ndarray) -> str | None:
-    """``"tir"`` if the exit medium is real and of lower index than ``n0`` at every
-    node wavelength, ``"plain"`` if it never is, ``None`` if it changes with λ
-    (not tabulated: the kink would cross nodes)."""
-    real = np.all(np.abs(n_exit.imag) <= 1e-6)
-    lower = n_exit.real < n0
-    if real and np.all(lower):
-        return "tir"
-    if not real or not np.any(lower):
-        return "plain"
-    return None
-
-
-# -- axis mappings (generic over array types: numpy-free, Dr.Jit math) ---------
-def u_texel(cos_i, sin_i, n0, n_exit, kind: str, nu):
-    """The continuous node coordinate (0 .. nu-1) of an incidence direction.
-
-    ``n0`` and ``n_exit`` are the real indices at the lookup's wavelength;
-    ``nu`` (the number of angle nodes) may be a Python number or an opaque
-    Float, so that the kernel does not depend on the table's shape. An
-    angle ``a`` in [0, pi/2] that ends at grazing incidence is mapped through
-    ``w = 1 - sqrt(x)`` with ``x = (pi/2 - a) / (pi/2)`` (computed as
-    ``atan2(cos, sin)``, free of cancellation): ``w`` is analytic at both ends
-    (``R`` is even in the angle at normal incidence) and puts nodes
-    quadratically closer towards grazing incidence, where coated metals show
-    their sharp pseudo-Brewster dip and the rise to ``R = 1``.
-
-    ``kind="band"`` (band-limited tables, :mod:`thinfilm_mi.tabulate.band`) blends
-    that ``w`` with ``S = 2a/π - (m sin(4a)/2 + (1 - m) sin(2a)) / π`` (``m`` =
-    :data:`BAND_MID`), whose node density ``∝ m sin²(2a) + (1 - m) sin²(a)``
-    rises to mid and high angles: ``BAND_WARP S + (1 - BAND_WARP) w``. A
-    band-limited ``R``'s features move along λ as the angle changes, fastest
-    between 30° and 75°, where ``w`` alone is sparsest.
-    """
-    if kind == "plain" or kind == "band":
-        x = (1.0 / HALF_PI) * dr.atan2(cos_i, sin_i)
-        w = 1.0 - dr.sqrt(x)
-        if kind == "band":
-            sin2 = 2.0 * sin_i * cos_i
-            sin4 = 2.0 * sin2 * (cos_i * cos_i - sin_i * sin_i)
-            S = (1.0 - x) - (0.5 * BAND_MID * sin4 + (1.0 - BAND_MID) * sin2) * (0.5 / HALF_PI)
-            w = BAND_WARP * S + (1.0 - BAND_WARP) * w
-        return (nu - 1) * w
-    m = 0.5 * nu            # split tables have an even nu: nodes 0..m-1 | m..nu-1
-    beta = n0 * sin_i
-    d2 = (n_exit - beta) * (n_exit + beta)            # q_exit^2
-    q_exit = dr.sqrt(dr.maximum(d2, 0.0))
-    a = dr.sqrt(dr.maximum(-d2, 0.0))                 # |q_exit| beyond the critical angle
-    theta_t = dr.atan2(beta, q_exit)
-    x = (1.0 / HALF_PI) * dr.atan2(n0 * cos_i, a)     # 1 - phi / (pi/2)
-    return dr.select(d2 > 0, (m - 1) * (1.0 / HALF_PI) * theta_t,
-                     m + (m - 1) * (1.0 - dr.sqrt(x)))
-
-
-#: Share of the mid-angle term ``S`` in the angle axis of band-limited tables
-#: (:func:`u_texel`, ``kind="band"``), and the share of ``sin²(2a)`` in its
-#: density. Chosen from the interpolation error of ``R_σ`` per 5° of incidence
-#: on the plain axis (10-film benchmark stack, 129 nodes: 8e-5 at 80-85°, 2.5e-2
-#: at 45-50°): the blend that equalises it needs ~0.6x the nodes.
-BAND_WARP = 0.6
-BAND_MID = 0.6
-
-
-def band_warp(theta: np.ndarray) -> np.ndarray:
-    """The ``"band"`` axis coordinate (0 at normal, 1 at grazing incidence) of
-    angles ``theta`` (radians; negative angles continue it analytically)."""
-    x = 1.0 - theta / HALF_PI
-    S = (1.0 - x) - (0.5 * BAND_MID * np.sin(4.0 * theta)
-                     + (1.0 - BAND_MID) * np.sin(2.0 * theta)) * (0.5 / HALF_PI)
-    return BAND_WARP * S + (1.0 - BAND_WARP) * (1.0 - np.sqrt(x))
-
-
-def band_cos(u: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`band_warp` as ``cos θ`` (float64 numpy, any shape): ``u < 0``
-    continues to negative angles, ``u > 1`` mirrors about grazing incidence
-    (as the plain axis's ghosts)."""
-    u = np.asarray(u, np.float64)
-    target = np.where(u > 1.0, 2.0 - u, u)
-    lo = np.full(target.shape, -HALF_PI)
-    hi = np.full(target.shape, HALF_PI)
-    for _ in range(60):     # the warp increases monotonically on [-pi/2, pi/2]
-        mid = 0.5 * (lo + hi)
-        below = band_warp(mid) < target
-        lo, hi = np.where(below, mid, lo), np.where(below, hi, mid)
-    return np.cos(0.5 * (lo + hi))
-
-
-def u_nodes_cos(s: np.ndarray, n0: np.ndarray, n_exit: np.ndarray, kind: str, nu: int,
-                 ghost: int = GHOST):
-    """Inverse of :func:`u_texel` (float64 numpy): cos(theta_i) at node
-    coordinates ``s`` (any shape broadcasting with the per-λ ``n0``, ``n_exit``).
-
-    On a plain axis ``s`` may lie up to ``ghost`` nodes beyond either end:
-    ``w < 0`` continues to negative angles (``cos`` of ``|theta|``) and
-    ``w > 1`` mirrors about grazing incidence (``cos = sin((1 - w)^2 pi/2)``
-    is even about ``w = 1``), both the analytic continuation of ``R(w)``."""
-    if kind == "plain":
-        w = np.clip(s / (nu - 1), -ghost / (nu - 1), 1.0 + ghost / (nu - 1))
-        return np.sin((1.0 - w) ** 2 * HALF_PI)
-    m = nu // 2
-    t = np.clip(s / (m - 1), 0.0, 1.0) * HALF_PI          # transmit segment: theta_t
-    beta = n_exit * np.sin(t)
-    cos_t = np.sqrt(np.maximum(1.0 - (beta / n0) ** 2, 0.0))
-    rho = np.sqrt(np.maximum(n0 * n0 - n_exit * n_exit, 0.0))
-    w = np.clip((s - m) / (m - 1), 0.0, 1.0)             # TIR segment
-    cos_p = rho * np.sin((1.0 - w) ** 2 * HALF_PI) / n0
-    return np.where(s < m - 0.5, cos_t, cos_p)
-
-
+# -- the wavelength axis (generic over array types: Dr.Jit math) -------------------
 def v_texel(wavelength, nv):
     """Node coordinate (0 .. nv-1) of a wavelength: uniform in 1/λ, 360 nm at 0
     (``nv`` a Python number or an opaque Float)."""
@@ -294,29 +189,13 @@ def with_ghosts(real: np.ndarray, left, right, g: int = GHOST) -> np.ndarray:
     """``real`` (nodes along axis 0) with ``g`` ghost nodes before and after.
 
     An end is either an array of the ``g`` values there, in the axis's order
-    (evaluated: the stack's analytic continuation), ``"mirror"`` (the function
-    is even about the end node: ``f(-k) = f(k)``) or ``"extrapolate"`` (the
-    cubic through the four nodes nearest the end, where no continuation can be
-    evaluated: at a critical angle)."""
-    def outwards(spec, inner):
-        # the ghosts at -1, -2, ..., -g of the nodes inner[0], inner[1], ...
-        if spec == "mirror":
-            return inner[1:g + 1]
-        f0, f1, f2, f3 = inner[0], inner[1], inner[2], inner[3]
-        return np.stack([4 * f0 - 6 * f1 + 4 * f2 - f3,
-                         10 * f0 - 20 * f1 + 15 * f2 - 4 * f3,
-                         20 * f0 - 45 * f1 + 36 * f2 - 10 * f3][:g])
-    lo = np.asarray(left) if not isinstance(left, str) else outwards(left, real)[::-1]
-    hi = np.asarray(right) if not isinstance(right, str) else outwards(right, real[::-1])
+    (evaluated: the stack's analytic continuation), or a
+    :class:`~thinfilm_mi.tabulate.axes.GhostEnd` (:data:`~thinfilm_mi.tabulate.axes.MIRROR`:
+    the function is even about the end node; :data:`~thinfilm_mi.tabulate.axes.EXTRAPOLATE`:
+    the cubic through the four nodes nearest the end)."""
+    lo = left.outwards(real, g)[::-1] if isinstance(left, GhostEnd) else np.asarray(left)
+    hi = right.outwards(real[::-1], g) if isinstance(right, GhostEnd) else np.asarray(right)
     return np.concatenate([lo, real, hi], axis=0)
-
-
-#: How each end of a segment of the u axis gets its ghost nodes
-#: (:func:`with_ghosts`): a plain axis's are evaluated; a split axis's transmit
-#: segment is even about normal incidence (uniform in the refraction angle),
-#: its total-reflection segment about grazing incidence (``w = 1``), and both
-#: are extrapolated at the critical angle, beyond which they do not continue.
-SPLIT_ENDS = (("mirror", "extrapolate"), ("extrapolate", "mirror"))
 
 
 def bspline_at(coeffs: np.ndarray, t: np.ndarray, g: int) -> np.ndarray:
@@ -357,12 +236,12 @@ class Table:
     (the transmit segment's columns, then the total-reflection segment's).
     """
 
-    def __init__(self, values: np.ndarray, kind: str, error: float, channels: int,
+    def __init__(self, values: np.ndarray, axis: AngleAxis, error: float, channels: int,
                  resolution: float = 0.0, shear=None):
         g = GHOST
-        segments = 2 if kind == "tir" else 1
-        self.nv, self.nu = values.shape[0] - 2 * g, values.shape[1] - 2 * g * segments
-        self.kind = kind
+        self.nv, self.nu = values.shape[0] - 2 * g, values.shape[1] - 2 * g * axis.segments
+        #: the angle axis (:data:`~thinfilm_mi.tabulate.axes.AXES`)
+        self.axis = axis
         self.channels = channels
         #: the verified max abs interpolation error (sum of both axes' maxima),
         #: against ``R_σ`` for a band-limited table
@@ -383,7 +262,7 @@ class Table:
         self._offset = g + 0.5   # node 0 sits at texel centre g
         # a split axis: node coordinates beyond the critical cell are in the
         # second segment, 2g texels further
-        self._split = opaque_float(0.5 * self.nu - 0.5) if kind == "tir" else None
+        self._split = opaque_float(0.5 * self.nu - 0.5) if axis.split else None
         #: a band-limited table's sheared v axis (:class:`~thinfilm_mi.tabulate.shear.Shear`)
         self.shear = shear
         if shear is not None:
@@ -394,7 +273,7 @@ class Table:
         return self.nu * self.nv
 
     def _u(self, cos_i, sin_i, n0, n_exit):
-        x = u_texel(cos_i, sin_i, n0, n_exit, self.kind, self._nu)
+        x = self.axis.texel(cos_i, sin_i, n0, n_exit, self._nu)
         if self._split is not None:
             x = x + dr.select(x > self._split, 2.0 * GHOST, 0.0)
         return (x + self._offset) * self._inv_u
@@ -423,11 +302,11 @@ class Table:
             cos_i = dr.clip(cos_i, 0.0, 1.0)
             sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
         out = [[] for _ in range(self.channels)]
-        if self.kind != "tir" and not each:
+        if not self.axis.needs_n_exit and not each:
             u = self._u(cos_i, sin_i, 1.0, 1.0)
         factor = self.shear.factor(sin_i) if self.shear is not None and not each else None
         for i in range(len(wavelengths)):
-            if self.kind == "tir":
+            if self.axis.needs_n_exit:
                 u = self._u(cos_i, sin_i, n0[i], n_exit[i])
             elif each:
                 u = self._u(cos_i[i], sin_i[i], 1.0, 1.0)
@@ -526,7 +405,7 @@ def evaluate_side(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.nda
 class BuildReport(dict):
     """What one table build did, returned through the builders' ``report`` argument
     (never left in a module global: Mitsuba runs constructors, and so builds, on
-    several threads). Keys: ``kind`` (the angle axis), ``points`` (exact
+    several threads). Keys: ``kind`` (the angle axis's name), ``points`` (exact
     evaluations in all), ``rounds`` (tables built and verified), ``result``
     ("table", "rejected by the probe", "over budget", "critical angle varies",
     "colour check failed"), ``resolution`` (nm, 0 for exact values); exact builds

@@ -28,7 +28,7 @@ colour-science's observer and D65 on a 0.01 nm grid: ΔE2000 <= 0.1 (measured
 <= 0.03) for 1-30 films up to 89°.
 
 **Angle (and thickness-scale) axis.** Linear interpolation on nodes uniform in
-``w = 1 - sqrt(x)``, ``x = (π/2 - θ)/(π/2)`` (:func:`tables.u_texel`: nodes
+``w = 1 - sqrt(x)``, ``x = (π/2 - θ)/(π/2)`` (:data:`~thinfilm_mi.tabulate.axes.PLAIN`: nodes
 quadratically closer towards grazing incidence); a side that totally reflects
 at one critical angle (non-dispersive media) is split there. From
 :data:`FIRST_NODES` per segment, each interval gets its exact midpoint; where
@@ -49,7 +49,7 @@ import numpy as np
 
 from thinfilm_mi.colour.cie import colour_differences, colour_weights, normalised_weights
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
-from thinfilm_mi.tabulate.base import BuildReport, linear_texture, opaque_float, u_texel
+from thinfilm_mi.tabulate.base import BuildReport, linear_texture, opaque_float
 from thinfilm_mi.tabulate.refine import (
     Budget,
     LinearAxis,
@@ -58,6 +58,13 @@ from thinfilm_mi.tabulate.refine import (
     power_of_two_step,
     subdivide,
 )
+
+__all__ = ["CHUNK_POINTS", "ColourTable", "FIRST_NODES", "FIRST_SCALE_NODES", "FIRST_STEP",
+           "LAMBDA_RELATIVE", "LAMBDA_TOLERANCE", "LINEAR_ABS", "LINEAR_DE", "MAX_FIRST_STEP",
+           "MAX_LAMBDA_LEVEL", "MAX_NODES", "MAX_NODES_2D", "MAX_TEXELS_2D", "Source",
+           "TOLERANCE_ABS", "TOLERANCE_ABS_2D", "TOLERANCE_DE", "TOLERANCE_DE_2D", "build",
+           "channel_count", "close_each", "first_step", "integrate", "integrate_points",
+           "settings"]
 
 #: The nodes are dense enough when the 4-point rule predicts the integrals at
 #: the midpoints within this CIEDE2000 (as colours under D65: R, and T, of every
@@ -155,6 +162,12 @@ class Source:
     first_step: float = FIRST_STEP
 
 
+def channel_count(kind: str) -> int:
+    """The output channels of the colour weights ``kind`` (``"rgb"``: 3, ``"mono"``: 1),
+    as :func:`~thinfilm_mi.colour.cie.normalised_weights` gives them."""
+    return normalised_weights(kind).shape[0]
+
+
 def _weights(kind: str, channels: list):
     """``wl -> ŵ_c(wl)`` (shape ``(n, len channels)``): the channel weights
     normalised to a unit integral (exact: they are linear between the 1 nm knots,
@@ -180,7 +193,7 @@ def integrate(sources: list, weights_kind: str, cos: np.ndarray, scales: list) -
     ``FIRST_STEP / 2^MAX_LAMBDA_LEVEL``; accepted intervals contribute their
     Simpson value ``T_half + (T_half - T) / 3``.
     """
-    C = 1 if weights_kind == "mono" else 3
+    C = channel_count(weights_kind)
     out = None
     for src in sources:
         w = _weights(weights_kind, src.channels)
@@ -197,7 +210,7 @@ def integrate_points(sources: list, weights_kind: str, cos: np.ndarray,
                      scale: np.ndarray) -> np.ndarray:
     """:func:`integrate` at the points ``(cos[i], scale[i])`` (flat arrays, one
     batch): shape ``(len cos, k * C)``."""
-    C = 1 if weights_kind == "mono" else 3
+    C = channel_count(weights_kind)
     out = None
     for src in sources:
         res = _adaptive(src.evaluate, _weights(weights_kind, src.channels), cos,
@@ -299,7 +312,7 @@ class ColourTable:
         import mitsuba as mi
         cos_i = dr.clip(cos_i, 0.0, 1.0)
         sin_i = dr.safe_sqrt((1.0 - cos_i) * (1.0 + cos_i))
-        x = u_texel(cos_i, sin_i, self._n0, self._n_exit, self.axis.kind, self._nu)
+        x = self.axis.angle.texel(cos_i, sin_i, self._n0, self._n_exit, self._nu)
         u = (x + 0.5) * self._inv_u
         if self.scale_max is None:
             res = self.texture.eval(mi.Point1f(u), active)
@@ -349,11 +362,11 @@ def build(sources: list, weights_kind: str, transmission: bool, axis: LinearAxis
     table's ``report``): ``points`` (spectral values evaluated), ``rounds``
     (refinement levels), ``texels``."""
     report = BuildReport() if report is None else report
-    report.update({"kind": axis.kind, "points": 0, "rounds": 0, "result": "building"})
+    report.update({"kind": axis.angle.name, "points": 0, "rounds": 0, "result": "building"})
     sources = [replace(src, evaluate=_counted(src.evaluate, report)) for src in sources]
     if scale_max is not None:
         return _build_2d(sources, weights_kind, transmission, axis, scale_max, report)
-    C = 1 if weights_kind == "mono" else 3
+    C = channel_count(weights_kind)
     seg = axis.segments
     nu = FIRST_NODES * seg
     values = integrate(sources, weights_kind, axis.cos(nu), [fixed_scale])   # (1, nu, kC)
@@ -401,7 +414,7 @@ def _build_2d(sources: list, weights_kind: str, transmission: bool, axis: Linear
     children then are checked again. Every exact integral of one level is one
     batch (:func:`integrate_points`), so interference colours that change with
     the thickness but little with the angle cost integrals along ``s`` only."""
-    C = 1 if weights_kind == "mono" else 3
+    C = channel_count(weights_kind)
     seg = axis.segments
     nu, ns = FIRST_NODES * seg, FIRST_SCALE_NODES
     S = np.linspace(0.0, scale_max, ns)

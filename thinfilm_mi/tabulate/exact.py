@@ -31,7 +31,7 @@ Axes (chosen so that the tabulated functions are smooth):
   ``q``, so ``R`` is analytic in ``theta``, and in ``w``; nodes crowd towards
   grazing incidence, where coated metals dip sharply and rise to ``R = 1``;
   band-limited tables, :mod:`thinfilm_mi.tabulate.band`, blend in more nodes at
-  mid angles: :func:`u_texel`'s ``kind="band"``).
+  mid angles: :data:`~thinfilm_mi.tabulate.axes.BAND`).
   When it can (light inside glass, exit medium of lower index), the axis is
   split at the critical angle, which sits exactly on a node at every
   wavelength: below it the axis is uniform in the refraction angle ``theta_t``
@@ -62,10 +62,9 @@ import math
 
 import numpy as np
 
+from thinfilm_mi.tabulate.axes import GHOST, HALF_PI, AngleAxis, axis_for
 from thinfilm_mi.tabulate.base import (
-    GHOST,
     GRAZING_COS,
-    HALF_PI,
     MAX_BUILD_WORK,
     MAX_ROUNDS,
     MAX_TEXELS,
@@ -76,7 +75,6 @@ from thinfilm_mi.tabulate.base import (
     REFINE_SHARE,
     SIGMA_MAX,
     SIGMA_MIN,
-    SPLIT_ENDS,
     BuildReport,
     SideData,
     Table,
@@ -86,13 +84,15 @@ from thinfilm_mi.tabulate.base import (
     build_work,
     evaluate_side,
     side_indices,
-    tir_kind,
-    u_nodes_cos,
     v_nodes_wl,
     v_texel,
     with_ghosts,
 )
 from thinfilm_mi.tabulate.refine import Budget, convergence_factor
+
+__all__ = ["MAX_PROBE_WORK", "PROBE_HOT_LINES", "PROBE_POINTS", "PROBE_SHARE", "PROBE_U",
+           "PROBE_U_FINE", "PROBE_V", "PROBE_V_FINE", "build_table", "ghost_count", "line_levels",
+           "table_resolution"]
 
 
 # -- resolution ----------------------------------------------------------------
@@ -133,12 +133,13 @@ class _Points:
     """Point sets (node coordinates ``s`` along u x ``t`` along v, for a table of
     ``nu x nv`` nodes) gathered into one :func:`evaluate_side` call."""
 
-    def __init__(self, side: SideData, kind: str):
-        self.side, self.kind = side, kind
+    def __init__(self, side: SideData, axis: AngleAxis):
+        self.side, self.axis = side, axis
         self.sets = []   # (t, s, nu, nv, ghost): the product t x s
 
     def add(self, s, t, nu: int, nv: int, ghost: int = GHOST) -> None:
-        """The points ``t x s``; a plain u axis reaches ``ghost`` nodes beyond its ends."""
+        """The points ``t x s``; a u axis whose ghosts are evaluated reaches ``ghost``
+        nodes beyond its ends."""
         self.sets.append((np.asarray(t, np.float64), np.asarray(s, np.float64), nu, nv, ghost))
 
     @property
@@ -158,7 +159,7 @@ class _Points:
         for t, s, nu, _, ghost in self.sets:
             r = inverse[start:start + t.size]
             start += t.size
-            c = u_nodes_cos(s[None, :], n0[r][:, None], ne[r][:, None], self.kind, nu, ghost)
+            c = self.axis.nodes_cos(s[None, :], n0[r][:, None], ne[r][:, None], nu, ghost)
             cos.append(np.broadcast_to(c, (t.size, s.size)))
             rows.append(np.broadcast_to(r[:, None], (t.size, s.size)))
         vals = evaluate_side(self.side, np.concatenate([c.ravel() for c in cos]),
@@ -195,14 +196,14 @@ MAX_PROBE_WORK = MAX_BUILD_WORK // 10
 
 
 def line_levels(f: np.ndarray, ok: np.ndarray, intervals: int, min_nodes: int,
-                 ends=("values", "values")) -> list:
+                 ends=(None, None)) -> list:
     """For fine lines ``f`` (shape ``(values, lines, channels)``, ``intervals``
     intervals each), per line: ``[(k, err, at)]`` for ``k`` = 2, 4, 8, ...: the
     largest error at the allowed (``ok``, shape ``(values, lines)``) midpoints
     of the interpolating cubic spline through every ``k``-th value (at least
     ``min_nodes`` nodes), and where it is (fine node coordinate, 0 ..
     intervals). Each subsampling gets :data:`GHOST` ghost nodes as the table
-    would (:func:`with_ghosts`): an end ``"values"`` reads them from the
+    would (:func:`with_ghosts`): an end ``None`` reads them from the
     :func:`ghost_count` fine values the line holds beyond it."""
     ext = (f.shape[0] - 1 - intervals) // 2
     g = GHOST
@@ -210,9 +211,9 @@ def line_levels(f: np.ndarray, ok: np.ndarray, intervals: int, min_nodes: int,
     while intervals // k + 1 >= min_nodes:
         n = intervals // k + 1
         mid = slice(ext + k // 2, ext + intervals, k)
-        left = f[ext - g * k:ext:k] if ends[0] == "values" else ends[0]
+        left = f[ext - g * k:ext:k] if ends[0] is None else ends[0]
         right = f[ext + intervals + k:ext + intervals + g * k + 1:k] \
-            if ends[1] == "values" else ends[1]
+            if ends[1] is None else ends[1]
         c = with_ghosts(f[ext:ext + intervals + 1:k], left, right)
         approx = bspline_midpoints(bspline_coefficients(c, axis=0), 0, g, n)
         dev = np.where(ok[mid], np.abs(approx - f[mid]).max(axis=-1), 0.0)
@@ -250,18 +251,12 @@ def _nodes_for(levels: list, intervals: int, target: float, order: int) -> tuple
     return intervals / levels[-1][0] + 1.0, True, None
 
 
-def _probe_columns(kind: str) -> np.ndarray:
+def _probe_columns(axis: AngleAxis) -> np.ndarray:
     """u node coordinates (on a reference axis of :data:`_REF` nodes, twice that
-    for a split axis) of the probe's lines along v: normal incidence, two
-    oblique ones and the edge of the grazing sliver; split, more on both sides
-    of the critical angle, just beyond which (the surface plasmon, and where
-    ``R`` follows the ambient's index most steeply) tables err most."""
+    for a split axis) of the probe's lines along v (the axis's ``probe_columns``)."""
     # (just inside the verified range: the sliver's edge itself may round out of it)
     w_graz = 1.0 - math.sqrt(math.asin(1.001 * GRAZING_COS) / HALF_PI)
-    if kind == "plain":
-        return np.array([0.0, 0.5, 1.0 - math.sqrt(math.asin(0.1) / HALF_PI), w_graz]) * (_REF - 1)
-    return np.concatenate([np.array([0.0, 0.5, 0.8, 0.95]) * (_REF - 1),
-                           _REF + np.array([0.05, 0.15, 0.3, 0.5, w_graz]) * (_REF - 1)])
+    return axis.probe_columns(_REF, w_graz)
 
 
 class _Curves:
@@ -284,11 +279,12 @@ class _Curves:
         return self.factor * n
 
 
-def _probe(side: SideData, kind: str, error: float, axis: str, lines: np.ndarray,
+def _probe(side: SideData, angle: AngleAxis, error: float, along_v: bool, lines: np.ndarray,
            intervals: int, curves: _Curves, stats: dict, fine: bool = False) -> tuple:
-    """Fine 1-D lines of exact values along ``axis`` (``"v"``: at the u node
+    """Fine 1-D lines of exact values along v (``along_v``: at the u node
     coordinates ``lines`` of a reference axis of :data:`_REF` nodes, twice that
-    if split; ``"u"``: at the v coordinates ``lines`` of such an axis), each
+    if split) or along the angle axis ``angle`` (at the v coordinates ``lines`` of
+    such an axis), each
     subsampled by 2, 4, 8, ...: a subsampling is a 1-D table whose error at its
     midpoints is known exactly (:func:`line_levels`). The lines' error curves
     are added to ``curves``, the points evaluated to ``stats["probe_points"]``.
@@ -298,26 +294,26 @@ def _probe(side: SideData, kind: str, error: float, axis: str, lines: np.ndarray
     of ``error``, with the nodes they need for it) and the line that needs most
     ``(nodes, line, resolved)``.
     """
-    split = kind == "tir"
     min_nodes = 65 if fine else 17
     ext = ghost_count(intervals, min_nodes)
-    pts = _Points(side, kind)
-    if axis == "v":
-        pts.add(lines, np.arange(-ext, intervals + ext + 1.0), 2 * _REF if split else _REF,
+    pts = _Points(side, angle)
+    if along_v:
+        pts.add(lines, np.arange(-ext, intervals + ext + 1.0), angle.segments * _REF,
                 intervals + 1)
-    elif split:
-        pts.add(np.arange(2.0 * (intervals + 1)), lines, 2 * (intervals + 1), _REF)
-    else:
+    elif angle.ghosts_evaluated:
         pts.add(np.arange(-ext, intervals + ext + 1.0), lines, intervals + 1, _REF, ghost=ext)
+    else:
+        n = angle.segments * (intervals + 1)
+        pts.add(np.arange(float(n)), lines, n, _REF)
     ((vals, cos),) = pts.evaluate()
     stats["probe_points"] += pts.size
-    if axis == "v":
-        parts = [(vals, cos, ("values", "values"))]
-    else:   # (lines, values, C) -> (values, lines, C)
+    if along_v:
+        parts = [(vals, cos, (None, None))]
+    else:   # (lines, values, C) -> (values, lines, C): per segment, its ghosts' ends
         vals, cos = np.swapaxes(vals, 0, 1), cos.T
-        m = intervals + 1   # a split axis: two segments of m nodes each
-        parts = ([(vals[:m], cos[:m], SPLIT_ENDS[0]), (vals[m:], cos[m:], SPLIT_ENDS[1])]
-                 if split else [(vals, cos, ("values", "values"))])
+        m = vals.shape[0] // angle.segments   # a split axis: intervals + 1 nodes each
+        parts = [(vals[i * m:(i + 1) * m], cos[i * m:(i + 1) * m], ends)
+                 for i, ends in enumerate(angle.ends)]
     hot, worst = [], (-1.0, None, True)
     for segment, (f, c, ends) in enumerate(parts):
         for i, levels in enumerate(line_levels(f, c >= GRAZING_COS, intervals, min_nodes,
@@ -331,7 +327,7 @@ def _probe(side: SideData, kind: str, error: float, axis: str, lines: np.ndarray
     return hot, worst
 
 
-def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: dict):
+def _estimate(side: SideData, angle: AngleAxis, error: float, max_texels: int, stats: dict):
     """``(nu, nv)`` for a first table, from :func:`_probe`.
 
     Resonances are narrow in both directions, so a fixed set of lines misses
@@ -348,23 +344,22 @@ def _estimate(side: SideData, kind: str, error: float, max_texels: int, stats: d
     would need more than MAX_U, MAX_V or ``max_texels`` texels: a stack that no
     table resolves fails in milliseconds.
     """
-    split = kind == "tir"
-    cu, cv = _Curves(4, 2 if split else 1), _Curves(4, 1)
+    cu, cv = _Curves(4, angle.segments), _Curves(4, 1)
 
     def hot(found):
         return [c for _, c in sorted(found, reverse=True)[:PROBE_HOT_LINES]]
 
     u_rows = np.linspace(0.0, _REF - 1.0, 5)
-    hot_u, worst_u = _probe(side, kind, error, "u", u_rows, PROBE_U, cu, stats)
-    cols = np.unique(np.concatenate([_probe_columns(kind), hot(hot_u)]))
-    hot_v, worst_v = _probe(side, kind, error, "v", cols, PROBE_V, cv, stats)
+    hot_u, worst_u = _probe(side, angle, error, False, u_rows, PROBE_U, cu, stats)
+    cols = np.unique(np.concatenate([_probe_columns(angle), hot(hot_u)]))
+    hot_v, worst_v = _probe(side, angle, error, True, cols, PROBE_V, cv, stats)
     if hot_v:
-        _, w = _probe(side, kind, error, "u", np.unique(hot(hot_v)), PROBE_U, cu, stats)
+        _, w = _probe(side, angle, error, False, np.unique(hot(hot_v)), PROBE_U, cu, stats)
         worst_u = max(worst_u, w, key=lambda x: x[0])
-    for axis, (_, line, resolved), curves, fine in (("v", worst_v, cv, PROBE_V_FINE),
-                                                    ("u", worst_u, cu, PROBE_U_FINE)):
+    for along_v, (_, line, resolved), curves, fine in ((True, worst_v, cv, PROBE_V_FINE),
+                                                       (False, worst_u, cu, PROBE_U_FINE)):
         if not resolved:
-            _probe(side, kind, error, axis, np.array([line]), fine, curves, stats, fine=True)
+            _probe(side, angle, error, along_v, np.array([line]), fine, curves, stats, fine=True)
     if cu.need(error) > MAX_U or cv.need(error) > MAX_V \
             or cu.need(error) * cv.need(error) > max_texels:
         return None, None
@@ -387,7 +382,7 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
 
     The table holds the coefficients of the interpolating cubic B-spline, on a
     plain u axis or on each segment of a split one (total internal
-    reflection), whose ghost nodes come from :data:`SPLIT_ENDS`. The first
+    reflection), whose ghost nodes come from its axis's ``ends``. The first
     resolution is the larger of :func:`table_resolution`'s (from the optical
     thickness) and the probe's (:func:`_estimate`, which also rejects hopeless
     stacks early). Verification: the exact values midway between neighbouring
@@ -401,14 +396,15 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     What the build did is written into ``report`` (a :class:`BuildReport`).
     ``budget_scale`` multiplies the evaluations and work allowed (the probe's too).
     """
-    kind = tir_kind(side.n0(wavelengths), side.n_exit(wavelengths))
+    axis = axis_for(side.n0(wavelengths), side.n_exit(wavelengths))
     stats = report if report is not None else BuildReport()
-    stats.update({"kind": kind, "probe_points": 0, "rounds": 0, "points": 0,
-                  "result": "critical angle varies", "resolution": 0.0})
-    if kind is None:
+    stats.update({"kind": axis.name if axis is not None else None, "probe_points": 0,
+                  "rounds": 0, "points": 0, "result": "critical angle varies",
+                  "resolution": 0.0})
+    if axis is None:
         return None
     g, order = GHOST, 4
-    split = kind == "tir"
+    split = axis.split
     side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)
                       + (bool(np.any(np.asarray(side.n_exit(wavelengths)).imag)),))
     if build_work(side, PROBE_POINTS) > MAX_PROBE_WORK * budget_scale:
@@ -416,7 +412,7 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         return None
     nu, nv = table_resolution(side, error, wavelengths)
     budget = Budget.scaled(budget_scale, texels=max_texels, point_work=build_work(side, 1))
-    pu, pv = _estimate(side, kind, error, max_texels, stats)
+    pu, pv = _estimate(side, axis, error, max_texels, stats)
     budget.spend(stats["probe_points"])
     stats["points"] = budget.spent
     if pu is None:
@@ -448,7 +444,7 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         # Where an index's slope jumps (tabulated data) the spline errs most
         # beside, not between, the nodes: check there too.
         kinks = v_texel(side.kinks, nv)
-        pts = _Points(side, kind)
+        pts = _Points(side, axis)
         pts.add(su, tv, nu, nv)
         pts.add(mu, tv[rows], nu, nv)
         pts.add(cols.astype(np.float64), np.concatenate([np.arange(nv - 1) + 0.5, kinks]),
@@ -457,7 +453,7 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         # Spline coefficients along u, per segment with its ghosts, then along v.
         if split:
             segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *ends), 0, 1)
-                    for part, ends in zip((nodes[:, :m], nodes[:, m:]), SPLIT_ENDS)]
+                    for part, ends in zip((nodes[:, :m], nodes[:, m:]), axis.ends)]
             cu = [bspline_coefficients(seg, axis=1) for seg in segs]
             approx_u = np.concatenate([bspline_midpoints(c[rows], 1, g, m) for c in cu],
                                       axis=1)
@@ -479,7 +475,7 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         stats.setdefault("errors", []).append((nu, nv, err_u, err_v))
         if err_u + err_v <= error:
             stats["result"] = "table"
-            return Table(coeffs, kind, err_u + err_v, nodes.shape[-1])
+            return Table(coeffs, axis, err_u + err_v, nodes.shape[-1])
         # Refine: aim at REFINE_SHARE of the target; an axis already within
         # half of that keeps its nodes and leaves the rest to the other.
         aim = REFINE_SHARE * error
@@ -490,13 +486,13 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         else:
             goal = {"u": 0.5 * aim, "v": 0.5 * aim}
         factors = {}
-        for axis, n, err in (("u", nu, err_u), ("v", nv, err_v)):
-            if err <= goal[axis]:
-                factors[axis] = 1.0
+        for along, n, err in (("u", nu, err_u), ("v", nv, err_v)):
+            if err <= goal[along]:
+                factors[along] = 1.0
                 continue
-            factors[axis] = convergence_factor(n, err, goal[axis], history.get(axis), order,
+            factors[along] = convergence_factor(n, err, goal[along], history.get(along), order,
                                                margin=1.05, cap=3.0)
-            history[axis] = (n, err)
+            history[along] = (n, err)
         if not budget.allows(texels=nu * nv * factors["u"] * factors["v"] / 4):
             return None   # hopeless within the budget: do not spend the time
         nu = int(math.ceil((nu - 1) * factors["u"])) + 1

@@ -36,7 +36,6 @@ import numpy as np
 from thinfilm_mi.optics.core import transmittance_factor_p, transmittance_factor_s
 from thinfilm_mi.optics.incoherent_mueller import incoherent_mueller
 from thinfilm_mi.optics.mueller import (
-    POWER_CHANNELS,
     amplitude_loop,
     channel_count,
     mueller_rt,
@@ -63,7 +62,7 @@ AUTO_MIN_FILMS = 40
 #: channels, 8 MiB): a lookup slows with the table's size (a 1.5 MiB table
 #: 1.01-1.36x, a 6.2 MiB one 1.27-1.75x, above), but the exact amplitudes of the
 #: deep stacks that need such tables cost more (the powers' budget,
-#: :data:`thinfilm_mi.render.kernel.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
+#: :data:`thinfilm_mi.tabulate.quantities.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
 #: band-limited tables of the benchmark's 10- and 30-film stacks).
 AUTO_MAX_FLOATS = 1 << 21
 #: :meth:`MuellerQuantity.smooth_terms` rescales the amplitudes by smooth factors
@@ -113,8 +112,9 @@ class MuellerQuantity:
     """What a Mueller table holds and how its builds evaluate it (see the module)."""
 
     name = "mueller"
-    auto_min_films = AUTO_MIN_FILMS
     auto_max_floats = AUTO_MAX_FLOATS
+    #: channels 8-9 of :meth:`smooth_terms` are amplitudes (``T``), not their squares
+    squared_terms = False
     #: First v-node spacing of band-limited tables (in σ_ν; the powers' is
     #: ``band_rows.V_SPACING`` = 0.6): the cross term ``C`` interpolates ~3.5x worse
     #: along v than ``R`` (measured at 0.6 on the 10- and 30-film benchmark stacks:
@@ -128,9 +128,9 @@ class MuellerQuantity:
         return channel_count(transmission)
 
     @staticmethod
-    def power_channels(transmission: bool) -> int:
-        """The leading channels that are unpolarised powers (``R`` [, ``T``])."""
-        return POWER_CHANNELS[transmission]
+    def auto_min_films(transmission: bool) -> int:
+        """Films from which ``tabulate="auto"`` tabulates a side (either way)."""
+        return AUTO_MIN_FILMS
 
     @staticmethod
     def rt(incoherent: list):

@@ -15,8 +15,8 @@ starts, and how it decides where to add nodes.
   :mod:`~thinfilm_mi.tabulate.diffuse`): :func:`midpoints4` predicts the values
   halfway between nodes, :func:`interleave` / :func:`subdivide` double an axis,
   :func:`linear_error` measures linear interpolation against the rule; and
-  :class:`LinearAxis`, their angle axis (nodes uniform in the coordinate of
-  :func:`~thinfilm_mi.tabulate.base.u_texel`, split at a critical angle).
+  :class:`LinearAxis`, their angle axis (nodes uniform in the coordinate of an
+  angle axis of :data:`~thinfilm_mi.tabulate.axes.AXES`, split at a critical angle).
 
 The cubic tables' own spline fit and midpoint prediction are
 :func:`~thinfilm_mi.tabulate.base.bspline_coefficients` and
@@ -29,7 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from thinfilm_mi.tabulate.base import MAX_BUILD_POINTS, MAX_BUILD_WORK, MAX_TEXELS, u_nodes_cos
+from thinfilm_mi.tabulate.axes import PLAIN, AngleAxis
+from thinfilm_mi.tabulate.base import MAX_BUILD_POINTS, MAX_BUILD_WORK, MAX_TEXELS
 
 __all__ = ["Budget", "LinearAxis", "convergence_factor", "interleave", "linear_error", "midpoints4",
            "optical_thickness", "power_of_two_step", "subdivide"]
@@ -146,28 +147,28 @@ def linear_error(values: np.ndarray, axis: int, mirror: bool = False) -> np.ndar
 
 @dataclass
 class LinearAxis:
-    """The angle axis of the linear tables: ``"plain"``, or ``"tir"`` split at the
-    critical angle of the constant real indices ``n0 > n_exit``; nodes uniform in
-    the coordinate of :func:`~thinfilm_mi.tabulate.base.u_texel`, ``nodes / 2`` per
-    segment of a split axis."""
-    kind: str = "plain"
+    """The angle axis of the linear tables: ``angle`` (:data:`~thinfilm_mi.tabulate.axes.PLAIN`,
+    or :data:`~thinfilm_mi.tabulate.axes.TIR` split at the critical angle of the
+    constant real indices ``n0 > n_exit``); nodes uniform in its coordinate,
+    ``nodes / 2`` per segment of a split axis."""
+    angle: AngleAxis = PLAIN
     n0: float = 1.0
     n_exit: float = 1.0
 
     @property
     def segments(self) -> int:
-        return 2 if self.kind == "tir" else 1
+        return self.angle.segments
 
     @property
     def mirror(self) -> bool:
         """Whether :func:`midpoints4` may continue the values evenly beyond the ends."""
-        return self.kind == "plain"
+        return self.angle.mirror
 
     def cos(self, nodes: int) -> np.ndarray:
         """cos θ at the ``nodes`` nodes."""
         s = np.arange(nodes, dtype=np.float64)
-        return u_nodes_cos(s, np.float64(self.n0), np.float64(self.n_exit), self.kind, nodes,
-                           ghost=0)
+        return self.angle.nodes_cos(s, np.float64(self.n0), np.float64(self.n_exit), nodes,
+                                    ghost=0)
 
     def midpoints(self, nodes: int) -> np.ndarray:
         """cos θ halfway (in node coordinates) between the nodes of each segment."""

@@ -36,7 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
-from thinfilm_mi.tabulate.base import GHOST, BuildReport, Table
+from thinfilm_mi.tabulate.axes import AXES, GHOST
+from thinfilm_mi.tabulate.base import BuildReport, Table
 from thinfilm_mi.tabulate.shear import Shear
 
 __all__ = ["ENVIRONMENT", "MAX_BYTES", "TableStore", "code_fingerprint", "default_store"]
@@ -46,8 +47,6 @@ ENVIRONMENT = "THINFILM_MI_TABLE_CACHE"
 #: The store's bound: beyond it the least recently used files are removed until
 #: three quarters remain (a 30-film table is 1.3 MiB, a polarized one 5 MiB).
 MAX_BYTES = 256 << 20
-#: Angle axes a stored table may have (:class:`~thinfilm_mi.tabulate.base.Table`).
-KINDS = ("plain", "band", "tir")
 _SUFFIX = ".npz"
 #: One trimming at a time in this process (stores are made per call; other
 #: processes may trim the same directory: every file operation tolerates a file
@@ -126,17 +125,17 @@ class TableStore:
     def _table(values, meta) -> Table | None:
         """The table of stored ``values`` if they are what ``meta`` says, else ``None``."""
         try:
-            kind, channels = meta["kind"], int(meta["channels"])
+            axis, channels = AXES.get(meta["kind"]), int(meta["channels"])
             error, resolution = float(meta["error"]), float(meta["resolution"])
             shear = Shear.from_plain(meta["shear"]) if meta.get("shear") is not None else None
         except (KeyError, TypeError, ValueError):
             return None
         g = GHOST
-        if (kind not in KINDS or values.dtype != np.float32 or values.ndim != 3
+        if (axis is None or values.dtype != np.float32 or values.ndim != 3
                 or values.shape[2] != channels or min(values.shape[:2]) <= 4 * g
                 or not np.all(np.isfinite(values)) or not np.isfinite(error)):
             return None
-        return Table(values, kind, error, channels, resolution, shear=shear)
+        return Table(values, axis, error, channels, resolution, shear=shear)
 
     def put(self, key: str, table: Table | None, report: dict | None) -> None:
         """Keep ``table`` (``None``: not tabulable) and its build ``report`` under ``key``;
@@ -145,7 +144,8 @@ class TableStore:
         meta = {"table": table is not None, "report": _plain(dict(report or {}))}
         arrays = {}
         if table is not None:
-            meta.update(kind=table.kind, channels=table.channels, error=float(table.error),
+            meta.update(kind=table.axis.name, channels
+=table.channels, error=float(table.error),
                         resolution=float(table.resolution),
                         shear=table.shear.to_plain() if table.shear is not None else None)
             arrays["values"] = np.array(table.texture.tensor(), dtype=np.float32)

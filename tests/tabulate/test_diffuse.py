@@ -1,5 +1,5 @@
 """``thinfilm_diffuse`` in RGB and mono variants under a ``thickness`` texture that varies
-over the surface (``thinfilm_mi/tabulate/diffuse_texture.py``).
+over the surface (``ScaledColourDiffuse`` in ``thinfilm_mi/tabulate/diffuse.py``).
 
 Reference: the same BSDF with a constant thickness scale ``s``, whose diffuse table is
 the 2-D one of ``tabulate/diffuse.py`` built at ``s`` (itself checked against the
@@ -20,9 +20,14 @@ mi.set_variant("llvm_ad_spectral")
 
 import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
-from thinfilm_mi.tabulate import diffuse_texture  # noqa: E402
-from thinfilm_mi.tabulate.diffuse import LEVEL_ABS, LINEAR_ABS  # noqa: E402
-from thinfilm_mi.tabulate.diffuse_texture import SCALE_ABS, cubic_midpoints, cubic_stencil  # noqa: E402
+from thinfilm_mi.tabulate import diffuse as diffuse_tables  # noqa: E402
+from thinfilm_mi.tabulate.diffuse import (  # noqa: E402
+    LEVEL_ABS,
+    LINEAR_ABS,
+    SCALE_ABS,
+    cubic_midpoints,
+    cubic_stencil,
+)
 
 LAYERS = "SiO2 120; Au 3"
 
@@ -145,7 +150,7 @@ def test_cubic_stencil_reproduces_cubics():
 
 
 def test_over_budget_is_refused(monkeypatch):
-    monkeypatch.setattr(diffuse_texture, "MAX_SCALED_FLOATS", 1000)
+    monkeypatch.setattr(diffuse_tables, "MAX_SCALED_FLOATS", 1000)
     # (Mitsuba's loader passes the ThinFilmError on as a RuntimeError with its text)
     with pytest.raises((ThinFilmError, RuntimeError), match=r"'thickness': a texture reaching 1 needs"):
         mi.load_dict({"type": "thinfilm_diffuse", "layers": LAYERS, "reflectance": 0.7,

@@ -1,0 +1,84 @@
+"""The plugins' shared parameter rows are written once (issue 40, "doc blocks").
+
+The rows of ``thickness``, ``tabulate``, ``table_error``, ``spectral_resolution`` and
+``coherence_thickness`` live in :mod:`thinfilm_mi.render.doc_rows`;
+``scripts/compose_docblocks.py`` writes them into each doc block that names its family
+(``.. shared-rows: FAMILY``). Here: every BSDF of :data:`thinfilm_mi.plugins.PLUGINS` that
+reads one of those properties has all five rows, and each equals the composition, so a
+row edited in one doc block and not in the module (or the other way round) fails.
+"""
+from __future__ import annotations
+
+import ast
+import importlib.util
+import sys
+from pathlib import Path
+
+import pytest
+
+from thinfilm_mi.plugins import PLUGINS
+from thinfilm_mi.render.doc_rows import FAMILIES, SHARED_NAMES, shared_rows
+
+REPO = Path(__file__).resolve().parents[2]
+_spec = importlib.util.spec_from_file_location("compose_docblocks", REPO / "scripts" / "compose_docblocks.py")
+compose = importlib.util.module_from_spec(_spec)
+sys.modules["compose_docblocks"] = compose
+_spec.loader.exec_module(compose)
+
+#: the property names the BSDFs read through render.props.stack_from_props (measured by
+#: tests/cross/test_docs.py, which checks that a doc block lists exactly what its plugin reads)
+PATHS = {name: REPO / "thinfilm_mi" / "plugins" / f"{module}.py" for name, (module, _) in PLUGINS.items()}
+
+
+def _listed(path: Path) -> set[str]:
+    doc = ast.get_docstring(ast.parse(path.read_text(encoding="utf-8")), clean=False)
+    return {m.group(1).strip() for line in doc.splitlines() if (m := compose.ROW.match(line))}
+
+
+@pytest.mark.parametrize("name", sorted(PATHS))
+def test_doc_block_rows_equal_the_composition(name):
+    path = PATHS[name]
+    source = path.read_text(encoding="utf-8")
+    listed = _listed(path)
+    if not listed & set(SHARED_NAMES):
+        pytest.skip(f"{name} reads none of the shared properties")
+    assert set(SHARED_NAMES) <= listed, f"{name} lists {sorted(listed & set(SHARED_NAMES))} only"
+    assert compose.composed(source, path) == source, (
+        f"{path.name}: the shared rows of its doc block differ from thinfilm_mi/render/doc_rows.py; "
+        "edit the rows there and run `python scripts/compose_docblocks.py`")
+
+
+def test_every_film_stack_bsdf_shares_the_rows():
+    # the five BSDFs of issue 40 all read a stack; a new one (the coating) joins by its reads
+    sharing = [n for n, p in PATHS.items() if set(SHARED_NAMES) <= _listed(p)]
+    assert {"thinfilm_conductor", "thinfilm_dielectric", "thinfilm_diffuse", "thinfilm_roughconductor",
+            "thinfilm_roughdielectric"} <= set(sharing)
+
+
+def test_a_row_edited_in_one_doc_block_is_found(tmp_path):
+    path = PATHS["thinfilm_conductor"]
+    source = path.read_text(encoding="utf-8")
+    edited = source.replace("(default: 0.001)", "(default: 0.002)", 1)
+    assert edited != source
+    assert compose.composed(edited, path) == source   # the composition restores it
+    assert compose.composed(source.replace(".. shared-rows: conductor", ".. shared-rows: dielectric"),
+                            path) != source           # another family's text differs
+
+
+def test_each_family_composes_every_row_and_only_those():
+    for family in FAMILIES:
+        rows = shared_rows(family)
+        assert tuple(rows) == SHARED_NAMES
+        for name, row in rows.items():
+            lines = row.splitlines()
+            assert lines[0] == f" * - {name}" and lines[1].startswith("   - |")
+            assert all(len(line) <= 88 and line.startswith("   ") for line in lines[1:]), (family, name)
+    with pytest.raises(Exception, match="family='metal'"):
+        shared_rows("metal")
+
+
+def test_a_doc_block_listing_shared_rows_without_a_family_is_refused():
+    path = PATHS["thinfilm_conductor"]
+    source = path.read_text(encoding="utf-8").replace(".. shared-rows: conductor\n", "", 1)
+    with pytest.raises(ValueError, match="names no family"):
+        compose.composed(source, path)

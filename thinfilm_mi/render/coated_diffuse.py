@@ -1,0 +1,547 @@
+"""The coated-diffuse model: a diffuse base under a stack of thin films (no plugin classes
+here; the model's physics are written in ``thinfilm_diffuse``'s doc block).
+
+Composed as pbrt-v4 composes ``CoatedDiffuseBxDF`` from an interface and a diffuse base:
+a :class:`CoatedDiffuse` holds the stack (a :class:`~thinfilm_mi.render.kernel.KernelStack`,
+and for the paper's models an absorbing innermost film ``N``), the base (its albedo
+texture and its :class:`~thinfilm_mi.render.orennayar.OrenNayar` roughness) and the
+model (:data:`DIFFUSE_MODELS`), and gives the BSDF's samples, values and pdfs, its
+load-time terms (``R_dh``, ``T_hemi``, the RGB/mono tables, ``R_dh``'s derivatives), its
+parameters and their edits. The ``thinfilm_diffuse`` plugin reads its properties into
+one and delegates to it; another plugin may hold one the same way.
+
+:data:`DIFFUSE_MODELS` is the ``model`` option: one object per value, each model's code
+in its class (:class:`DiffuseModel`): how it splits the films into a coating and film
+``N``, its spectral factors (hence its hemispherical terms and colour tables), the
+series ``G(k_d, R_dh)`` of its diffuse term per wavelength, in the colour tables and over
+a rough base, and whether ``R_dh`` carries derivatives. :func:`diffuse_model` looks one
+up by name.
+"""
+from __future__ import annotations
+
+import drjit as dr
+import numpy as np
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.materials.model import GRID
+from thinfilm_mi.optics.choices import choose
+from thinfilm_mi.optics.core import Cx, film_attenuation
+from thinfilm_mi.render.colour import (
+    GradientSampler,
+    attach_gradient,
+    colour_channels,
+    index_on_wavelengths,
+    prepare_gradients,
+)
+from thinfilm_mi.render.diffuse import (
+    DiffuseFactors,
+    ExactFactors,
+    SpectralTerms,
+    absorbs,
+    colour_diffuse,
+    constant_albedo,
+    texture_gradients_refused,
+    with_derivatives,
+)
+from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.textures import mitsuba_module, scalar
+from thinfilm_mi.render.variant import spectral_mean
+from thinfilm_mi.tabulate.base import opaque_float
+from thinfilm_mi.tabulate.hemispherical import DerivativeTable
+
+__all__ = ["DiffuseModel", "Exact", "Single", "Multiple", "DIFFUSE_MODELS", "diffuse_model",
+           "CoatedDiffuse"]
+
+
+class DiffuseModel:
+    """One value of the ``model`` option of the coated-diffuse model.
+
+    The interface the colour tables (:mod:`thinfilm_mi.tabulate.diffuse`) read is
+    :meth:`g`, :meth:`series` and :attr:`interreflection`; :class:`CoatedDiffuse` reads the
+    rest. This base class is the model with interreflection: ``G(k, r) = k / (1 - k r)``."""
+    #: the value of ``model`` that names it
+    name = ""
+    #: whether the diffuse term sums the light that the coating sends back onto the base
+    #: (``G`` depends on ``R_dh``, whose derivatives the kernel then needs)
+    interreflection = True
+    #: whether ``base_ior`` is a parameter of the model
+    takes_base_ior = False
+
+    def split(self, films, ext, base):
+        """``(coating films, exit medium, film N, its thickness)`` of ``films``
+        (``[(SpectralIndex, thickness)]``) between the ambient ``ext`` and the base medium
+        ``base``; film ``N`` and its thickness (an opaque float) ``None`` where there is none."""
+        raise NotImplementedError
+
+    def factors(self, coating, film_n, film_n_thickness):
+        """The spectral factors (:class:`~thinfilm_mi.render.diffuse.DiffuseFactors`) of
+        ``coating`` over film ``N``."""
+        return DiffuseFactors(coating, film_n, None if film_n is None else scalar(film_n_thickness))
+
+    def base_ratio(self, ext, base) -> bool:
+        """Whether ``t`` carries the radiance factor ``n_0/n_b`` of a base medium unlike the
+        ambient."""
+        return False
+
+    def g(self, kd, r):
+        """``G(k_d, r)``: the diffuse term per wavelength divided by ``t_i t_o`` (numpy or
+        Dr.Jit)."""
+        return kd / (1.0 - kd * r)
+
+    def series(self, kd, r):
+        """``G(k_d, r) / k_d`` (numpy)."""
+        return 1.0 / (1.0 - kd * r)
+
+    def kernel_series(self, kd, r_dh):
+        """``G(k_d, R_dh) / k_d`` in the kernel (``r_dh()``: ``R_dh`` at the hit, not called
+        by a model without interreflection)."""
+        return dr.rcp(1.0 - kd * r_dh())
+
+    def rough_series(self, terms, r_dh):
+        """``π f / (t_i t_o)`` over a rough base of :class:`~thinfilm_mi.render.orennayar.BaseTerms`
+        ``terms``: ``π f_b + E_i E_o R_dh / (1 - Ē R_dh)`` (``r_dh()`` as in :meth:`kernel_series`)."""
+        r = r_dh()
+        return terms.pi_f + terms.e_i * terms.e_o * r * dr.rcp(1.0 - terms.e_avg * r)
+
+    def rough_integrated(self, node_values, terms):
+        """``π f`` per colour channel over a rough base from the integrated diffuse table's
+        terms ``node_values = [(r_j, M_j)]`` (built without a fixed albedo,
+        :meth:`thinfilm_mi.tabulate.diffuse.ColourDiffuse.node_values`; the Lagrange basis
+        sums to 1): ``π f_b Σ M_j + E_i E_o Σ r_j/(1 - Ē r_j) M_j``, the integral of
+        :meth:`rough_series` against colour matching."""
+        mi = mitsuba_module()
+        single = mi.Spectrum(0.0)
+        rest = mi.Spectrum(0.0)
+        for r, m in node_values:
+            single += m
+            rest += r * dr.rcp(1.0 - terms.e_avg * r) * m
+        return terms.pi_f * single + terms.e_i * terms.e_o * rest
+
+
+class Exact(DiffuseModel):
+    """``"exact"``: every film, coherent, over a base medium of index ``base_ior``."""
+    name = "exact"
+    takes_base_ior = True
+
+    def split(self, films, ext, base):
+        return films, base, None, None
+
+    def factors(self, coating, film_n, film_n_thickness):
+        return ExactFactors(coating)
+
+    def base_ratio(self, ext, base) -> bool:
+        return base is not ext
+
+
+class Multiple(DiffuseModel):
+    """``"multiple"``: the paper's split (films ``1..N-1`` over an absorbing film ``N``,
+    which only attenuates) and the interreflection series."""
+    name = "multiple"
+
+    def split(self, films, ext, base):
+        if films and absorbs(films[-1][0]):
+            return films[:-1], films[-1][0], films[-1][0], opaque_float(films[-1][1])
+        # no absorbing film N: all films over the base medium (matched to the ambient)
+        return films, ext, None, None
+
+
+class Single(Multiple):
+    """``"single"``: the paper's first-order model as published, ``G = k_d``."""
+    name = "single"
+    interreflection = False
+
+    def g(self, kd, r):
+        return kd
+
+    def series(self, kd, r):
+        return 1.0
+
+    def kernel_series(self, kd, r_dh):
+        return mitsuba_module().UnpolarizedSpectrum(1.0)
+
+    def rough_series(self, terms, r_dh):
+        return terms.pi_f
+
+    def rough_integrated(self, node_values, terms):
+        single = mitsuba_module().Spectrum(0.0)
+        for _, m in node_values:
+            single += m
+        return terms.pi_f * single
+
+
+#: The coated-diffuse models by their ``model`` value; the first is the default.
+DIFFUSE_MODELS = {m.name: m for m in (Exact(), Single(), Multiple())}
+
+
+def diffuse_model(value, plugin: str) -> DiffuseModel:
+    """The :data:`DIFFUSE_MODELS` entry named ``value`` (:func:`~thinfilm_mi.optics.choices.choose`:
+    case-insensitive); a ``ThinFilmError`` naming ``plugin``'s ``model``, the value and
+    the choices otherwise."""
+    return choose(DIFFUSE_MODELS, value, f"{plugin}: 'model'")
+
+
+class _FilmParameters:
+    """A traversal callback that collects the Dr.Jit values of the films' parameters
+    (``layers.*``; a texture's own parameters included)."""
+
+    def __init__(self):
+        self.values = []
+
+    def put(self, key, value, flags):
+        if not key.startswith("layers."):
+            return
+        mi = mitsuba_module()
+        if isinstance(value, mi.Object):
+            params = mi.traverse(value)
+            self.values.extend(params[k] for k in params.keys())
+        else:
+            self.values.append(value)
+
+
+class CoatedDiffuse:
+    """A diffuse base under ``films`` (``[(SpectralIndex, thickness nm)]``, outside in)
+    between the ambient ``ext`` and the base medium ``base`` (``SpectralIndex``), with the
+    :class:`DiffuseModel` ``model``; ``reflectance``: the base's albedo (a texture);
+    ``rough``: its :class:`~thinfilm_mi.render.orennayar.OrenNayar` roughness; ``options``:
+    the stack's options (:func:`~thinfilm_mi.render.props.stack_options_from_props`);
+    ``mode``: the variant's :mod:`~thinfilm_mi.render.modes` mode; ``plugin`` names the
+    BSDF in errors.
+
+    Component 0 is the coating's delta reflection, component 1 the diffuse lobe.
+    :attr:`bare`: no films and no interface (the base medium is the ambient): exactly
+    Mitsuba's ``diffuse`` (or the rough base alone), with no stack work."""
+
+    def __init__(self, model: DiffuseModel, films, ext, base, reflectance, rough, options: dict,
+                 mode, plugin: str):
+        self.model, self.mode, self.plugin = model, mode, plugin
+        self.reflectance = reflectance
+        #: the base's roughness (:class:`~thinfilm_mi.render.orennayar.OrenNayar`)
+        self.base = rough
+        self.texture = options["thickness_texture"]
+        coating, exit_medium, self.film_n, self.film_n_thickness = model.split(films, ext, base)
+        # RGB/mono: only k_r from the colour table; t enters through the diffuse table
+        self.coating = KernelStack(coating, ext, exit_medium, sides={False: not mode.integrated},
+                                   **options)
+        #: t carries n_0/n_b (a base medium unlike the ambient)
+        self.base_ratio = model.base_ratio(ext, base)
+        #: no films and no interface (a base medium of the ambient's index): Mitsuba's diffuse
+        self.bare = not films and (not self.base_ratio or np.array_equal(
+            base.spectral_values(GRID, real=True), ext.spectral_values(GRID, real=True)))
+        #: spectral variants: R_dh and T_hemi (SpectralTerms)
+        self.terms = None
+        #: RGB/mono variants: the diffuse term integrated as a product (ColourDiffuse)
+        self.colour = None
+        #: R_dh's derivative table, while a film parameter carries gradients
+        self.r_dh_grad = None
+        self.update()
+
+    # -- load-time terms -------------------------------------------------------
+    def factors(self):
+        """The spectral factors at the current parameters (``None`` when :attr:`bare`)."""
+        if self.bare:
+            return None
+        return self.model.factors(self.coating, self.film_n, self.film_n_thickness)
+
+    def update(self) -> None:
+        """Recompute ``T_hemi`` and ``R_dh`` (float64) from the current parameters; in
+        RGB/mono variants the integrated diffuse tables instead. In AD variants also
+        ``R_dh``'s derivatives (:attr:`r_dh_grad`)."""
+        factors = self.factors()
+        self.r_dh_grad = None
+        self.update_derivatives()
+        if self.mode.integrated:
+            if factors is not None:
+                self.colour = colour_diffuse(factors, self.texture, self.model, colour_channels(),
+                                             constant_albedo(self.reflectance, self.base.rough),
+                                             self.plugin)
+                if self.film_n is not None and dr.is_diff_v(mitsuba_module().Float):
+                    prepare_gradients([self.film_n])
+            return
+        self.terms = SpectralTerms(factors, self.texture, self.plugin, self.terms)
+
+    def film_gradients(self) -> bool:
+        """Whether a film parameter (a ``layers.*`` value) carries gradients."""
+        mi = mitsuba_module()
+        if not dr.is_diff_v(mi.Float):
+            return False
+        found = _FilmParameters()
+        self.traverse(found)
+        return any(dr.is_diff_v(v) and dr.grad_enabled(v) for v in found.values)
+
+    def update_derivatives(self) -> None:
+        """``R_dh``'s derivative table: built if a film parameter carries gradients and it is
+        missing, kept if it is there, dropped when nothing carries gradients (or for a
+        model without interreflection, or no stack). Never needed at scene load, where
+        nothing carries gradients: the reverse-mode pass then never runs on Mitsuba's
+        loader threads."""
+        factors = self.factors()
+        if factors is None or not self.model.interreflection or not self.film_gradients():
+            self.r_dh_grad = None
+        elif self.r_dh_grad is None:
+            self.r_dh_grad = DerivativeTable(factors.r_dh_partials(GRID))
+        if self.r_dh_grad is not None and self.texture is not None:
+            self.r_dh_grad = None
+            raise ThinFilmError(texture_gradients_refused(self.plugin, self.model))
+
+    # -- kernel pieces ---------------------------------------------------------
+    def transmission(self, si, cos_theta, k_t, active):
+        """``t`` at the hit from the coating's ``k_t`` (``mi.UnpolarizedSpectrum``): times
+        ``k_a`` of film ``N`` (its thickness times the texture's scale), times ``n_0/n_b``
+        over a base medium unlike the ambient."""
+        mi = mitsuba_module()
+        n0 = self.coating.ambient.eval_real(si, active)
+        if self.film_n is not None:
+            scale = self.coating.thickness_scale_at(si, active)
+            d = self.film_n_thickness if scale is None else self.film_n_thickness * scale
+            grid = self.terms.film_n if self.terms is not None else None
+            if grid is None or self.film_n.carries_gradients(si, active):
+                n_film = self.film_n.eval(si, active)
+            else:
+                n_film = grid.index(si.wavelengths)
+            k_t = k_t * film_attenuation(n0, cos_theta, n_film, d, si.wavelengths)
+        if self.base_ratio:
+            k_t = k_t * n0 / self.coating.substrate.eval_real(si, active)
+        # (the polarized amplitudes of a scaled stack come back as plain Array4f)
+        return mi.UnpolarizedSpectrum(k_t)
+
+    def factors_at(self, si, cos_theta, active, transmission: bool):
+        """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
+        and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
+        mi = mitsuba_module()
+        resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
+        k_r = mi.UnpolarizedSpectrum(resp.R)
+        if not transmission:
+            return k_r, None, resp.reflection
+        return k_r, self.transmission(si, cos_theta, resp.T, active), resp.reflection
+
+    def r_dh_with_derivatives(self, r_dh, si, wavelengths, index_at, active):
+        """``R_dh`` carrying its derivatives (:func:`~thinfilm_mi.render.diffuse.with_derivatives`;
+        as is without interreflection or stack)."""
+        if not self.model.interreflection or self.bare:
+            return r_dh
+        films = list(zip(self.coating.indices, self.coating.thickness))
+        if self.film_n is not None:
+            films.append((self.film_n, self.film_n_thickness))
+        return with_derivatives(self.r_dh_grad, r_dh, films, si, wavelengths, index_at, active,
+                                self.coating.plugin)
+
+    def r_dh(self, si, active):
+        """``R_dh`` at the hit's wavelengths, with its derivatives."""
+        return self.r_dh_with_derivatives(self.terms.lookup(si, self.coating, active)[0], si,
+                                          si.wavelengths, lambda ix: ix.eval(si, active), active)
+
+    def series(self, si, kd, active):
+        """``G(k_d, R_dh) / k_d`` at the hit (spectral variants)."""
+        return self.model.kernel_series(kd, lambda: self.r_dh(si, active))
+
+    def colour_scale(self, si, active):
+        """The thickness scale at the hit for the colour table if it is one over the
+        scale, else ``None``."""
+        return self.coating.thickness_scale_at(si, active) if self.colour.scaled else None
+
+    def colour_gradients(self, si, active) -> bool:
+        """RGB/mono AD variants: whether a film thickness or index carries gradients."""
+        n = self.film_n
+        return self.coating.colour_gradients(si, active) or (n is not None and (
+            dr.grad_enabled(self.film_n_thickness) or n.carries_gradients(si, active)))
+
+    def colour_estimate(self, si, cos_i, cos_o, active, g):
+        """An unbiased estimate of the integrated diffuse term at stratified wavelengths
+        (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose gradients the table's
+        value takes; ``g(c, R_dh)``: the base's term of channel ``c`` (``G(k_d,c, R_dh)``
+        for Lambert's), ``R_dh`` with its derivatives; the thickness texture scales every
+        film."""
+        mi = mitsuba_module()
+        coating, film_n = self.coating, self.film_n
+        sampler = GradientSampler.get()
+        wl = sampler.wavelengths(si)
+        scale = coating.thickness_scale_at(si, active)
+        n0, _ = index_on_wavelengths(coating.ambient, si, wl, active)
+
+        def t(cos):
+            _, k_t = coating.at_wavelengths(False, si, cos, active, True, scale, wl)
+            if self.base_ratio:
+                k_t = k_t * n0 / index_on_wavelengths(coating.substrate, si, wl, active)[0]
+            if film_n is None:
+                return k_t
+            d = self.film_n_thickness if scale is None else self.film_n_thickness * scale
+            return k_t * film_attenuation(n0, cos, Cx(*index_on_wavelengths(film_n, si, wl, active)),
+                                          d, wl)
+        product = t(cos_i) * t(cos_o)
+        r_dh = self.r_dh_with_derivatives(self.colour.r_dh_at(wl, active), si, wl,
+                                          lambda ix: Cx(*index_on_wavelengths(ix, si, wl, active)), active)
+        channels = [sampler.estimate(wl, product * g(c, r_dh))[c] for c in range(dr.size_v(mi.Spectrum))]
+        return mi.Spectrum(*channels)
+
+    def diffuse(self, si, kd, cos_i, wo, t_i, series, active):
+        """``π f`` towards ``wo``: ``k_d t_i t_o S`` per wavelength (over a rough base:
+        ``t_i t_o`` times the model's :meth:`DiffuseModel.rough_series`), or its integral
+        over wavelengths in RGB/mono variants."""
+        cos_o = mitsuba_module().Frame3f.cos_theta(wo)
+        base = self.base.terms(si, kd, wo, active) if self.base.rough else None
+        if self.colour is not None:
+            scale = self.colour_scale(si, active)
+            if base is None:
+                value = self.colour.value(cos_i, cos_o, kd, active, scale)
+                g = lambda c, r_dh: self.colour.series(kd[c], r_dh)
+            else:
+                value = self.model.rough_integrated(self.colour.node_values(cos_i, cos_o, active, scale),
+                                                    base)
+                g = lambda c, r_dh: self.model.rough_series(base.channel(c), lambda: r_dh)
+            if self.colour_gradients(si, active):
+                value = attach_gradient(value, self.colour_estimate(si, cos_i, cos_o, active, g))
+            return value
+        _, t_o, _ = self.factors_at(si, cos_o, active, transmission=True)
+        if base is not None:
+            return t_i * t_o * self.model.rough_series(base, lambda: self.r_dh(si, active))
+        return kd * t_i * t_o * series
+
+    def bare_value(self, si, wo, active):
+        """``π f`` without films: ``k_d`` (exactly Mitsuba's ``diffuse``) or the rough base's."""
+        kd = self.reflectance.eval(si, active)
+        return self.base.terms(si, kd, wo, active).pi_f if self.base.rough else kd
+
+    def prob_specular(self, si, k_r, t_i, kd, series, active, cos_i):
+        """The probability of choosing the delta component: the spectral mean of ``k_r``
+        against that of the diffuse albedo estimate ``t_i k_d T_hemi S`` (the colour
+        table's in RGB/mono variants)."""
+        spec = spectral_mean(k_r)
+        if self.colour is not None:
+            diff = spectral_mean(self.colour.albedo(cos_i, kd, active, self.colour_scale(si, active)))
+        else:
+            diff = spectral_mean(t_i * kd * self.terms.lookup(si, self.coating, active)[1] * series)
+        total = spec + diff
+        return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
+
+    # -- the BSDF --------------------------------------------------------------
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        """``(BSDFSample3f, weight)`` as Mitsuba's ``BSDF.sample``."""
+        mi = mitsuba_module()
+        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
+        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        self.base.check_lambertian()
+        bs = dr.zeros(mi.BSDFSample3f)
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        active = mi.Bool(active) & (cos_i > 0)
+        if not (has_spec or has_diff) or (self.bare and not has_diff):
+            return bs, mi.Spectrum(0.0)
+
+        if self.bare:  # exactly Mitsuba's diffuse (component index 1 here)
+            bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
+            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+            bs.eta = 1.0
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+            bs.sampled_component = mi.UInt32(1)
+            value = self.mode.value(self.bare_value(si, bs.wo, active), self.mode.depolarized,
+                                    ctx, si.wi, bs.wo)
+            return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
+
+        spectral = self.colour is None
+        k_r, t_i, spec_lobe = self.factors_at(si, cos_i, active, transmission=has_diff and spectral)
+        kd = series = None
+        if has_diff:
+            kd = self.reflectance.eval(si, active)
+            series = self.series(si, kd, active) if spectral else None
+        if has_spec and has_diff:
+            # detached: a sampling decision divides the weight as a constant
+            # (the weight's gradient is then that of k_r, resp. the diffuse term)
+            prob_spec = dr.detach(self.prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+        else:
+            prob_spec = mi.Float(1.0 if has_spec else 0.0)
+        sel_spec = active & (sample1 < prob_spec)
+        sel_diff = active & (sample1 >= prob_spec)   # not ~sel_spec: a Python bool in scalar variants
+
+        wo_diff = mi.warp.square_to_cosine_hemisphere(sample2)
+        bs.wo = dr.select(sel_spec, mi.reflect(si.wi), wo_diff)
+        bs.eta = 1.0
+        bs.sampled_component = dr.select(sel_spec, mi.UInt32(0), mi.UInt32(1))
+        bs.sampled_type = dr.select(sel_spec, mi.UInt32(+mi.BSDFFlags.DeltaReflection),
+                                    mi.UInt32(+mi.BSDFFlags.DiffuseReflection))
+        pdf_diff = mi.warp.square_to_cosine_hemisphere_pdf(wo_diff)
+        bs.pdf = dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff)
+
+        weight = mi.UnpolarizedSpectrum(0.0)
+        if has_spec:
+            weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
+        if has_diff:
+            # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
+            w_diff = (self.diffuse(si, kd, cos_i, wo_diff, t_i, series, sel_diff)
+                      / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0))
+            weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
+        # the film's reflection is polarized, the light through the base depolarized
+        lobe = self.mode.select(sel_spec, spec_lobe, self.mode.depolarized)
+        return bs, dr.select(active & (bs.pdf > 0),
+                             self.mode.value(weight, lobe, ctx, si.wi, bs.wo), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active, want_value: bool = True, want_pdf: bool = True):
+        """``(value, pdf)`` as Mitsuba's ``BSDF.eval_pdf`` (the parts not wanted are 0)."""
+        mi = mitsuba_module()
+        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
+        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
+        if not has_diff:
+            return mi.Spectrum(0.0), mi.Float(0.0)
+        self.base.check_lambertian()
+        cos_i = mi.Frame3f.cos_theta(si.wi)
+        cos_o = mi.Frame3f.cos_theta(wo)
+        active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0)
+        pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo) if want_pdf else mi.Float(0.0)
+
+        if self.bare:  # exactly Mitsuba's diffuse
+            value = (self.bare_value(si, wo, active) * dr.inv_pi * cos_o) if want_value \
+                else mi.UnpolarizedSpectrum(0.0)
+            value = self.mode.value(value, self.mode.depolarized, ctx, si.wi, wo)
+            return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+
+        need_prob = want_pdf and has_spec
+        value = mi.Spectrum(0.0)
+        if want_value or need_prob:
+            spectral = self.colour is None
+            kd = self.reflectance.eval(si, active)
+            series = self.series(si, kd, active) if spectral else None
+            k_r, t_i, _ = self.factors_at(si, cos_i, active, transmission=spectral)
+        if want_value:
+            value = self.mode.value(
+                self.diffuse(si, kd, cos_i, wo, t_i, series, active) * dr.inv_pi * cos_o,
+                self.mode.depolarized, ctx, si.wi, wo)
+        if need_prob:
+            pdf = pdf * (1.0 - self.prob_specular(si, k_r, t_i, kd, series, active, cos_i))
+        return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+
+    # -- parameters ------------------------------------------------------------
+    def traverse(self, callback) -> None:
+        """Expose the films (``layers.N.*``), ``thickness``, ``reflectance`` and ``roughness``."""
+        mi = mitsuba_module()
+        self.coating.traverse(callback)
+        if self.film_n is not None:
+            i = len(self.coating)
+            callback.put(f"layers.{i}.thickness", self.film_n_thickness, mi.ParamFlags.Differentiable)
+            self.film_n.traverse(callback, f"layers.{i}.")
+        callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
+        self.base.traverse(callback)
+
+    def parameters_changed(self, changed) -> None:
+        """Refresh after an edit of the keys ``changed`` (``None``: any)."""
+        self.coating.parameters_changed()
+        if self.film_n is not None:
+            self.film_n.parameters_changed(self.plugin, f"layers.{len(self.coating)}.")
+        if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
+            dr.make_opaque(self.film_n_thickness)
+        colour_albedo = self.colour is not None and self.colour.fixed
+        if self.base.refresh() or changed is None or any(
+                k.startswith(("layers.", "thickness")) or (colour_albedo and k.startswith("reflectance"))
+                for k in changed):
+            self.update()
+        else:
+            # gradients enabled or disabled on an unchanged value (the guard
+            # compares values, not their AD state)
+            self.update_derivatives()
+
+    def describe(self) -> str:
+        """The model, the base's roughness and the stack, for ``to_string``."""
+        layers = self.coating.describe()
+        if self.film_n is not None:
+            d = self.film_n_thickness
+            d = float(dr.ravel(d)[0]) if dr.is_array_v(d) else d
+            layers = f"{layers} over absorbing film {self.film_n.label} {d:g} nm"
+        return (f"  model = {self.model.name},\n{self.base.describe()}  layers = {layers},\n"
+                f"  ext_ior = {self.coating.ambient.label}\n")
