@@ -218,18 +218,3 @@ def test_mitsuba_tio2_labels_are_swapped():
     # 0.02: the luxpop table rounds to 0.01 and Devore's fit is good to ~0.01
     assert abs(plain - n_e) < 0.02 and abs(e - n_o) < 0.02
     assert "extraordinary" in M.resolve("mitsuba:TiO2_palik").reference
-
-
-def test_rii_data_types(tmp_path):
-    """Each DATA type of sources.RII_DATA_TYPES gives its parts: ``tabulated nk`` both n and k
-    (the first entry that gives a part wins); an unknown or empty type names the entry."""
-    nk = tmp_path / "nk.yml"
-    nk.write_text("DATA:\n  - type: tabulated nk\n    data: |\n        0.4 1.5 0.1\n        0.8 1.7 0.3\n"
-                  "  - type: tabulated k\n    data: |\n        0.4 9.0\n        0.8 9.0\n")
-    mat = sources.load_file(nk)
-    assert abs(mat.index(600.0) - (1.6 + 0.2j)) < 1e-12  # linear between the two rows
-    for bad_type in ("''", "formula", "formula 2 3", "tabulated"):
-        bad = tmp_path / "bad.yml"
-        bad.write_text(f"DATA:\n  - type: {bad_type}\n    data: |\n        0.5 1.0\n")
-        with pytest.raises(MaterialError, match=r"DATA\[0\].*unsupported data type"):
-            sources.load_file(bad)
