@@ -23,10 +23,9 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "tests"))
+sys.path.insert(0, str(REPO))
 
-from test_design import _labs, numeric_layers, tmm_rt  # noqa: E402  (the tests' tmm + colour-science)
-
+from tests.support.design import labs, numeric_layers, tmm_rt  # noqa: E402  (the tests' tmm + colour-science)
 from thinfilm_mi.design import design  # noqa: E402
 from thinfilm_mi.design.colourmath import delta_e2000  # noqa: E402
 
@@ -55,12 +54,12 @@ def colour_cases(cases: int, seed: int) -> None:
     for case in range(cases):
         first = int(rng.integers(2))
         truth = [((1.46, 2.35)[(first + k) % 2], float(rng.uniform(20, 300))) for k in range(3)]
-        wanted = _labs(truth, angles)
+        wanted = labs(truth, angles)
         targets = {"substrate": "1.52", "materials": ["1.46", "2.35"], "max_layers": 3, "seeds": 8,
                    "targets": [{"quantity": "colour", "angles": [a], "Lab": wanted[i].tolist(), "tolerance": 1.0}
                                for i, a in enumerate(angles)]}
         result, wall, _ = timed(lambda: design(targets))
-        dE = delta_e2000(wanted, _labs(numeric_layers(result.layers), angles))
+        dE = delta_e2000(wanted, labs(numeric_layers(result.layers), angles))
         reached += bool(np.all(dE <= 2.0))
         walls.append(wall)
         worst.append(float(dE.max()))

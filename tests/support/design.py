@@ -51,6 +51,13 @@ def numeric_layers(text):
     return [(complex(m.replace("i", "j")), d) for m, d in parse_layers(text)]
 
 
+def labs(films, angles):
+    """L*a*b* (colour-science, D65, 2°) of the reflectance (tmm) of ``films`` on glass of
+    1.52 in air, at each of ``angles`` (degrees)."""
+    wl = integration_wavelengths("D65")
+    return np.array([cs_colour(tmm_rt(films, 1.52, 1.0, wl, a)[0])[2] for a in angles])
+
+
 #: Every kind of target: R, T (back side, p), A (s) with an absorbing film,
 #: colour as Lab and as xy (back side, T, illuminant A, 10° observer), Y with
 #: a kind, and a free index.
