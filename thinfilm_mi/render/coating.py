@@ -233,44 +233,98 @@ class Coating:
         si_b.wi = w
         return si_b
 
+    def underside(self, si, cos, active):
+        """``R_in(θ') A(θ')²``: what one reflection at the stack's underside and the two
+        crossings of the coat around it leave."""
+        r = self.top(si, cos, active, inside=True, transmission=False)
+        a = self.attenuation(si, cos, active)
+        return r if a is None else r * dr.square(a)
+
+    def tracks_gradients(self, si, active) -> bool:
+        """Whether a parameter of the coating or of the nested BSDF carries gradients
+        (AD variants; decided when the kernel is traced)."""
+        mi = mitsuba_module()
+        if not dr.is_diff_v(mi.Float):
+            return False
+        own = ([self.thickness] + ([self.sigma_a.eval(si, active)] if self.sigma_a else []))
+        if self.stack.colour_gradients(si, active) or any(dr.grad_enabled(v) for v in own):
+            return True
+        params = mi.traverse(self.base)
+        return any(dr.is_array_v(params[k]) and dr.grad_enabled(params[k]) for k in params.keys())
+
     def walk(self, ctx_mode, si, w0, wo_in, seed, active):
         """``Σ_k β_k f_b(w_k, ω_o') cos θ_o'`` from ``w_0 = w0`` (module docstring), the
-        PCG32 seeded with ``seed`` (two ``UInt32``)."""
+        PCG32 seeded with ``seed`` (two ``UInt32``).
+
+        Gradients: the walk runs detached, then again with the same random numbers
+        (:meth:`_replay`), adding per vertex what the parameters change there, as
+        Mitsuba's ``prb`` replays a path: ``dW = Σ_j β_j de_j + Σ_j dlog(g_j r_j) (W -
+        W_{≤j})`` with ``e_j`` the base's ``eval`` towards ``ω_o'``, ``g_j r_j`` the step's
+        base weight (the base's ``eval`` over its detached pdf at the sampled
+        direction: sampling decisions are detached) and underside, and ``W - W_{≤j}``
+        what the walk gathered after vertex ``j``. Every term depends on the parameters
+        through its own vertex only, the sum-style loop Dr.Jit differentiates in reverse
+        mode without storing the trajectory."""
+        if not self.tracks_gradients(si, active):
+            return self._walk(ctx_mode, si, w0, wo_in, seed, active, None)
+        with dr.suspend_grad():
+            total = self._walk(ctx_mode, si, w0, wo_in, seed, active, None)
+        surrogate = self._walk(ctx_mode, si, w0, wo_in, seed, active, total)
+        return total + (surrogate - dr.detach(surrogate))
+
+    def _walk(self, ctx_mode, si, w0, wo_in, seed, active, total):
+        """The walk (``total`` None), or its replay carrying the gradients (``total``: the
+        detached walk's sum)."""
         mi = mitsuba_module()
         ctx = mi.BSDFContext(ctx_mode)
         base, max_bounces = self.base, self.max_bounces
+        replay = total is not None
         rng = mi.PCG32(size=1, initstate=mi.UInt64(seed[0]), initseq=mi.UInt64(seed[1]))
         zero = dr.zeros(mi.Spectrum)
 
-        def cond(acc, beta, w, depth, rng, active):
+        def cond(acc, gathered, beta, w, depth, rng, active):
             return active
 
-        def body(acc, beta, w, depth, rng, active):
+        def body(acc, gathered, beta, w, depth, rng, active):
+            alive = active
             si_b = self._base_si(si, w)
-            acc = dr.select(active, acc + beta * base.eval(ctx, si_b, wo_in, active), acc)
-            depth = depth + 1
-            s1 = rng.next_float32()
-            s2 = mi.Point2f(rng.next_float32(), rng.next_float32())
-            bs, g = base.sample(ctx, si_b, s1, s2, active)
-            cos = bs.wo.z
-            active = active & (cos > 0) & (depth < max_bounces) & (bs.pdf > 0)
-            step = g * self.top(si, cos, active, inside=True, transmission=False)
-            a = self.attenuation(si, cos, active)
-            if a is not None:
-                step = step * dr.square(a)
-            beta = dr.select(active, beta * step, zero)
-            w = mi.Vector3f(-bs.wo.x, -bs.wo.y, cos)
-            q = dr.minimum(dr.max(mi.UnpolarizedSpectrum(beta)), 0.95)
-            roulette = active & (depth >= RR_DEPTH)
-            u = rng.next_float32()
-            active = active & (_not(roulette) | (u < q)) & (q > 0)
-            beta = dr.select(roulette, beta / dr.select(q > 0, q, 1.0), beta)
-            return acc, beta, w, depth, rng, active
+            e = base.eval(ctx, si_b, wo_in, active)
+            with dr.suspend_grad(when=replay):
+                gathered = dr.select(active, gathered + beta * e, gathered)
+                depth = depth + 1
+                s1 = rng.next_float32()
+                s2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+                bs, g = base.sample(ctx, si_b, s1, s2, active)
+                cos = bs.wo.z
+                active = active & (cos > 0) & (depth < max_bounces) & (bs.pdf > 0)
+                step = g * self.underside(si, cos, active)
+            if replay:
+                # this vertex's terms (their values do not matter: only their gradients)
+                g_r = base.eval(ctx, si_b, bs.wo, active) / dr.detach(
+                    dr.select(bs.pdf > 0, bs.pdf, 1.0)) * self.underside(si, cos, active)
+                live = dr.detach(g_r) != 0
+                ratio = dr.select(live, g_r / dr.select(live, dr.detach(g_r), 1.0), 0.0)
+                acc = mi.Spectrum(acc + dr.select(active, ratio * (total - gathered), zero)
+                                  + dr.select(alive, beta * e, zero))
+            else:
+                acc = gathered
+            with dr.suspend_grad(when=replay):
+                beta = dr.select(active, beta * step, zero)
+                w = mi.Vector3f(-bs.wo.x, -bs.wo.y, cos)
+                q = dr.minimum(dr.max(mi.UnpolarizedSpectrum(beta)), 0.95)
+                roulette = active & (depth >= RR_DEPTH)
+                u = rng.next_float32()
+                active = active & (_not(roulette) | (u < q)) & (q > 0)
+                beta = dr.select(roulette, beta / dr.select(q > 0, q, 1.0), beta)
+            return acc, gathered, beta, w, depth, rng, active
 
-        state = (zero, dr.full(mi.Spectrum, 1.0), mi.Vector3f(w0), mi.UInt32(0), rng,
+        state = (zero, zero, dr.full(mi.Spectrum, 1.0), mi.Vector3f(w0), mi.UInt32(0), rng,
                  mi.Bool(active))
-        return dr.while_loop(state, cond, body, labels=("acc", "beta", "w", "depth", "rng",
-                                                        "active"))[0]
+        labels = ("acc", "gathered", "beta", "w", "depth", "rng", "active")
+        # max_iterations=-1: the replay is a sum of per-vertex terms (Dr.Jit's fast path
+        # for reverse-mode differentiation of such loops)
+        return dr.while_loop(state, cond, body, labels=labels,
+                             max_iterations=-1 if replay else None)[0]
 
     def transmitted(self, ctx_mode, si, wo, seed, active):
         """The walk's estimate of the base part of ``f cos θ_o`` (outer ``si.wi``, ``wo``)."""
@@ -394,10 +448,17 @@ class Coating:
         if not has_base:
             return value, pdf
         if self.invisible:
+            # the nested BSDF's own calls, bit for bit (times the coat's absorption)
             ctx_b = mi.BSDFContext(ctx.mode)
-            value, pdf = self.base.eval_pdf(ctx_b, si, wo, active)
+            si_b = self._base_si(si, si.wi)
+            if want_value and want_pdf:
+                value, pdf = self.base.eval_pdf(ctx_b, si_b, wo, active)
+            elif want_value:
+                value = self.base.eval(ctx_b, si_b, wo, active)
+            else:
+                pdf = self.base.pdf(ctx_b, si_b, wo, active)
             a = self.attenuation(si, si.wi.z, active)
-            if a is not None:
+            if a is not None and want_value:
                 value = value * a * self.attenuation(si, wo.z, active)
             return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
         if want_value:
