@@ -9,11 +9,12 @@ Thin-film coating over any BSDF (:monosp:`thinfilm_coating`)
 .. pluginparameters::
 
  * - bsdf
-   - |bsdf|
+   - BSDF (nested)
    - The base: any Mitsuba BSDF without delta lobes (``diffuse``, ``roughconductor``,
-     ``principled``, ``measured``, ``roughplastic``, ours...), nested by this name or as
-     the one unnamed child. It is evaluated in the coat medium: give it ``int_ior`` as its
-     own ``ext_ior`` where it has one. |differentiable| (its own parameters).
+     ``principled``, ``measured``, ``roughplastic``, ``thinfilm_roughconductor``...),
+     nested by this name or as the one unnamed child. It is evaluated in the coat medium:
+     give it ``int_ior`` as its own ``ext_ior`` where it has one. |differentiable| (its
+     own parameters).
  * - layers
    - |string|
    - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."`` (default:
