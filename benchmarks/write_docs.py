@@ -45,6 +45,7 @@ BENCHMARKS = {
     "fit_bench": [],
     "sweep_bench": [],
     "gc_guard_bench": [],
+    "coating_bench": ["--repeats", "3", "--first-repeats", "1"],
 }
 
 

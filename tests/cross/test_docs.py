@@ -38,6 +38,9 @@ finally:
 #: plugin -> the property dictionaries it is loaded with (each beside ``type``);
 #: together they take every branch of the constructor that reads a property
 CONFIGS = {
+    "thinfilm_coating": [{"bsdf": {"type": "diffuse"}},
+                         {"bsdf": {"type": "diffuse"}, "coat_sigma_a": 0.1, "coat_thickness": 2.0,
+                          "max_bounces": 8, "thin_film_ior": 1.46, "thin_film_thickness": 300.0}],
     "thinfilm_conductor": [{}, {"eta": 0.2, "k": 3.0},
                            {"thin_film_ior": 1.46, "thin_film_thickness": 300.0}],
     "thinfilm_dielectric": [{}, {"thin_film_ior": "SiO2", "thin_film_thickness": 300.0}],

@@ -6,6 +6,7 @@ import pytest
 import tmm
 
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.optics.core import COMPONENTS
 from thinfilm_mi.optics.polarization import POLARIZATIONS, UNPOLARIZED, P, S, as_polarization
 
 
@@ -23,6 +24,8 @@ def test_registry_and_parsing():
 
 def test_components_labels_descriptions():
     assert UNPOLARIZED.components == (S, P)
+    # the recursion's per-component results are keyed by the components' names
+    assert tuple(c.name for c in UNPOLARIZED.components) == COMPONENTS
     assert S.components == (S,) and P.components == (P,)
     assert [UNPOLARIZED.label("R"), S.label("R"), P.label("T")] == ["R", "Rs", "Tp"]
     assert [UNPOLARIZED.describe(), S.describe(), P.describe()] == ["", "s-pol", "p-pol"]

@@ -13,6 +13,7 @@ mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
 from tests.support.bsdf import WAVELENGTHS as WL
 from tests.support.bsdf import direction, make_si
+from thinfilm_mi.render.media import SpectralIndex  # noqa: E402
 from thinfilm_mi.tabulate.hemispherical import hemispherical_factors, r_dh_partials  # noqa: E402
 
 # ---------------------------------------------------------------------------
@@ -107,3 +108,24 @@ def test_scale_table_against_direct_terms():
     R, T = ExactFactors(b.coating).hemispherical_scales(np.array(WL), s)
     np.testing.assert_allclose(np.array(r), R.T, atol=SCALE_ABS / 2 + 1e-6)
     np.testing.assert_allclose(np.array(t), T.T, atol=SCALE_ABS / 2 + 1e-6)
+
+
+@pytest.mark.parametrize("films", [1, 24])
+def test_paper_terms_over_scales_are_the_terms_of_scaled_films(films):
+    """The paper's hemispherical terms over thickness scales (a texture's table) and at one
+    scale (no texture) are one computation: at each scale they equal the one-scale terms of
+    the films scaled, bit for bit (each thickness times a scale is the same float64
+    product; 24 films run the loop over the films)."""
+    from thinfilm_mi.materials.model import GRID
+    from thinfilm_mi.tabulate.hemispherical import DEFAULT_NODES, hemispherical_factors, paper_terms
+    wl = GRID[::23]
+
+    def index(material):
+        return SpectralIndex.from_material(material, "x").spectral_values(wl)
+    coating = [(index("SiO2") if i % 2 else index("TiO2"), 90.0 + i) for i in range(films)]
+    gold, n0, scales = index("Au"), np.full(wl.size, 1.0), [0.0, 0.35, 1.0, 1.5]
+    R, T = paper_terms(n0, coating, gold, (gold, 4.0), wl, scales, DEFAULT_NODES)
+    for k, s in enumerate(scales):
+        t1, r1 = hemispherical_factors(n0, [(n, d * s) for n, d in coating], gold, (gold, 4.0 * s), wl)
+        assert np.array_equal(R[k], r1) and np.array_equal(T[k], t1), s
+    assert np.all(T[1:] > 0) and np.all(R[1:] > 0)

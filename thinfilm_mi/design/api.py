@@ -21,12 +21,12 @@ __all__ = ["design", "refine", "evaluate"]
 def _problem(targets: Any, **overrides) -> Problem:
     problem = targets if isinstance(targets, Problem) else load_problem(targets)
     problem = dataclasses.replace(problem, materials=list(problem.materials))
-    for key in ("max_layers", "seeds", "seed"):
+    for key, least in (("max_layers", 1), ("seeds", 1), ("seed", 0)):
         value = overrides.get(key)
         if value is None:
             continue
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < (1 if key != "seed" else 0):
-            raise ThinFilmError(f"{key}: expected an integer >= {1 if key != 'seed' else 0}, got {value!r}")
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+            raise ThinFilmError(f"{key}: expected an integer >= {least}, got {value!r}")
         problem = dataclasses.replace(problem, **{key: int(value)})
     return problem
 

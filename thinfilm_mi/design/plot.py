@@ -70,7 +70,8 @@ def _chromaticity(ax, result):
             for angle in angles:
                 R, T = result.spectrum(wl, angle, t.side, t.polarization)
                 XYZ = t.of.curve(R, T) @ W
-                path.append(XYZ[:2] / XYZ.sum())
+                total = XYZ.sum()          # 0 where no light passes (T beyond total reflection): a gap
+                path.append(XYZ[:2] / total if total > 0 else np.full(2, np.nan))
             path = np.array(path)
             side = t.side.describe()
             line, = ax.plot(path[:, 0], path[:, 1], lw=1,
@@ -90,6 +91,7 @@ def _chromaticity(ax, result):
             ax.scatter(spread[..., 0].ravel(), spread[..., 1].ravel(), s=2, color=c, alpha=0.3, lw=0)
         pts += [wanted, got]
     pts = np.concatenate(pts)
+    pts = pts[np.all(np.isfinite(pts), axis=1)]
     span = max(float(np.ptp(pts[:, 0])), float(np.ptp(pts[:, 1])), 0.05)
     centre = (pts.max(axis=0) + pts.min(axis=0)) / 2
     ax.set_xlim(centre[0] - 0.65 * span, centre[0] + 0.65 * span)

@@ -32,8 +32,8 @@ from thinfilm_mi.errors import ThinFilmError
 if TYPE_CHECKING:
     from thinfilm_mi.design.targets import Target
 
-__all__ = ["TargetQuantity", "Power", "Absorptance", "Luminous", "Colour", "ColourSpace", "TARGET_QUANTITIES",
-           "TARGET_QUANTITY_ALIASES", "POWERS", "COLOUR_SPACES", "stats", "json_list"]
+__all__ = ["TargetQuantity", "Power", "Absorptance", "Integrated", "Luminous", "Colour", "ColourSpace",
+           "TARGET_QUANTITIES", "TARGET_QUANTITY_ALIASES", "POWERS", "COLOUR_SPACES", "stats", "json_list"]
 
 _COMMON = ("quantity", "angles", "tolerance", "kind", "polarization", "side")
 

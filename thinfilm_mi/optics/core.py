@@ -58,6 +58,7 @@ from typing import Any, Sequence
 import drjit as dr
 
 __all__ = [
+    "COMPONENTS",
     "Cx",
     "sqrt_decaying",
     "normal_index",
@@ -72,6 +73,11 @@ __all__ = [
     "transmittance_factor_s",
     "transmittance_factor_p",
 ]
+
+#: The linear components the recursion computes, in the order of its results (s, then
+#: p): the keys of its per-component dicts. The polarisations of
+#: :mod:`thinfilm_mi.optics.polarization` name their components alike.
+COMPONENTS = ("s", "p")
 
 
 class Cx:
@@ -639,7 +645,7 @@ def stack_rt(n0, cos0, films, n_exit, wavelength, *, transmission: bool = True):
     if transmission:
         fac = power_factors(n0, q0, media[-1], qs[-1], grazing, 4.0 ** (len(films) + 1))
     results = {pol: rouard_recursion(adm[pol], E, None, tpow.get(pol), zero_pairs)
-               for pol in ("s", "p")}
+               for pol in COMPONENTS}
     return _powers(results, fac, grazing)
 
 
@@ -663,7 +669,7 @@ def power_factors(n0, q0, n_ex: Cx, q_ex: Cx, grazing, scale):
 def _powers(results: dict, fac: dict | None, grazing):
     """``(Rs, Rp, Ts, Tp)`` from the projective ``{pol: (N, D, |T|^2)}``."""
     out = []
-    for pol in ("s", "p"):
+    for pol in COMPONENTS:
         N, D, T = results[pol]
         inv = 1.0 / D.abs2()
         R = dr.select(grazing, 1.0, dr.minimum(N.abs2() * inv, 1.0))
@@ -804,7 +810,7 @@ def stack_loop_terms(n0, cos0, count, film, n_exit, wavelength, *, transmission:
     def components(st) -> list:
         """``(pol, (Nr, Ni, Dr, Di, T[, e]), admittance below)`` of s, then p, in the state ``st``."""
         return [(pol, st[i * k:(i + 1) * k], Cx(*st[2 * k + 2 * i:2 * k + 2 * i + 2]))
-                for i, pol in enumerate(("s", "p"))]
+                for i, pol in enumerate(COMPONENTS)]
 
     def step(j, *st):
         j = j - 1

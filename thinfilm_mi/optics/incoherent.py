@@ -81,7 +81,14 @@ from typing import Any, Sequence
 
 import drjit as dr
 
-from thinfilm_mi.optics.core import clip_transmittance, is_zero, prepare_stack, rouard_recursion, stack_rt
+from thinfilm_mi.optics.core import (
+    COMPONENTS,
+    clip_transmittance,
+    is_zero,
+    prepare_stack,
+    rouard_recursion,
+    stack_rt,
+)
 
 __all__ = ["incoherent_rt", "incoherent_rt_sp", "reference_incoherent_rt", "coherent_groups"]
 
@@ -160,7 +167,7 @@ def incoherent_rt_sp(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
             mag2[j + 1] = dr.exp((-4.0 * math.pi) * (q.im * (d * inv_wl)))
 
     out = []
-    for pol in ("s", "p"):
+    for pol in COMPONENTS:
         a = adm[pol]
         last = len(groups) - 2
         Re, Te = _substack(a, E, mag2, groups[last], groups[last + 1], False, transmission)

@@ -48,6 +48,7 @@ from __future__ import annotations
 import drjit as dr
 
 from thinfilm_mi.optics.core import (
+    COMPONENTS,
     Cx,
     StackAmplitudes,
     cinv,
@@ -175,7 +176,7 @@ def amplitude_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: b
 
     def unpack(st):
         out = {}
-        for i, pol in enumerate(("s", "p")):
+        for i, pol in enumerate(COMPONENTS):
             v = st[i * k:(i + 1) * k]
             out[pol] = (Cx(v[0], v[1]), Cx(v[2], v[3]), Cx(v[4], v[5]) if transmission else None)
         return out
@@ -188,7 +189,7 @@ def amplitude_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: b
         below = {"s": Cx(st[2 * k], st[2 * k + 1]), "p": Cx(st[2 * k + 2], st[2 * k + 3])}
         E_b = Cx(st[2 * k + 4], st[2 * k + 5])
         out = []
-        for pol in ("s", "p"):
+        for pol in COMPONENTS:
             N, D, T = step(a[pol], below[pol], E_b, e1, *cur[pol])
             out += [N.re, N.im, D.re, D.im] + ([T.re, T.im] if transmission else [])
         return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
@@ -201,7 +202,7 @@ def amplitude_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: b
     out = {"q0": q0, "q_exit": q_ex, "n_exit": n_ex, "grazing": grazing}
     # t_p carries the telescoped product n0 / n_exit of the p admittances q / n^2
     t_scale = {"s": lambda T: T, "p": lambda T: cmul(T, cinv(n_ex) * n0)}
-    for pol in ("s", "p"):
+    for pol in COMPONENTS:
         N, D, T = step(a0[pol], below[pol], E_b, None, *cur[pol], last=True)
         out[pol] = (N, D, T if T is None else t_scale[pol](T))
     return out
@@ -241,7 +242,7 @@ def loop_amplitudes(n0, cos0, count, film, n_exit, wl, transmission: bool = True
                           n0_max=n0_max, film_n_min=film_n_min)
     grazing = amps["grazing"]
     out = {}
-    for pol in ("s", "p"):
+    for pol in COMPONENTS:
         N, D, T = amps[pol]
         inv = cinv(D)
         out[pol] = (Cx(-1.0, 0.0).select(grazing, cmul(N, inv)),

@@ -20,6 +20,7 @@ __all__ = ["PLUGINS", "TEXTURES", "register"]
 
 #: plugin name -> (module in thinfilm_mi.plugins, class name)
 PLUGINS = {
+    "thinfilm_coating": ("thinfilm_coating", "ThinFilmCoating"),
     "thinfilm_conductor": ("thinfilm_conductor", "ThinFilmConductor"),
     "thinfilm_dielectric": ("thinfilm_dielectric", "ThinFilmDielectric"),
     "thinfilm_diffuse": ("thinfilm_diffuse", "ThinFilmDiffuse"),
@@ -44,14 +45,15 @@ def _plugin_modules() -> dict:
     once a variant is set (and is reloaded per variant by :func:`_register_current`)."""
     from thinfilm_mi.plugins import (
         thinfilm_blackbody,
+        thinfilm_coating,
         thinfilm_conductor,
         thinfilm_dielectric,
         thinfilm_diffuse,
         thinfilm_roughconductor,
         thinfilm_roughdielectric,
     )
-    modules = (thinfilm_blackbody, thinfilm_conductor, thinfilm_dielectric, thinfilm_diffuse,
-               thinfilm_roughconductor, thinfilm_roughdielectric)
+    modules = (thinfilm_blackbody, thinfilm_coating, thinfilm_conductor, thinfilm_dielectric,
+               thinfilm_diffuse, thinfilm_roughconductor, thinfilm_roughdielectric)
     return {m.__name__.rpartition(".")[2]: m for m in modules}
 
 

@@ -65,9 +65,7 @@ def channel_mean_texture(wavelengths: np.ndarray, values: np.ndarray, channels: 
 
 def with_absorbing(data: tabulate_base.SideData) -> tabulate_base.SideData:
     """``data`` with ``absorbing`` set from the 1 nm grid (one kernel per build)."""
-    data.absorbing = (tuple(bool(np.any(np.asarray(f(GRID)).imag)) for f, _ in data.films)
-                      + (bool(np.any(np.asarray(data.n_exit(GRID)).imag)),))
-    return data
+    return data.set_absorbing(GRID)
 
 
 #: Colour tables shared between stacks with identical optics (RGB/mono variants).

@@ -41,10 +41,10 @@ from thinfilm_mi.render.textures import checked_texture, mitsuba_module, regular
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.diffuse import ColourDiffuse, ScaledColourDiffuse
 from thinfilm_mi.tabulate.hemispherical import (
+    DEFAULT_NODES,
     PER_FILM,
     ScaleTable,
     exact_hemispherical,
-    hemispherical_factors,
     paper_terms,
     r_dh_partials,
 )
@@ -71,13 +71,12 @@ class DiffuseFactors:
         """The same factors with every thickness times ``scale`` (instead of :attr:`scale`)."""
         return DiffuseFactors(self.coating, self.film_n, self.film_n_thickness, scale)
 
-    def hemispherical_scales(self, wl, scales):
+    def hemispherical_scales(self, wl, scales, nodes: int | None = None):
         """``(R_dh, T_hemi)`` at every thickness scale of ``scales``, each of shape
-        ``(len scales, len wl)``."""
+        ``(len scales, len wl)`` (:func:`~thinfilm_mi.tabulate.hemispherical.paper_terms`;
+        ``nodes``: of its rule, by default as many as the films' fringes need)."""
         n0, coat, n_exit, fn = self.at_scale(1.0)._arguments(wl)
-        if fn is None:   # the coating over the (matched) base medium: the exact terms
-            return exact_hemispherical(n0, coat, n_exit.real, wl, scales)
-        return paper_terms(n0, coat, n_exit, fn, wl, scales)
+        return paper_terms(n0, coat, n_exit, fn, wl, scales, nodes)
 
     def t(self, cos, wl):
         """``t = k_t k_a`` at every angle ``cos`` and wavelength ``wl``: shape ``(len cos, len wl)``."""
@@ -93,7 +92,9 @@ class DiffuseFactors:
                           * self.scale)
 
     def _arguments(self, wl):
-        """:func:`~thinfilm_mi.tabulate.hemispherical.hemispherical_factors`'s arguments at ``wl``."""
+        """The arguments of :func:`~thinfilm_mi.tabulate.hemispherical.paper_terms` and
+        :func:`~thinfilm_mi.tabulate.hemispherical.r_dh_partials` at ``wl`` (the films at
+        :attr:`scale`)."""
         c = self.coating
         n0 = c.ambient.spectral_values(wl, real=True)
         coat = [(ix.spectral_values(wl), scalar(d) * self.scale)
@@ -103,9 +104,10 @@ class DiffuseFactors:
         return n0, coat, c.substrate.spectral_values(wl), fn
 
     def hemispherical(self, wl):
-        """``(R_dh, T_hemi)`` at ``wl`` (at :attr:`scale`)."""
-        t_hemi, r_dh = hemispherical_factors(*self._arguments(wl), wavelengths=wl)
-        return r_dh, t_hemi
+        """``(R_dh, T_hemi)`` at ``wl`` at :attr:`scale`, with the full rule
+        (:data:`~thinfilm_mi.tabulate.hemispherical.DEFAULT_NODES`)."""
+        R_dh, T_hemi = self.hemispherical_scales(wl, [self.scale], DEFAULT_NODES)
+        return R_dh[0], T_hemi[0]
 
     def r_dh_partials(self, wl):
         """``∂R_dh/∂x`` at ``wl`` (:func:`~thinfilm_mi.tabulate.hemispherical.r_dh_partials`):

@@ -172,8 +172,7 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
                   "colour_error": None, "errors": []})
     if axis is None:
         return None
-    side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)
-                      + (bool(np.any(np.asarray(side.n_exit(wavelengths)).imag)),))
+    side.set_absorbing(wavelengths)
     axis = axis.band_limited     # a plain axis: more nodes at mid angles
     split = axis.split
     # a quantity whose channels vary faster along v (tabulate.mueller) starts finer

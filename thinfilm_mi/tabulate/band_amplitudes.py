@@ -9,7 +9,7 @@ from __future__ import annotations
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.optics.core import Cx
+from thinfilm_mi.optics.core import COMPONENTS, Cx
 from thinfilm_mi.tabulate.base import SideData, film_gather
 
 __all__ = ["GRADING", "INTERPOLATION_NODES", "RESOLVE_DISTANCE", "Amplitudes", "amplitudes",
@@ -151,12 +151,12 @@ def amplitudes(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarra
         film_n_min=float(re.min()) if real else None, label="thinfilm_band", exponents=True,
         smooth=True)
     out = []
-    for pol in ("s", "p"):
+    for pol in COMPONENTS:
         N, D, _, _ = terms[pol]
         out += [N.re, N.im, D.re, D.im]
     if side.transmission:
-        out += [dr.select(grazing, 0.0, terms[pol][2] * fac[pol]) for pol in ("s", "p")]
-    exps = [terms["s"][3], terms["p"][3]]
+        out += [dr.select(grazing, 0.0, terms[pol][2] * fac[pol]) for pol in COMPONENTS]
+    exps = [terms[pol][3] for pol in COMPONENTS]
     dr.eval(*out, *exps)
     return (np.stack([np.array(v, dtype=np.float64) for v in out], axis=-1),
             np.stack([np.array(v, dtype=np.float64) for v in exps], axis=-1))

@@ -105,8 +105,8 @@ class SideData:
     ``rt_loop``, where given, evaluates :data:`BUILD_LOOP_MIN_FILMS` films or
     more as a loop (:func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt_loop`).
     ``kinks``: wavelengths where an index's slope jumps (tabulated data), at
-    which the build checks the table too. ``absorbing`` (set by
-    :func:`build_table`): whether each film and the exit medium absorb
+    which the build checks the table too. ``absorbing`` (set by the builds,
+    :meth:`set_absorbing`): whether each film and the exit medium absorb
     anywhere in the range, so that every evaluation of a build traces the same
     kernel whatever its wavelengths. ``quantity``: what is tabulated, one of
     :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES` (the powers ``R`` [, ``T``],
@@ -123,6 +123,13 @@ class SideData:
     rt_loop: object = None
     kinks: np.ndarray = field(default_factory=lambda: np.empty(0))
     absorbing: tuple | None = None
+
+    def set_absorbing(self, wavelengths: np.ndarray) -> "SideData":
+        """Set :attr:`absorbing` from the indices at ``wavelengths`` (whether each film and
+        the exit medium absorb anywhere there); returns the side."""
+        self.absorbing = (tuple(bool(np.any(np.asarray(n(wavelengths)).imag)) for n, _ in self.films)
+                          + (bool(np.any(np.asarray(self.n_exit(wavelengths)).imag)),))
+        return self
 
 
 # -- the wavelength axis (generic over array types: Dr.Jit math) -------------------

@@ -405,8 +405,7 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
         return None
     g, order = GHOST, 4
     split = axis.split
-    side.absorbing = (tuple(bool(np.any(n(wavelengths).imag)) for n, _ in side.films)
-                      + (bool(np.any(np.asarray(side.n_exit(wavelengths)).imag)),))
+    side.set_absorbing(wavelengths)
     if build_work(side, PROBE_POINTS) > MAX_PROBE_WORK * budget_scale:
         stats["result"] = "probe over budget"
         return None

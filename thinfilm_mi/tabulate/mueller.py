@@ -33,7 +33,7 @@ import dataclasses
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.optics.core import transmittance_factor_p, transmittance_factor_s
+from thinfilm_mi.optics.core import COMPONENTS, transmittance_factor_p, transmittance_factor_s
 from thinfilm_mi.optics.incoherent_mueller import incoherent_mueller
 from thinfilm_mi.optics.mueller import (
     amplitude_loop,
@@ -79,12 +79,12 @@ def _terms_loop(n0, cos0, count, film, n_exit, wl, transmission, smooth: bool, *
                           smooth=smooth, label="thinfilm_mueller_band")
     zero = 0.0 * cos0 * wl
     out = []
-    for pol in ("s", "p"):
+    for pol in COMPONENTS:
         N, D, _ = amps[pol]
         out += [N.re, N.im, D.re, D.im]
     if transmission:
         q0 = dr.select(amps["grazing"], 1.0, amps["q0"])
-        for pol in ("s", "p"):
+        for pol in COMPONENTS:
             T = amps[pol][2]
             out += [T.re, T.im]
         out += [transmittance_factor_s(amps["q_exit"], q0),

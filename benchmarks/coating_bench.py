@@ -1,0 +1,407 @@
+"""``thinfilm_coating`` (issue 42): its render cost over the nested BSDF alone, its image
+noise at equal time against the explicit-geometry reference, its first image, and film
+edits without recompilation.
+
+    python benchmarks/coating_bench.py [--repeats 5] [--res 256] [--spp 16]
+                                       [--variants llvm_ad_spectral,llvm_ad_rgb]
+                                       [--noise-res 128] [--noise-spp 16] [--ref-factor 16]
+                                       [--first-repeats 3] [--edits 4]
+                                       [--skip-steady] [--skip-noise] [--skip-first]
+                                       [--write-docs]
+
+The scene is the sphere of ``render_bench.py`` (radius 1 on a diffuse floor under a
+constant emitter, ``path``, box filter). The sphere's BSDF is one of :data:`BASES`
+(``diffuse``, ``roughconductor`` α 0.3 on Al, ``principled``), alone or under the coating
+:data:`COAT` (``int_ior`` 1.5, the films ``"SiO2 500; TiO2 80"``, default settings).
+
+1. **Steady cost** per base and variant (each variant in a process of its own, every scene
+   rendered once first: compiles): --repeats rounds in which the base alone and the coated
+   base render back to back (the base first in even rounds, the coating first in odd ones),
+   --res², --spp, max depth 8. The coated scene is loaded for its render and freed after it
+   (untimed; the kernel cache makes it cheap): while a Python BSDF lives, Dr.Jit traces its
+   code into every render, the base's too, which would bill part of the coating's cost to
+   the base (at 48×48 the base's renders took 5× longer with a coated scene alive). The
+   ratio is the median over rounds of the round's ratio of the process's CPU time (all of
+   Dr.Jit's threads; a slow spell of the shared machine hits both renders of a pair
+   alike); wall-clock seconds are in the JSON on stderr.
+2. **Edits**, in the same processes: with ``dr.JitFlag.KernelHistory`` on, --edits edits of
+   the outer film's thickness through ``mi.traverse(scene)`` and ``params.update()`` (which
+   rebuilds a table where the stack has one), each followed by a render; the JIT kernels
+   compiled (neither an in-memory nor a disk-cache hit) in the updates and in the renders.
+3. **Noise at equal time** (``llvm_ad_spectral``, --noise-res², max depth 64 in both
+   scenes, lit by the sky and by the area light of ``scenes/include/stage.xml``, which the
+   geometry reaches only by chance: next-event estimation cannot cross its smooth top):
+   the coated sphere against the coating as geometry, as in
+   ``tests/cross/test_coating_geometry.py``: a ``thinfilm_dielectric`` sphere (the films,
+   ``ext_ior`` -> ``int_ior``) around a sphere :data:`GAP` smaller that carries the base
+   (max depth 64 leaves the walk between the two its bounces). The coating renders
+   --noise-spp samples in T seconds (median of 3); the geometry gets the spp that fill the
+   same T by its own median time per render (CPU seconds, after a render at that sample
+   count: the count is compiled into the kernel). Each image's RMSE, over the sphere's
+   pixels and relative to their mean, is taken against a render of the same scene at
+   --ref-factor times its samples (whose own noise adds 1/ref-factor to the variance);
+   three images each, the median time and the root mean square of the three RMSEs. Efficiency ratio:
+   ``(RMSE_geometry² t_geometry) / (RMSE_coating² t_coating)`` with the measured times; above
+   1 the coating is the more efficient. The two high-spp images' relative RMSE to each
+   other is reported too (noise of both and the gap's offset).
+4. **First image** (``llvm_ad_spectral``, --res², --spp): a fresh process, the kernel cache
+   warm (one untimed run of each first) and the table store off (every table is built),
+   times ``mi.load_dict`` (which builds the stack's table) and the first ``mi.render``;
+   --first-repeats runs per configuration, alternating, medians.
+
+``--write-docs`` writes the tables to ``docs/_generated/coating_bench.md`` under the line
+that says where, when and at which commit they were measured (``benchmarks/docs_output.py``);
+docs/benchmarks.md shows it.
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import json
+import os
+import subprocess
+import sys
+import time
+import warnings
+
+import numpy as np
+
+os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, HERE)
+from render_bench import render_sync, scene_dict  # noqa: E402
+
+VARIANTS = ("llvm_ad_spectral", "llvm_ad_rgb")
+#: the coating of every measurement: a TiO2 film under SiO2 on a clear 1.5 coat
+COAT = {"layers": "SiO2 500; TiO2 80", "int_ior": 1.5}
+#: (label, the nested BSDF)
+BASES = [
+    ("`diffuse`", {"type": "diffuse", "reflectance": {"type": "rgb", "value": [0.6, 0.25, 0.1]}}),
+    ("`roughconductor` Al, α 0.3", {"type": "roughconductor", "material": "Al", "alpha": 0.3}),
+    ("`principled`", {"type": "principled", "roughness": 0.4,
+                      "base_color": {"type": "rgb", "value": [0.6, 0.05, 0.05]}}),
+]
+#: the sphere's radius less the base sphere's in the explicit geometry (the sphere's is 1)
+GAP = 0.01
+CENTER = (0.0, 0.2, 0.0)
+NOISE_DEPTH = 64
+
+
+def coated(base: dict) -> dict:
+    return {"type": "thinfilm_coating", **COAT, "bsdf": base}
+
+
+def sphere_scene(bsdf: dict, res: int, spp: int, max_depth: int = 8) -> dict:
+    d = scene_dict("", res, spp, bsdf=bsdf)
+    d["integrator"]["max_depth"] = max_depth
+    return d
+
+
+def lit_scene(bsdf: dict, res: int, spp: int) -> dict:
+    """The sphere scene at max depth NOISE_DEPTH with the area light of
+    ``scenes/include/stage.xml`` (2.4 wide, ~5 away, above and to the left) besides the sky."""
+    import mitsuba as mi
+    d = sphere_scene(bsdf, res, spp, NOISE_DEPTH)
+    d["light"] = {"type": "rectangle", "emitter": {"type": "area", "radiance": {
+                  "type": "rgb", "value": [9.0, 8.6, 8.0]}},
+                  "to_world": mi.ScalarTransform4f().translate([-2.0, 4.0, 2.5])
+                  .rotate([1, 0, 0], 70).scale(1.2)}
+    return d
+
+
+def geometry_scene(base: dict, res: int, spp: int) -> dict:
+    """The coating as geometry: the films on a ``thinfilm_dielectric`` sphere around the base."""
+    d = lit_scene({"type": "thinfilm_dielectric", "layers": COAT["layers"],
+                   "int_ior": COAT["int_ior"]}, res, spp)
+    d["base"] = {"type": "sphere", "center": list(CENTER), "radius": 1.0 - GAP, "bsdf": base}
+    return d
+
+
+def cpu_timed(fn, *args, **kwargs) -> tuple[float, float, object]:
+    """(wall seconds, process CPU seconds, result) of ``fn(*args, **kwargs)``."""
+    t, c = time.perf_counter(), time.process_time()
+    result = fn(*args, **kwargs)
+    return time.perf_counter() - t, time.process_time() - c, result
+
+
+# -- 1 and 2: steady cost and edits, one process per variant -------------------------------
+
+def compiled(history: list) -> int:
+    import drjit as dr
+    return sum(1 for k in history if k["type"] == dr.KernelType.JIT
+               and not k.get("cache_hit", False) and not k.get("cache_disk", False))
+
+
+def edits(scene, n: int) -> dict:
+    """Kernels compiled by ``n`` edits of the outer film's thickness and the renders after them."""
+    import drjit as dr
+    import mitsuba as mi
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("layers.0.thickness"))
+    render_sync(scene, seed=0)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()   # clear
+        update = render = 0
+        for i, d in enumerate(np.linspace(500.0, 420.0, n)):
+            params[key] = float(d)
+            params.update()
+            update += compiled(dr.kernel_history())
+            render_sync(scene, seed=i + 1)
+            render += compiled(dr.kernel_history())
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return {"key": key, "edits": n, "update": update, "render": render}
+
+
+def steady_child(variant: str, repeats: int, res: int, spp: int, n_edits: int) -> None:
+    import mitsuba as mi
+    mi.set_variant(variant)
+    import thinfilm_mi  # noqa: F401
+    warnings.simplefilter("ignore")
+    bases = [mi.load_dict(sphere_scene(base, res, spp)) for _, base in BASES]
+
+    def coated_render(i: int, seed: int) -> tuple[float, float]:
+        """Load the coated scene (untimed), time one render, free it: while a Python BSDF
+        lives, every render traces its code (Dr.Jit traces each instance of a call's
+        domain), which would bill the coating's tracing to the base's renders too."""
+        scene = mi.load_dict(sphere_scene(coated(BASES[i][1]), res, spp))
+        wall, cpu, _ = cpu_timed(render_sync, scene, seed=seed)
+        del scene
+        gc.collect()
+        return wall, cpu
+
+    for i, (label, _) in enumerate(BASES):
+        render_sync(bases[i], seed=0)   # compiles
+        coated_render(i, 0)             # compiles (later loads hit the kernel cache)
+        print(f"  {variant}: {label} compiled", file=sys.stderr, flush=True)
+    wall = [[[], []] for _ in BASES]
+    cpu = [[[], []] for _ in BASES]
+    for r in range(repeats):
+        for i in range(len(BASES)):
+            for j in ((0, 1) if r % 2 == 0 else (1, 0)):
+                w, c = (cpu_timed(render_sync, bases[i], seed=r + 1)[:2] if j == 0
+                        else coated_render(i, r + 1))
+                wall[i][j].append(w)
+                cpu[i][j].append(c)
+    out = {"steady": [], "edits": edits(mi.load_dict(sphere_scene(coated(BASES[-1][1]), res, spp)),
+                                        n_edits)}
+    for i, (label, _) in enumerate(BASES):
+        base_w, ours_w = (np.array(x) for x in wall[i])
+        base_c, ours_c = (np.array(x) for x in cpu[i])
+        out["steady"].append({"label": label, "base": float(np.median(base_w)),
+                              "coated": float(np.median(ours_w)),
+                              "wall_ratio": float(np.median(ours_w / base_w)),
+                              "ratio": float(np.median(ours_c / base_c))})
+    print(json.dumps(out))
+
+
+# -- 3: noise at equal time against the explicit geometry ----------------------------------
+
+def sphere_mask(scene) -> np.ndarray:
+    """Pixels (row-major, as ``mi.render`` returns them) whose centre sees the sphere."""
+    import drjit as dr
+    import mitsuba as mi
+    sensor = scene.sensors()[0]
+    w, h = sensor.film().crop_size()
+    x, y = np.meshgrid((np.arange(w) + 0.5) / w, (np.arange(h) + 0.5) / h)
+    ray, _ = sensor.sample_ray(0.0, 0.5, mi.Point2f(x.ravel(), y.ravel()), mi.Point2f(0.5))
+    si = scene.ray_intersect(ray)
+    near = dr.norm(si.p - mi.Point3f(*CENTER)) < 1.0 + 1e-3
+    return np.array(si.is_valid() & near).reshape(h, w)
+
+
+def relative_rmse(image, reference, mask) -> float:
+    a, b = np.asarray(image)[mask], np.asarray(reference)[mask]
+    return float(np.sqrt(np.mean((a - b) ** 2)) / np.mean(b))
+
+
+def noise_child(res: int, spp: int, ref_factor: int) -> None:
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_spectral")
+    import thinfilm_mi  # noqa: F401
+    warnings.simplefilter("ignore")
+    out = []
+    for label, base in BASES:
+        # each scene is loaded alone (see steady_child: a live Python BSDF is traced by every
+        # render); loads after the first hit the kernel cache
+        dicts = {"coating": lit_scene(coated(base), res, spp),
+                 "geometry": geometry_scene(base, res, spp)}
+        per_render, mask = {}, None
+        for name, d in dicts.items():
+            scene = mi.load_dict(d)
+            mask = sphere_mask(scene) if mask is None else mask
+            render_sync(scene, seed=0)   # compiles
+            per_render[name] = float(np.median([cpu_timed(render_sync, scene, seed=s)[1]
+                                                for s in (1, 2, 3)]))
+            del scene
+            gc.collect()
+        spp_of = {"coating": spp,
+                  "geometry": max(1, round(spp * per_render["coating"] / per_render["geometry"]))}
+        row = {"label": label, "mask_pixels": int(mask.sum())}
+        refs = {}
+        for name, d in dicts.items():
+            scene = mi.load_dict(d)
+            render_sync(scene, seed=0, spp=spp_of[name])   # compiles for this sample count
+            refs[name] = np.asarray(render_sync(scene, seed=1000, spp=ref_factor * spp_of[name]))
+            seconds, rmse = [], []
+            for seed in (7, 8, 9):
+                _, cpu, image = cpu_timed(render_sync, scene, seed=seed, spp=spp_of[name])
+                seconds.append(cpu)
+                rmse.append(relative_rmse(image, refs[name], mask))
+            row[name] = {"spp": spp_of[name], "seconds": float(np.median(seconds)),
+                         "rmse": float(np.sqrt(np.mean(np.square(rmse))))}
+            del scene
+            gc.collect()
+        g, c = row["geometry"], row["coating"]
+        row["efficiency"] = (g["rmse"] ** 2 * g["seconds"]) / (c["rmse"] ** 2 * c["seconds"])
+        row["references_rmse"] = relative_rmse(refs["geometry"], refs["coating"], mask)
+        out.append(row)
+        print(f"  noise: {label}: coating {c}, geometry {g}", file=sys.stderr, flush=True)
+    print(json.dumps(out))
+
+
+# -- 4: first image ------------------------------------------------------------------------
+
+def first_child(which: str, index: int, res: int, spp: int) -> None:
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_spectral")
+    import thinfilm_mi  # noqa: F401
+    warnings.simplefilter("ignore")
+    base = BASES[index][1]
+    t0 = time.perf_counter()
+    scene = mi.load_dict(sphere_scene(coated(base) if which == "coated" else base, res, spp))
+    t1 = time.perf_counter()
+    render_sync(scene, seed=0)
+    print(json.dumps({"load": t1 - t0, "render": time.perf_counter() - t1}))
+
+
+def child(*args: str) -> dict | list:
+    env = dict(os.environ, THINFILM_MI_TABLE_CACHE="off")
+    res = subprocess.run([sys.executable, os.path.abspath(__file__), *args], env=env,
+                         capture_output=True, text=True)
+    if res.returncode != 0:
+        raise RuntimeError(res.stderr[-3000:])
+    sys.stderr.write(res.stderr)
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def first_images(repeats: int, res: int, spp: int) -> list:
+    out = []
+    for index, (label, _) in enumerate(BASES):
+        size = ["--res", str(res), "--spp", str(spp)]
+        for which in ("base", "coated"):      # the kernel cache warm; tables built per process
+            child("--first-child", which, str(index), *size)
+        runs = {"base": [], "coated": []}
+        for r in range(repeats):
+            for which in (("base", "coated") if r % 2 == 0 else ("coated", "base")):
+                runs[which].append(child("--first-child", which, str(index), *size))
+        total = {w: np.array([x["load"] + x["render"] for x in v]) for w, v in runs.items()}
+        out.append({"label": label, "base": float(np.median(total["base"])),
+                    "coated": float(np.median(total["coated"])),
+                    "coated_load": float(np.median([x["load"] for x in runs["coated"]])),
+                    "ratio": float(np.median(total["coated"] / total["base"]))})
+    return out
+
+
+# -- the report ----------------------------------------------------------------------------
+
+def markdown(data: dict, args) -> str:
+    import drjit as dr
+    coat = f'`thinfilm_coating` "{COAT["layers"]}", `int_ior` {COAT["int_ior"]}'
+    lines = [f"{dr.thread_count()} Dr.Jit threads.", ""]
+    steady = data.get("steady")
+    if steady:
+        variants = list(steady)
+        lines += [f"**Render cost over the nested BSDF alone.** The sphere scene of "
+                  f"`render_bench.py` ({args.res}×{args.res}, {args.spp} spp, max depth 8), the "
+                  f"sphere's BSDF the base alone or under {coat}; median over {args.repeats} "
+                  f"rounds of the CPU-time ratio of back-to-back renders:", "",
+                  "| base | " + " | ".join(f"`{v}`" for v in variants) + " |",
+                  "|---|" + "---:|" * len(variants)]
+        for i, (label, _) in enumerate(BASES):
+            cells = [f"{steady[v]['steady'][i]['ratio']:.2f}× ({steady[v]['steady'][i]['coated']:.2f} s "
+                     f"against {steady[v]['steady'][i]['base']:.2f} s)" for v in variants]
+            lines.append(f"| {label} | " + " | ".join(cells) + " |")
+        lines += ["", "**Edits without recompilation** (the `principled` base): "
+                  + "; ".join(f"`{v}`: {e['edits']} edits of `{e['key']}` compiled {e['update']} "
+                              f"kernels in `params.update()` and {e['render']} in the renders after them"
+                              for v, e in ((v, steady[v]["edits"]) for v in variants)) + ".", ""]
+    noise = data.get("noise")
+    if noise:
+        lines += [f"**Noise at equal time against the explicit geometry** (`llvm_ad_spectral`, "
+                  f"{args.noise_res}×{args.noise_res}, max depth {NOISE_DEPTH}, the sky and an area "
+                  f"light as in `scenes/include/stage.xml`): the coated sphere "
+                  f"at {args.noise_spp} spp against a `thinfilm_dielectric` sphere around the base "
+                  f"sphere ({GAP} smaller) given the same seconds; RMSE over the sphere's pixels "
+                  f"relative to their mean, each against its own scene at {args.ref_factor}× its "
+                  f"samples. Efficiency = RMSE² × time of the geometry over that of the coating "
+                  f"(> 1: the coating is the more efficient):", "",
+                  "| base | coating: spp, s, RMSE | geometry: spp, s, RMSE | efficiency | "
+                  "the two high-spp images apart |", "|---|---|---|---:|---:|"]
+        for row in noise:
+            c, g = row["coating"], row["geometry"]
+            lines.append(f"| {row['label']} | {c['spp']}, {c['seconds']:.2f} s, {c['rmse']:.3f} | "
+                         f"{g['spp']}, {g['seconds']:.2f} s, {g['rmse']:.3f} | "
+                         f"{row['efficiency']:.1f}× | {row['references_rmse']:.3f} |")
+        lines.append("")
+    first = data.get("first")
+    if first:
+        lines += [f"**First image** (`llvm_ad_spectral`, {args.res}×{args.res}, {args.spp} spp; a "
+                  f"fresh process, the kernel cache warm, the table store off: the stack's table is "
+                  f"built in the load): medians of {args.first_repeats}:", "",
+                  "| base | coated (load) | base alone | ratio |", "|---|---:|---:|---:|"]
+        for row in first:
+            lines.append(f"| {row['label']} | {row['coated']:.2f} s ({row['coated_load']:.2f} s) | "
+                         f"{row['base']:.2f} s | {row['ratio']:.2f}× |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--res", type=int, default=256)
+    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--edits", type=int, default=4)
+    ap.add_argument("--noise-res", type=int, default=128)
+    ap.add_argument("--noise-spp", type=int, default=16)
+    ap.add_argument("--ref-factor", type=int, default=16)
+    ap.add_argument("--first-repeats", type=int, default=3)
+    ap.add_argument("--skip-steady", action="store_true")
+    ap.add_argument("--skip-noise", action="store_true")
+    ap.add_argument("--skip-first", action="store_true")
+    ap.add_argument("--steady-child")
+    ap.add_argument("--noise-child", action="store_true")
+    ap.add_argument("--first-child", nargs=2, metavar=("WHICH", "BASE"))
+    args = ap.parse_args()
+    if args.steady_child:
+        return steady_child(args.steady_child, args.repeats, args.res, args.spp, args.edits)
+    if args.noise_child:
+        return noise_child(args.noise_res, args.noise_spp, args.ref_factor)
+    if args.first_child:
+        return first_child(args.first_child[0], int(args.first_child[1]), args.res, args.spp)
+    data = {}
+    if not args.skip_steady:
+        data["steady"] = {v: child("--steady-child", v, "--repeats", str(args.repeats),
+                                   "--res", str(args.res), "--spp", str(args.spp),
+                                   "--edits", str(args.edits))
+                          for v in args.variants.split(",")}
+    if not args.skip_noise:
+        data["noise"] = child("--noise-child", "--noise-res", str(args.noise_res),
+                              "--noise-spp", str(args.noise_spp), "--ref-factor", str(args.ref_factor))
+    if not args.skip_first:
+        data["first"] = first_images(args.first_repeats, args.res, args.spp)
+    import mitsuba as mi
+    mi.set_variant("scalar_rgb")
+    print(markdown(data, args))
+    print(json.dumps(data), file=sys.stderr)
+
+
+if __name__ == "__main__":
+    from docs_output import write_docs_option
+
+    with write_docs_option("coating_bench"):   # --write-docs: docs/_generated/coating_bench.md
+        main()

@@ -1,0 +1,233 @@
+r"""
+.. _bsdf-thinfilm_coating:
+
+Thin-film coating over any BSDF (:monosp:`thinfilm_coating`)
+------------------------------------------------------------
+
+.. shared-rows: dielectric
+
+.. pluginparameters::
+
+ * - bsdf
+   - BSDF (nested)
+   - The base: any Mitsuba BSDF without delta lobes (``diffuse``, ``roughconductor``,
+     ``principled``, ``measured``, ``roughplastic``, ``thinfilm_roughconductor``...),
+     nested by this name or as the one unnamed child. It is evaluated in the coat medium:
+     give it ``int_ior`` as its own ``ext_ior`` where it has one. |differentiable| (its
+     own parameters).
+ * - layers
+   - |string|
+   - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."`` (default:
+     ``""``, no films: a bare interface between ``ext_ior`` and ``int_ior``).
+ * - thin_film_ior, thin_film_thickness
+   - |string| or |float|, |float|
+   - Shorthand for one film (index or material name, thickness in nm). Not together
+     with ``layers``.
+ * - int_ior
+   - |float| or |string|
+   - The coat medium between the films and the base: a real index or a non-absorbing
+     material name (default: 1.5).
+ * - ext_ior
+   - |float| or |string|
+   - Exterior index, real (default: 1.000277, air).
+ * - coat_sigma_a
+   - |spectrum| or |texture|
+   - Absorption coefficient of the coat medium per unit of ``coat_thickness``, >= 0
+     (default: none, a clear coat). Beer–Lambert along every refracted crossing,
+     ``exp(-σ_a d / cos θ')``, as Mitsuba 0.6's ``coating``. |differentiable|.
+ * - coat_thickness
+   - |float|
+   - Thickness ``d`` of the coat medium in the unit of ``coat_sigma_a``, >= 0
+     (default: 1). |differentiable|.
+ * - max_bounces
+   - |int|
+   - Most base vertices of a walk, >= 1 (default: 64). Longer paths are dropped:
+     their energy is at most ``(a R̄)^N/(1 - a R̄)`` for a base of albedo ``a`` under an
+     underside of mean reflectance ``R̄`` (6e-15 for white under a bare 1.5 coat).
+ * - thickness
+   - |float| or |texture|
+   - Optional scale on every film's thickness at the hit, e.g. a ``bitmap`` with
+     ``raw="true"`` (clamped to >= 0; default: 1). In spectral variants the stack is
+     then evaluated exactly (no table); RGB and mono variants tabulate the colour over
+     its range, read at load.
+ * - tabulate
+   - |string| or |bool|
+   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
+     ``T`` where needed) is read from a verified table over (angle, wavelength) instead
+     of the recursion (a cubic B-spline, split at the critical angle where the exit
+     medium can totally reflect): its cost does not grow with the number of films.
+     ``auto`` tabulates in vectorised variants by measured cost: absorbing films from 5
+     films, non-absorbing ones between constant indices from 10 (both sides are then one
+     exact recursion at the Snell-mapped angle), other non-absorbing ones from 1, unless
+     a ``thickness`` texture is given, gradients are tracked, or the target cannot be
+     met within 2^19 texels (a table that still fits the cache), by a table of the exact
+     values or one of the band-limited values (``spectral_resolution``) (then: exact),
+     or in a build of ~2 s (70 films or more on a metal: not started); ``true`` waits up
+     to 10x longer (100 films: ~2.5 s). Built tables are kept on disk (the table store).
+     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller components
+     (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each within
+     ``table_error``, and ``auto`` tabulates from 40 films (fewer are as cheap exact)
+     within 2^21 floats.
+ * - table_error
+   - |float|
+   - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
+ * - spectral_resolution
+   - |float|
+   - Spectral resolution (nm) tables may assume, for stacks whose exact values no table
+     resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide): their ``R``
+     and ``T`` are tabulated convolved with a Gaussian in wavenumber whose standard
+     deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm), i.e. light of
+     coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is verified within
+     ``table_error`` against the convolved values and kept only if the colours of the
+     exact and the convolved values under D65, A and F11 differ by ΔE2000 <= 0.5
+     (default: 1; 0: tables of the exact values only). Under lasers or line-spectrum
+     emitters narrower than the resolution pass 0, or ``tabulate=false``.
+ * - coherence_thickness
+   - |float|
+   - Films thicker than this (nm) are averaged incoherently, as tmm's ``inc_tmm`` does,
+     instead of showing ~1 nm fringes no broadband light shows (default: 5000).
+
+A smooth thin-film stack between ``ext_ior`` and a clear (or absorbing) coat medium of
+index ``int_ior``, over any nested BSDF: an interference clear coat over a ``principled``
+paint, a dichroic film over a printed ``diffuse`` label, an AR-coated cover glass, an
+oxide over a ``roughconductor`` under a lacquer. Component 0 is the stack's delta
+reflection (its exact ``R(θ_i)``, from a table or the recursion as the other plugins),
+component 1 the light that crosses the stack, scatters at the base and bounces between
+the base and the stack's underside (whose reflectance ``R_in`` includes total internal
+reflection) before it leaves::
+
+    f = T(θ_i) T(θ_o) (η_e/η_c)² A(θ_i') A(θ_o') [f_b(ω_i', ω_o') + interreflections]
+
+with ``ω'`` the directions refracted into the coat (Snell's law at the mean indices),
+``A`` Beer–Lambert and ``(η_e/η_c)²`` the radiance factor of Mitsuba's ``plastic``. The
+interreflections are estimated, unbiased for any base, by a position-free random walk
+(Guo et al. 2018, pbrt-v4's ``LayeredBxDF``): next-event estimation through the smooth
+top at every base vertex, the base sampled between them, Russian roulette after 3
+vertices, at most ``max_bounces`` vertices. ``eval`` seeds its random numbers from a
+hash of the directions and ``sample`` from its sample, so both are deterministic.
+``sample`` picks the reflection with probability ``R̄/(R̄ + T̄)``; otherwise it draws from
+a fixed mixture of the base's own lobe refracted out and a cosine lobe, and weighs the
+direction by the walk's ``f cos θ_o`` over the mixture's density, which is what ``pdf``
+returns (so ``sample``, ``eval`` and ``pdf`` agree, and MIS weights sum to one). With no
+films and ``int_ior`` equal to ``ext_ior`` the plugin returns the nested BSDF itself
+(times the coat's absorption). Details: ``thinfilm_mi/render/coating.py`` and the guide
+``docs/guides/coating.md``.
+
+**Variants.** Spectral: the stack exact (or tabulated) at the path's wavelengths, the
+base in Mitsuba's spectral mode. RGB and mono: the stack's ``R`` and ``T`` integrated
+against colour matching per channel (as ``thinfilm_dielectric``), times the base's RGB
+per channel: a product of integrals where the physical value is the integral of the
+product (``tests/render/test_coating.py`` measures the ΔE2000 against the spectral
+value). Polarized variants are refused at load. AD: film thicknesses and indices,
+``coat_sigma_a`` and ``coat_thickness`` carry gradients; the nested BSDF's own parameters
+keep theirs (they appear under ``bsdf.`` in ``mi.traverse``).
+
+**Not covered.** A base with delta lobes (smooth ``conductor``, ``dielectric``,
+``plastic``) is refused at load: each base vertex is connected to the exit direction
+through the base's ``eval``. Light the base transmits is lost (no layer below it).
+
+.. tabs::
+    .. code-tab:: xml
+
+        <bsdf type="thinfilm_coating">
+            <string name="layers" value="TiO2 120"/>
+            <float name="int_ior" value="1.5"/>
+            <bsdf type="principled">
+                <rgb name="base_color" value="0.6, 0.05, 0.05"/>
+                <float name="roughness" value="0.4"/>
+            </bsdf>
+        </bsdf>
+
+    .. code-tab:: python
+
+        {'type': 'thinfilm_coating', 'layers': 'TiO2 120', 'int_ior': 1.5,
+         'bsdf': {'type': 'principled', 'base_color': {'type': 'rgb', 'value': [0.6, 0.05, 0.05]},
+                  'roughness': 0.4}}
+"""
+from __future__ import annotations
+
+import mitsuba as mi
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render import modes
+from thinfilm_mi.render.coating import DEFAULT_MAX_BOUNCES, Coating, nested_bsdf
+from thinfilm_mi.render.media import real_index
+from thinfilm_mi.render.params import ParameterGuard
+from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
+from thinfilm_mi.render.variant import check_variant
+
+__all__ = ["NAME", "ThinFilmCoating"]
+
+NAME = "thinfilm_coating"
+#: the coat medium's default index (the issue's; a clear lacquer)
+DEFAULT_COAT_IOR = 1.5
+
+
+class ThinFilmCoating(mi.BSDF):
+    def __init__(self, props):
+        check_variant(NAME)
+        if mi.is_polarized:
+            raise ThinFilmError(f"{NAME}: polarized variants are not supported yet (the walk "
+                                "carries unpolarised spectra); use a *_spectral, RGB or mono "
+                                "variant")
+        mi.BSDF.__init__(self, props)
+        mode = modes.current()
+        base = nested_bsdf(props, NAME)
+        interior = real_index(props.get("int_ior", DEFAULT_COAT_IOR), "int_ior")
+        stack = stack_from_props(props, NAME, interior, sides={False: True, True: False})
+        sigma_a = optional_texture(props, "coat_sigma_a", NAME)
+        thickness = props.get("coat_thickness", 1.0)
+        if isinstance(thickness, bool) or not isinstance(thickness, (int, float)):
+            raise ThinFilmError(f"{NAME}: 'coat_thickness' must be a number, got {thickness!r}")
+        bounces = props.get("max_bounces", DEFAULT_MAX_BOUNCES)
+        if isinstance(bounces, bool) or not isinstance(bounces, int) or bounces < 1:
+            raise ThinFilmError(f"{NAME}: 'max_bounces' must be an integer >= 1, got {bounces!r}")
+        check_unqueried(props, NAME)
+        self.coating = Coating(stack, base, mode, sigma_a, float(thickness), bounces, NAME)
+        #: the base's reflection lobes (component 1: any of them through the coat)
+        self.base_lobes = [lobe for lobe in (mi.BSDFFlags.DiffuseReflection,
+                                             mi.BSDFFlags.GlossyReflection)
+                           if base.flags() & lobe]
+        base_flags = mi.BSDFFlags.Empty
+        for lobe in self.base_lobes:
+            base_flags = base_flags | lobe
+        self.m_components = [mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide,
+                             base_flags | mi.BSDFFlags.FrontSide]
+        self.m_flags = self.m_components[0] | self.m_components[1]
+        self.guard = ParameterGuard(self, NAME)
+
+    def _enabled(self, ctx):
+        return (ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0),
+                any(ctx.is_enabled(lobe, 1) for lobe in self.base_lobes))
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        return self.coating.sample(ctx, si, sample1, sample2, active, *self._enabled(ctx))
+
+    def eval(self, ctx, si, wo, active=True):
+        return self.coating.eval_pdf(ctx, si, wo, active, *self._enabled(ctx), want_pdf=False)[0]
+
+    def pdf(self, ctx, si, wo, active=True):
+        return self.coating.eval_pdf(ctx, si, wo, active, *self._enabled(ctx), want_value=False)[1]
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        return self.coating.eval_pdf(ctx, si, wo, active, *self._enabled(ctx))
+
+    def traverse(self, callback):
+        c = self.coating
+        c.stack.traverse(callback)
+        if c.sigma_a is not None:
+            callback.put("coat_sigma_a", c.sigma_a, mi.ParamFlags.Differentiable)
+        callback.put("coat_thickness", c.thickness, mi.ParamFlags.Differentiable)
+        callback.put("bsdf", c.base, mi.ParamFlags.Differentiable)
+
+    def parameters_changed(self, keys):
+        def refresh(changed):
+            self.coating.stack.parameters_changed()
+            self.coating.refresh()
+        self.guard.changed(self, refresh, keys)
+
+    def to_string(self):
+        c = self.coating
+        return (f"ThinFilmCoating[\n  layers = {c.stack.describe()},\n"
+                f"  int_ior = {c.stack.substrate.label},\n  ext_ior = {c.stack.ambient.label},\n"
+                f"  bsdf = {c.base.class_name()}\n]")
