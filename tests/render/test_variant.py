@@ -3,6 +3,8 @@ they do not support, clearly."""
 import mitsuba as mi
 import pytest
 
+import thinfilm_mi  # noqa: F401  (registers the plugins)
+
 
 @pytest.mark.parametrize("variant_name", ["llvm_ad_mono_polarized"])
 def test_unsupported_variants_raise_clearly(variant_name):
