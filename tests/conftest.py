@@ -54,8 +54,9 @@ def real_path_calls(monkeypatch):
     return calls
 
 
-# The Dask sweeps (tests/batch/test_sweeps.py, tests/cli/test_sweep.py): a scene file and
-# a local cluster of two workers per module.
+# The Dask sweeps (tests/batch/test_sweeps.py, tests/cli/test_sweep.py, tests/batch/test_worker.py):
+# a scene file and a local cluster of two workers per module. (tests/cli/test_render.py
+# has a `scene` of its own.)
 
 @pytest.fixture(scope="module")
 def scene(tmp_path_factory):

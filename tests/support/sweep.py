@@ -4,12 +4,7 @@ from __future__ import annotations
 import csv
 from pathlib import Path
 
-import pytest
-
-pytest.importorskip("distributed")
-
-
-from thinfilm_mi.batch import outputs  # noqa: E402
+from thinfilm_mi.batch import outputs
 
 TIMEOUT = 120  # seconds: bound of every sweep (they take a few seconds)
 THICKNESS = "sphere.bsdf.layers.0.thickness"
