@@ -195,12 +195,13 @@ def test_truncation_bias_is_the_dropped_series():
     assert full - first > 0.05
 
 
-@pytest.mark.parametrize("layers", [LOSSLESS, "1.46 200; 0.42+2.47j 4"],
-                         ids=["lossless", "absorbing"])
+@pytest.mark.parametrize("layers", ["", LOSSLESS, "1.46 200; 0.42+2.47j 4"],
+                         ids=["bare", "lossless", "absorbing"])
 def test_films_over_diffuse_are_thinfilm_diffuse_exact(layers):
     """Check 3: films over ``diffuse`` equal ``thinfilm_diffuse`` ``model="exact"`` with
     ``base_ior`` = ``int_ior`` (its series in closed form, deterministic: its delta ``R``
-    plus the quadrature of its ``eval``), at cos θ 1, 0.5 and 0.17."""
+    plus the quadrature of its ``eval``), at cos θ 1, 0.5 and 0.17. Bare (no films over
+    a base medium unlike the ambient: an interface), lossless and absorbing stacks."""
     ours_bsdf = coating(layers=layers)
     ref = mi.load_dict({"type": "thinfilm_diffuse", "model": "exact", "base_ior": 1.5,
                         "ext_ior": 1.0, "layers": layers, "reflectance": 0.5})
