@@ -117,10 +117,15 @@ films and ``int_ior`` equal to ``ext_ior`` the plugin returns the nested BSDF it
 base in Mitsuba's spectral mode. RGB and mono: the stack's ``R`` and ``T`` integrated
 against colour matching per channel (as ``thinfilm_dielectric``), times the base's RGB
 per channel: a product of integrals where the physical value is the integral of the
-product (``tests/render/test_coating.py`` measures the ΔE2000 against the spectral
-value). Polarized variants are refused at load. AD: film thicknesses and indices,
-``coat_sigma_a`` and ``coat_thickness`` carry gradients; the nested BSDF's own parameters
-keep theirs (they appear under ``bsdf.`` in ``mi.traverse``).
+product (``tests/plugins/test_thinfilm_coating.py`` measures the ΔE2000 against the
+spectral value: 0.96 for two films over an orange ``diffuse``). Polarized
+(``*_spectral_polarized``): the stack's Mueller matrices at every crossing and
+reflection (exact amplitudes or their tables, as ``thinfilm_dielectric``) times the
+base's, each in Mitsuba's implicit Stokes bases of the directions the light travels, so
+the products chain (radiance transport; light tracing gets the chain's intensity,
+depolarized). AD: film thicknesses and indices, ``coat_sigma_a`` and
+``coat_thickness`` carry gradients (not in polarized variants); the nested BSDF's own
+parameters keep theirs (they appear under ``bsdf.`` in ``mi.traverse``).
 
 **Not covered.** A base with delta lobes (smooth ``conductor``, ``dielectric``,
 ``plastic``) is refused at load: each base vertex is connected to the exit direction
@@ -166,10 +171,6 @@ DEFAULT_COAT_IOR = 1.5
 class ThinFilmCoating(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
-        if mi.is_polarized:
-            raise ThinFilmError(f"{NAME}: polarized variants are not supported yet (the walk "
-                                "carries unpolarised spectra); use a *_spectral, RGB or mono "
-                                "variant")
         mi.BSDF.__init__(self, props)
         mode = modes.current()
         base = nested_bsdf(props, NAME)
