@@ -41,9 +41,10 @@ Thin-film coating over any BSDF (:monosp:`thinfilm_coating`)
      (default: 1). |differentiable|.
  * - max_bounces
    - |int|
-   - Most base vertices of a walk, >= 1 (default: 64). Longer paths are dropped:
-     their energy is at most ``(a R̄)^N/(1 - a R̄)`` for a base of albedo ``a`` under an
-     underside of mean reflectance ``R̄`` (6e-15 for white under a bare 1.5 coat).
+   - Most base vertices of a walk, >= 1 (default: 64). Longer paths are dropped: for a
+     Lambertian base of albedo ``ρ`` under an underside of hemispherical reflectance
+     ``R̄`` their energy is at most ``(ρ R̄)^N/(1 - ρ R̄)`` (1e-14 for white under a bare
+     1.5 coat).
  * - thickness
    - |float| or |texture|
    - Optional scale on every film's thickness at the hit, e.g. a ``bitmap`` with

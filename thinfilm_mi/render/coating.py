@@ -36,17 +36,19 @@ the walk goes on reflected by the underside: ``β_{k+1} = β_k g R_in(θ_w) A(w)
 ``w_{k+1} = (-w_x, -w_y, w_z)``. The first term is exact (``w_0`` is fixed); later ones
 are unbiased estimates of the interreflection series. Russian roulette from
 :data:`RR_DEPTH` bounces on (survival ``q = min(max β, 0.95)``, ``β /= q``: unbiased);
-the walk stops after ``max_bounces`` base vertices: the paths with more are dropped
-(their energy is at most ``(a R̄)^N / (1 - a R̄)`` of the incident light for a base of
-albedo ``a`` and an underside of mean reflectance ``R̄``: ``0.6^64 ≈ 6e-15`` for a bare
-``η = 1.5`` coat over white; ``tests/render/test_coating.py`` measures the truncation at
+the walk stops after ``max_bounces`` base vertices: the paths with more are dropped. For
+a Lambertian base of albedo ``ρ`` each vertex sends back ``ρ R̄`` of what it receives
+(``R̄``: the underside's hemispherical reflectance), so the dropped energy is at most ``(ρ R̄)^N /
+(1 - ρ R̄)`` of the light that entered: ``0.596^64/0.404 ≈ 1e-14`` for a bare ``η = 1.5``
+coat over white. A base that sends its light beyond the critical angle meets ``R_in = 1``
+there and may lose more (``tests/render/test_coating.py`` measures the truncation at
 ``N = 1``). Random numbers: a PCG32 seeded from the sample's numbers in ``sample`` and
 from a TEA hash of the two directions in ``eval`` (as pbrt-v4's ``LayeredBxDF``), so
 every call is deterministic.
 
 **Sampling** (:meth:`Coating.sample`): the delta reflection with probability ``P_R = R̄ /
 (R̄ + T̄)`` (spectral means at ``θ_i``), weight ``R/P_R``. Otherwise a direction is drawn
-from a deterministic mixture (:meth:`Coating.pdf`, its exact density)::
+from a deterministic mixture (:meth:`Coating.base_pdf`, its exact density)::
 
     p(ω_o) = (1 - P_R) [ (1 - c) p_b(ω_i', ω_o') (η_e/η_c)² cos θ_o / cos θ_o' + c cos θ_o / π ]
 
@@ -420,7 +422,7 @@ class Coating:
     # -- the BSDF interface ----------------------------------------------------
     def sample(self, ctx, si, sample1, sample2, active, has_delta: bool, has_base: bool):
         """``(bs, weight)``: the delta reflection or a direction of the mixture
-        (:meth:`pdf`), weighted by the walk's estimate of ``f cos θ_o`` over ``pdf``."""
+        (:meth:`base_pdf`), weighted by the walk's estimate of ``f cos θ_o`` over ``pdf``."""
         mi = mitsuba_module()
         bs = dr.zeros(mi.BSDFSample3f)
         active = mi.Bool(active) & (si.wi.z > 0)
