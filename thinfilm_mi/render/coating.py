@@ -370,13 +370,15 @@ class Coating:
         return dr.while_loop(state, cond, body, labels=labels,
                              max_iterations=-1 if replay else None)[0]
 
-    def transmitted(self, ctx_mode, si, wo, seed, active):
-        """The walk's estimate of the base part of ``f cos θ_o`` (outer ``si.wi``, ``wo``)."""
+    def transmitted(self, ctx_mode, si, wo, seed, active, top_i=None):
+        """The walk's estimate of the base part of ``f cos θ_o`` (outer ``si.wi``, ``wo``);
+        ``top_i``: the stack's response at ``si.wi`` where the caller has it."""
         mi = mitsuba_module()
         wi_in, ok_i = inward(si.wi, self.eta_f)
         wo_in, ok_o = inward(wo, self.eta_f)
         active = active & ok_i & ok_o
-        top_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
+        if top_i is None:
+            top_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
         top_o = self.top(si, wo.z, active, inside=False, transmission=True)
         acc = self.walk(ctx_mode, si, wi_in, wo_in, seed, active)
         # light enters along -wo, is refracted along -wo', ..., leaves the base along wi'
@@ -458,7 +460,7 @@ class Coating:
             pdf = (1.0 - p_r) * self.base_pdf(ctx.mode, si, wo, ok)
             seed = (_bits(sample1) ^ _shl(_bits(sample2.y), 16), _bits(sample2.x))
             seed = mi.sample_tea_32(seed[0], seed[1], 4)
-            f = self.transmitted(ctx.mode, si, wo, seed, ok & (pdf > 0))
+            f = self.transmitted(ctx.mode, si, wo, seed, ok & (pdf > 0), top_i)
             weight = dr.select(ok & (pdf > 0), f / dr.select(pdf > 0, pdf, 1.0), weight)
             sel_b = ok & (pdf > 0)
             btype = dr.select(cosine, mi.UInt32(+mi.BSDFFlags.DiffuseReflection),
@@ -513,11 +515,12 @@ class Coating:
             if a is not None and want_value:
                 value = value * a * self.attenuation(si, wo.z, active)
             return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+        top_i = self.top(si, si.wi.z, active, inside=False, transmission=True) \
+            if want_value or (want_pdf and has_delta) else None
         if want_value:
-            value = self.transmitted(ctx.mode, si, wo, self.eval_seed(si.wi, wo), active)
+            value = self.transmitted(ctx.mode, si, wo, self.eval_seed(si.wi, wo), active, top_i)
         if want_pdf:
             pdf = self.base_pdf(ctx.mode, si, wo, active)
             if has_delta:
-                top_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
                 pdf = pdf * (1.0 - self.prob_reflect(top_i.R, top_i.T))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
