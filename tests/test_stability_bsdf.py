@@ -41,7 +41,7 @@ import drjit as dr
 import mitsuba as mi
 import numpy as np
 import pytest
-from _plugin_modules import import_error
+from _plugin_modules import import_error, plugin_dict
 from drjit.llvm import Float64
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
@@ -91,7 +91,7 @@ def takes(plugin: str, what: str) -> bool:
     key = (plugin, what)
     if key not in _taken:
         try:
-            mi.load_dict({"type": plugin, **PROBES[what]})
+            mi.load_dict(plugin_dict(plugin, **PROBES[what]))
             _taken[key] = True
         except Exception as e:  # noqa: BLE001
             if "unreferenced propert" not in str(e):
@@ -130,7 +130,7 @@ def layers_string(films) -> str:
 
 
 def build(plugin: str, s: dict, tabulate=False):
-    props = {"type": plugin, "layers": layers_string(s["films"]), "ext_ior": s["ext"]}
+    props = plugin_dict(plugin, layers=layers_string(s["films"]), ext_ior=s["ext"])
     if takes(plugin, "eta_k"):
         props["eta"], props["k"] = s["sub"]
     if takes(plugin, "int_ior"):
