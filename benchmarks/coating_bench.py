@@ -5,6 +5,7 @@ edits without recompilation.
     python benchmarks/coating_bench.py [--repeats 5] [--res 256] [--spp 16]
                                        [--variants llvm_ad_spectral,llvm_ad_rgb]
                                        [--noise-res 128] [--noise-spp 16] [--ref-factor 16]
+                                       [--noise-variants llvm_ad_spectral,llvm_ad_rgb]
                                        [--first-repeats 3] [--edits 4]
                                        [--skip-steady] [--skip-noise] [--skip-first]
                                        [--write-docs]
@@ -28,7 +29,7 @@ constant emitter, ``path``, box filter). The sphere's BSDF is one of :data:`BASE
    the outer film's thickness through ``mi.traverse(scene)`` and ``params.update()`` (which
    rebuilds a table where the stack has one), each followed by a render; the JIT kernels
    compiled (neither an in-memory nor a disk-cache hit) in the updates and in the renders.
-3. **Noise at equal time** (``llvm_ad_spectral``, --noise-res², max depth 64 in both
+3. **Noise at equal time** (each of --noise-variants, --noise-res², max depth 64 in both
    scenes, lit by the sky and by the area light of ``scenes/include/stage.xml``, which the
    geometry reaches only by chance: next-event estimation cannot cross its smooth top):
    the coated sphere against the coating as geometry, as in
@@ -40,10 +41,13 @@ constant emitter, ``path``, box filter). The sphere's BSDF is one of :data:`BASE
    count: the count is compiled into the kernel). Each image's RMSE, over the sphere's
    pixels and relative to their mean, is taken against a render of the same scene at
    --ref-factor times its samples (whose own noise adds 1/ref-factor to the variance);
-   three images each, the median time and the root mean square of the three RMSEs. Efficiency ratio:
-   ``(RMSE_geometry² t_geometry) / (RMSE_coating² t_coating)`` with the measured times; above
-   1 the coating is the more efficient. The two high-spp images' relative RMSE to each
-   other is reported too (noise of both and the gap's offset).
+   three images each, the median time and the root mean square of the three RMSEs.
+   Efficiency ratio: ``(RMSE_geometry² t_geometry) / (RMSE_coating² t_coating)`` with the
+   measured times; above 1 the coating is the more efficient. The two high-spp images'
+   relative RMSE to each other is reported too, beside what their own noise alone puts
+   between them: the excess is the gap's offset, and in RGB the plugin's product of channel
+   integrals against the geometry's per-channel crossings. In spectral variants four
+   wavelengths per path make most of the RMSE (colour noise) on both sides.
 4. **First image** (``llvm_ad_spectral``, --res², --spp): a fresh process, the kernel cache
    warm (one untimed run of each first) and the table store off (every table is built),
    times ``mi.load_dict`` (which builds the stack's table) and the first ``mi.render``;
@@ -217,9 +221,9 @@ def relative_rmse(image, reference, mask) -> float:
     return float(np.sqrt(np.mean((a - b) ** 2)) / np.mean(b))
 
 
-def noise_child(res: int, spp: int, ref_factor: int) -> None:
+def noise_child(variant: str, res: int, spp: int, ref_factor: int) -> None:
     import mitsuba as mi
-    mi.set_variant("llvm_ad_spectral")
+    mi.set_variant(variant)
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
     out = []
@@ -257,8 +261,10 @@ def noise_child(res: int, spp: int, ref_factor: int) -> None:
         g, c = row["geometry"], row["coating"]
         row["efficiency"] = (g["rmse"] ** 2 * g["seconds"]) / (c["rmse"] ** 2 * c["seconds"])
         row["references_rmse"] = relative_rmse(refs["geometry"], refs["coating"], mask)
+        # what the two high-spp images' own noise alone puts between them
+        row["references_noise"] = float(np.hypot(c["rmse"], g["rmse"]) / np.sqrt(ref_factor))
         out.append(row)
-        print(f"  noise: {label}: coating {c}, geometry {g}", file=sys.stderr, flush=True)
+        print(f"  noise, {variant}: {label}: coating {c}, geometry {g}", file=sys.stderr, flush=True)
     print(json.dumps(out))
 
 
@@ -322,7 +328,7 @@ def markdown(data: dict, args) -> str:
                   "|---|" + "---:|" * len(variants)]
         for i, (label, _) in enumerate(BASES):
             cells = [f"{steady[v]['steady'][i]['ratio']:.2f}× ({steady[v]['steady'][i]['coated']:.2f} s "
-                     f"against {steady[v]['steady'][i]['base']:.2f} s)" for v in variants]
+                     f"against {steady[v]['steady'][i]['base']:.2f} s wall)" for v in variants]
             lines.append(f"| {label} | " + " | ".join(cells) + " |")
         lines += ["", "**Edits without recompilation** (the `principled` base): "
                   + "; ".join(f"`{v}`: {e['edits']} edits of `{e['key']}` compiled {e['update']} "
@@ -330,21 +336,27 @@ def markdown(data: dict, args) -> str:
                               for v, e in ((v, steady[v]["edits"]) for v in variants)) + ".", ""]
     noise = data.get("noise")
     if noise:
-        lines += [f"**Noise at equal time against the explicit geometry** (`llvm_ad_spectral`, "
-                  f"{args.noise_res}×{args.noise_res}, max depth {NOISE_DEPTH}, the sky and an area "
-                  f"light as in `scenes/include/stage.xml`): the coated sphere "
-                  f"at {args.noise_spp} spp against a `thinfilm_dielectric` sphere around the base "
-                  f"sphere ({GAP} smaller) given the same seconds; RMSE over the sphere's pixels "
-                  f"relative to their mean, each against its own scene at {args.ref_factor}× its "
-                  f"samples. Efficiency = RMSE² × time of the geometry over that of the coating "
-                  f"(> 1: the coating is the more efficient):", "",
-                  "| base | coating: spp, s, RMSE | geometry: spp, s, RMSE | efficiency | "
-                  "the two high-spp images apart |", "|---|---|---|---:|---:|"]
-        for row in noise:
-            c, g = row["coating"], row["geometry"]
-            lines.append(f"| {row['label']} | {c['spp']}, {c['seconds']:.2f} s, {c['rmse']:.3f} | "
-                         f"{g['spp']}, {g['seconds']:.2f} s, {g['rmse']:.3f} | "
-                         f"{row['efficiency']:.1f}× | {row['references_rmse']:.3f} |")
+        lines += [f"**Noise at equal time against the explicit geometry** ({args.noise_res}×"
+                  f"{args.noise_res}, max depth {NOISE_DEPTH}, the sky and an area light as in "
+                  f"`scenes/include/stage.xml`): the coated sphere at {args.noise_spp} spp against "
+                  f"a `thinfilm_dielectric` sphere around the base sphere ({GAP} smaller) given the "
+                  f"same CPU seconds; RMSE over the sphere's pixels relative to their mean, each "
+                  f"against its own scene at {args.ref_factor}× its samples. Efficiency = RMSE² × "
+                  f"time of the geometry over that of the coating (> 1: the coating is the more "
+                  f"efficient). The last column is the two high-spp images' RMSE to each other, and "
+                  f"in brackets what their own noise alone puts between them (in RGB the plugin's "
+                  f"product of channel integrals differs from the geometry's per-channel crossings "
+                  f"too):", "",
+                  "| base | variant | coating: spp, s, RMSE | geometry: spp, s, RMSE | efficiency | "
+                  "high-spp images apart |", "|---|---|---|---|---:|---:|"]
+        for i, (label, _) in enumerate(BASES):
+            for v, rows in noise.items():
+                row = rows[i]
+                c, g = row["coating"], row["geometry"]
+                lines.append(f"| {label} | `{v}` | {c['spp']}, {c['seconds']:.2f} s, {c['rmse']:.3f} | "
+                             f"{g['spp']}, {g['seconds']:.2f} s, {g['rmse']:.3f} | "
+                             f"{row['efficiency']:.1f}× | {row['references_rmse']:.3f} "
+                             f"({row['references_noise']:.3f}) |")
         lines.append("")
     first = data.get("first")
     if first:
@@ -374,13 +386,14 @@ def main():
     ap.add_argument("--skip-noise", action="store_true")
     ap.add_argument("--skip-first", action="store_true")
     ap.add_argument("--steady-child")
-    ap.add_argument("--noise-child", action="store_true")
+    ap.add_argument("--noise-variants", default=",".join(VARIANTS))
+    ap.add_argument("--noise-child")
     ap.add_argument("--first-child", nargs=2, metavar=("WHICH", "BASE"))
     args = ap.parse_args()
     if args.steady_child:
         return steady_child(args.steady_child, args.repeats, args.res, args.spp, args.edits)
     if args.noise_child:
-        return noise_child(args.noise_res, args.noise_spp, args.ref_factor)
+        return noise_child(args.noise_child, args.noise_res, args.noise_spp, args.ref_factor)
     if args.first_child:
         return first_child(args.first_child[0], int(args.first_child[1]), args.res, args.spp)
     data = {}
@@ -390,8 +403,10 @@ def main():
                                    "--edits", str(args.edits))
                           for v in args.variants.split(",")}
     if not args.skip_noise:
-        data["noise"] = child("--noise-child", "--noise-res", str(args.noise_res),
-                              "--noise-spp", str(args.noise_spp), "--ref-factor", str(args.ref_factor))
+        data["noise"] = {v: child("--noise-child", v, "--noise-res", str(args.noise_res),
+                                  "--noise-spp", str(args.noise_spp), "--ref-factor",
+                                  str(args.ref_factor))
+                         for v in args.noise_variants.split(",")}
     if not args.skip_first:
         data["first"] = first_images(args.first_repeats, args.res, args.spp)
     import mitsuba as mi

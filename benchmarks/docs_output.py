@@ -96,6 +96,10 @@ class _Tee(io.TextIOBase):
     def flush(self) -> None:
         self.stream.flush()
 
+    def reconfigure(self, **kwargs) -> None:
+        """``sys.stdout.reconfigure`` (line buffering, as rgb_bench asks) of the stream it passes to."""
+        self.stream.reconfigure(**kwargs)
+
 
 @contextlib.contextmanager
 def write_docs_option(name: str):

@@ -27,7 +27,7 @@ import numpy as np
 import pytest
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
-from tests.support.plugin_modules import import_error
+from tests.support.plugin_modules import REQUIRED, import_error, plugin_dict
 from thinfilm_mi.plugins import PLUGINS
 
 VARIANT = "llvm_ad_spectral"
@@ -53,18 +53,19 @@ def _xml_value(name: str, v) -> str:
         return f'<float name="{name}" value="{float(v)!r}"/>'
     if isinstance(v, dict):
         body = "".join(_xml_value(k, x) for k, x in v.items() if k != "type")
-        return f'<texture name="{name}" type="{v["type"]}">{body}</texture>'
+        tag = "bsdf" if name == "bsdf" else "texture"  # a nested BSDF (thinfilm_coating's base)
+        return f'<{tag} name="{name}" type="{v["type"]}">{body}</{tag}>'
     raise TypeError(v)
 
 
 def to_xml(plugin: str, props: dict) -> str:
-    body = "".join(_xml_value(k, v) for k, v in props.items())
+    body = "".join(_xml_value(k, v) for k, v in {**REQUIRED.get(plugin, {}), **props}.items())
     return f'<scene version="3.0.0"><bsdf type="{plugin}" id="b">{body}</bsdf></scene>'
 
 
 def load(plugin: str, props: dict, how: str):
     if how == "dict":
-        return mi.load_dict({"type": plugin, **props})
+        return mi.load_dict(plugin_dict(plugin, **props))
     return mi.load_string(to_xml(plugin, props))
 
 
@@ -416,11 +417,14 @@ mi.set_variant("llvm_ad_spectral")
 for plugin in PLUGINS:
     for how in ("dict", "xml"):
         try:
+            base = plugin == "thinfilm_coating"  # the one plugin with a nested BSDF
             if how == "dict":
-                mi.load_dict({"type": plugin, "layers": "1.46 100"})
+                mi.load_dict({"type": plugin, "layers": "1.46 100",
+                              **({"bsdf": {"type": "diffuse"}} if base else {})})
             else:
                 mi.load_string('<scene version="3.0.0"><bsdf type="%s">'
-                               '<string name="layers" value="1.46 100"/></bsdf></scene>' % plugin)
+                               '<string name="layers" value="1.46 100"/>%s</bsdf></scene>'
+                               % (plugin, '<bsdf type="diffuse"/>' if base else ''))
         except Exception as e:
             print("REFUSED", plugin, how, "LLVMVersionError" in str(e) and "15." in str(e)
                   and "libllvm19" in str(e) and "DRJIT_LIBLLVM_PATH" in str(e))

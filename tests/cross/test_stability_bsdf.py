@@ -48,7 +48,7 @@ from hypothesis import strategies as st
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from tests.support import bsdf
-from tests.support.plugin_modules import import_error
+from tests.support.plugin_modules import import_error, plugin_dict
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.optics.unpolarised import unpolarised_rt
 from thinfilm_mi.plugins import PLUGINS
@@ -93,7 +93,7 @@ def takes(plugin: str, what: str) -> bool:
     key = (plugin, what)
     if key not in _taken:
         try:
-            mi.load_dict({"type": plugin, **PROBES[what]})
+            mi.load_dict(plugin_dict(plugin, **PROBES[what]))
             _taken[key] = True
         except Exception as e:  # noqa: BLE001
             if "unreferenced propert" not in str(e):
@@ -132,7 +132,7 @@ def layers_string(films) -> str:
 
 
 def build(plugin: str, s: dict, tabulate=False):
-    props = {"type": plugin, "layers": layers_string(s["films"]), "ext_ior": s["ext"]}
+    props = plugin_dict(plugin, layers=layers_string(s["films"]), ext_ior=s["ext"])
     if takes(plugin, "eta_k"):
         props["eta"], props["k"] = s["sub"]
     if takes(plugin, "int_ior"):

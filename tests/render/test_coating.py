@@ -131,34 +131,36 @@ def test_single_bounce_is_the_closed_form():
         np.testing.assert_allclose(got, np.repeat(want[:, None], 4, axis=1), rtol=1e-5)
 
 
-@pytest.mark.parametrize("cos", [1.0, np.cos(np.radians(30)), np.cos(np.radians(60)),
-                                 np.cos(np.radians(80))], ids=["0", "30", "60", "80"])
-def test_albedo_is_plastic_nonlinear(cos):
+def test_albedo_is_plastic_nonlinear():
     """Check 2: no films, ``int_ior`` 1.5 over ``diffuse`` 0.5 is ``plastic`` with
     ``nonlinear`` true. Both against the float64 series (4σ of our samples); ``plastic``
     (from its deterministic ``eval`` and its specular weight) within its fit error: its
     ``F_dr,int`` is ``mi.fresnel_diffuse_reflectance``'s polynomial, 0.59681 against the
     integral's 0.59635 at η = 1.5, which moves the albedo by ∂A/∂F_fit · δ (evaluated here,
-    <= 1e-4 at ρ = 0.5)."""
-    ours, tol = albedo(coating(), float(cos))
-    exact = plastic_series(cos, 0.5, 1.5)
-    np.testing.assert_allclose(ours, exact, atol=tol.max())
+    <= 1e-4 at ρ = 0.5). At 0/30/60/80°."""
+    ours_bsdf = coating()
     plastic = mi.load_dict({"type": "plastic", "int_ior": 1.5, "ext_ior": 1.0, "nonlinear": True,
                             "diffuse_reflectance": 0.5})
-    ctx = mi.BSDFContext()
-    ctx.component = 0
-    _, spec = plastic.sample(ctx, interaction(float(cos)), 0.5, mi.Point2f(0.5, 0.5))
-    plastic_albedo = float(np.array(spec)[0, 0]) + diffuse_albedo_quadrature(plastic, float(cos))
     f_fit = float(np.array(mi.fresnel_diffuse_reflectance(mi.Float(1 / 1.5)))[0])
     f_dr = internal_diffuse_reflectance(1.5)
-    f_i = fresnel(cos, 1.5)
-    # plastic's albedo is (1 - F_i) ρ (1 - F_dr) / (1 - ρ F_fit): its escape integral is
-    # exact, the fit enters the series' denominator only: ∂A/∂F_fit = (1 - F_i) ρ² (1 -
-    # F_dr) / (1 - ρ F_dr)²; times the fit's error, with a 1 % margin
-    fit_error = (1 - f_i) * 0.25 * (1 - f_dr) / (1 - 0.5 * f_dr) ** 2 * abs(f_fit - f_dr) * 1.01
-    assert fit_error < 1e-4
-    np.testing.assert_allclose(plastic_albedo, exact, atol=fit_error + 1e-5)  # + float32 sums
-    np.testing.assert_allclose(ours, plastic_albedo, atol=tol.max() + fit_error + 1e-5)
+    ctx = mi.BSDFContext()
+    ctx.component = 0
+    for deg in (0, 30, 60, 80):
+        cos = float(np.cos(np.radians(deg)))
+        ours, tol = albedo(ours_bsdf, cos)
+        exact = plastic_series(cos, 0.5, 1.5)
+        np.testing.assert_allclose(ours, exact, atol=tol.max())
+        _, spec = plastic.sample(ctx, interaction(cos), 0.5, mi.Point2f(0.5, 0.5))
+        plastic_albedo = float(np.array(spec)[0, 0]) + diffuse_albedo_quadrature(plastic, cos)
+        f_i = fresnel(cos, 1.5)
+        # plastic's albedo is (1 - F_i) ρ (1 - F_dr) / (1 - ρ F_fit): its escape integral
+        # is exact, the fit enters the series' denominator only: ∂A/∂F_fit = (1 - F_i) ρ²
+        # (1 - F_dr) / (1 - ρ F_dr)²; times the fit's error, with a 1 % margin
+        fit_error = (1 - f_i) * 0.25 * (1 - f_dr) / (1 - 0.5 * f_dr) ** 2 \
+            * abs(f_fit - f_dr) * 1.01
+        assert fit_error < 1e-4
+        np.testing.assert_allclose(plastic_albedo, exact, atol=fit_error + 1e-5)  # + float32
+        np.testing.assert_allclose(ours, plastic_albedo, atol=tol.max() + fit_error + 1e-5)
 
 
 def test_eval_is_plastic_nonlinear_in_expectation():
@@ -193,17 +195,20 @@ def test_truncation_bias_is_the_dropped_series():
     assert full - first > 0.05
 
 
-@pytest.mark.parametrize("cos", [1.0, 0.5, 0.17])
-def test_films_over_diffuse_are_thinfilm_diffuse_exact(cos):
+@pytest.mark.parametrize("layers", ["", LOSSLESS, "1.46 200; 0.42+2.47j 4"],
+                         ids=["bare", "lossless", "absorbing"])
+def test_films_over_diffuse_are_thinfilm_diffuse_exact(layers):
     """Check 3: films over ``diffuse`` equal ``thinfilm_diffuse`` ``model="exact"`` with
     ``base_ior`` = ``int_ior`` (its series in closed form, deterministic: its delta ``R``
-    plus the quadrature of its ``eval``). Lossless and absorbing stacks."""
-    for layers in (LOSSLESS, "1.46 200; 0.42+2.47j 4"):
-        ours, tol = albedo(coating(layers=layers), cos)
-        ref = mi.load_dict({"type": "thinfilm_diffuse", "model": "exact", "base_ior": 1.5,
-                            "ext_ior": 1.0, "layers": layers, "reflectance": 0.5})
-        ctx = mi.BSDFContext()
-        ctx.component = 0
+    plus the quadrature of its ``eval``), at cos θ 1, 0.5 and 0.17. Bare (no films over
+    a base medium unlike the ambient: an interface), lossless and absorbing stacks."""
+    ours_bsdf = coating(layers=layers)
+    ref = mi.load_dict({"type": "thinfilm_diffuse", "model": "exact", "base_ior": 1.5,
+                        "ext_ior": 1.0, "layers": layers, "reflectance": 0.5})
+    ctx = mi.BSDFContext()
+    ctx.component = 0
+    for cos in (1.0, 0.5, 0.17):
+        ours, tol = albedo(ours_bsdf, cos)
         _, spec = ref.sample(ctx, interaction(cos), 0.5, mi.Point2f(0.5, 0.5))
         want = np.array(spec, np.float64)[:, 0] + diffuse_albedo_quadrature(ref, cos, 256)
         # 4σ of ours + the stacks' float32 evaluation (1e-5) and the reference's R_dh

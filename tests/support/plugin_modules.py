@@ -18,3 +18,15 @@ def import_error(plugin: str, variant: str) -> str | None:
     except Exception as e:  # noqa: BLE001 - report any import failure as the reason
         return f"{plugin}: module thinfilm_mi.plugins.{module} does not import yet ({e!r})"
     return None
+
+
+#: What a plugin needs besides its films to load, for the matrices over every plugin:
+#: the nested base of ``thinfilm_coating`` (a Lambertian one: the cheapest walk, and
+#: every property those matrices check holds for it).
+REQUIRED = {"thinfilm_coating": {"bsdf": {"type": "diffuse"}}}
+
+
+def plugin_dict(plugin: str, **props) -> dict:
+    """``{"type": plugin, ...}`` with what the plugin needs to load (:data:`REQUIRED`)
+    and ``props``."""
+    return {"type": plugin, **REQUIRED.get(plugin, {}), **props}

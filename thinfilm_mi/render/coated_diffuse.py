@@ -19,6 +19,8 @@ up by name.
 """
 from __future__ import annotations
 
+from abc import ABC, abstractmethod
+
 import drjit as dr
 import numpy as np
 
@@ -53,7 +55,7 @@ __all__ = ["DiffuseModel", "Exact", "Single", "Multiple", "DIFFUSE_MODELS", "dif
            "CoatedDiffuse"]
 
 
-class DiffuseModel:
+class DiffuseModel(ABC):
     """One value of the ``model`` option of the coated-diffuse model.
 
     The interface the colour tables (:mod:`thinfilm_mi.tabulate.diffuse`) read is
@@ -67,11 +69,11 @@ class DiffuseModel:
     #: whether ``base_ior`` is a parameter of the model
     takes_base_ior = False
 
+    @abstractmethod
     def split(self, films, ext, base):
         """``(coating films, exit medium, film N, its thickness)`` of ``films``
         (``[(SpectralIndex, thickness)]``) between the ambient ``ext`` and the base medium
         ``base``; film ``N`` and its thickness (an opaque float) ``None`` where there is none."""
-        raise NotImplementedError
 
     def factors(self, coating, film_n, film_n_thickness):
         """The spectral factors (:class:`~thinfilm_mi.render.diffuse.DiffuseFactors`) of

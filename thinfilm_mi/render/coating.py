@@ -36,17 +36,19 @@ the walk goes on reflected by the underside: ``β_{k+1} = β_k g R_in(θ_w) A(w)
 ``w_{k+1} = (-w_x, -w_y, w_z)``. The first term is exact (``w_0`` is fixed); later ones
 are unbiased estimates of the interreflection series. Russian roulette from
 :data:`RR_DEPTH` bounces on (survival ``q = min(max β, 0.95)``, ``β /= q``: unbiased);
-the walk stops after ``max_bounces`` base vertices: the paths with more are dropped
-(their energy is at most ``(a R̄)^N / (1 - a R̄)`` of the incident light for a base of
-albedo ``a`` and an underside of mean reflectance ``R̄``: ``0.6^64 ≈ 6e-15`` for a bare
-``η = 1.5`` coat over white; ``tests/render/test_coating.py`` measures the truncation at
+the walk stops after ``max_bounces`` base vertices: the paths with more are dropped. For
+a Lambertian base of albedo ``ρ`` each vertex sends back ``ρ R̄`` of what it receives
+(``R̄``: the underside's hemispherical reflectance), so the dropped energy is at most ``(ρ R̄)^N /
+(1 - ρ R̄)`` of the light that entered: ``0.596^64/0.404 ≈ 1e-14`` for a bare ``η = 1.5``
+coat over white. A base that sends its light beyond the critical angle meets ``R_in = 1``
+there and may lose more (``tests/render/test_coating.py`` measures the truncation at
 ``N = 1``). Random numbers: a PCG32 seeded from the sample's numbers in ``sample`` and
 from a TEA hash of the two directions in ``eval`` (as pbrt-v4's ``LayeredBxDF``), so
 every call is deterministic.
 
 **Sampling** (:meth:`Coating.sample`): the delta reflection with probability ``P_R = R̄ /
 (R̄ + T̄)`` (spectral means at ``θ_i``), weight ``R/P_R``. Otherwise a direction is drawn
-from a deterministic mixture (:meth:`Coating.pdf`, its exact density)::
+from a deterministic mixture (:meth:`Coating.base_pdf`, its exact density)::
 
     p(ω_o) = (1 - P_R) [ (1 - c) p_b(ω_i', ω_o') (η_e/η_c)² cos θ_o / cos θ_o' + c cos θ_o / π ]
 
@@ -59,6 +61,12 @@ passes), and MIS weights built from it sum to one in both strategies. (Were ``p`
 approximation of the sampler's density, as pbrt's layered pdf is, the sum would still be
 unbiased: the BSDF strategy estimates ``∫ w(ω) f cos L`` for any deterministic ``w`` when
 its weight is an unbiased estimate of ``f cos / p_true``, the light strategy the rest.)
+
+**Polarized variants**: every factor of a path is a Mueller matrix in Mitsuba's implicit
+Stokes bases of the directions the light travels (:meth:`Coating.crossing`: the stack's
+amplitudes rotated as ``thinfilm_dielectric`` rotates them; the base's own matrices), so
+the products ``T_out · B_0 · U_1 · B_1 ⋯ E_k · T_in`` chain; Russian roulette reads
+``M00``. Importance transport gets the chain's ``M00``, depolarized.
 
 **Not covered**: bases with delta lobes (a smooth ``conductor``, ``dielectric``,
 ``plastic``'s reflection) are refused at load: the estimate connects every base vertex
@@ -172,6 +180,12 @@ def _shl(x, k: int):
     return (x << k) & 0xFFFFFFFF if isinstance(x, int) else x << k
 
 
+def _intensity(x, polarized: bool):
+    """The unpolarised part of a value: ``M00`` of a Mueller matrix, else the spectrum."""
+    mi = mitsuba_module()
+    return mi.UnpolarizedSpectrum(x[0][0] if polarized else x)
+
+
 def _bits(x):
     """The bits of a float32 as a ``UInt32`` (an int in scalar variants)."""
     mi = mitsuba_module()
@@ -213,19 +227,38 @@ class Coating:
 
     # -- pieces ----------------------------------------------------------------
     def top(self, si, cos, active, inside: bool, transmission: bool):
-        """The stack's ``R`` (and ``T``) at the cosine ``cos`` on the side ``inside``."""
+        """The stack's response at the cosine ``cos`` on the side ``inside``
+        (:class:`~thinfilm_mi.render.modes.Response`: unpolarised ``R``, ``T`` and, in
+        polarized variants, each lobe's polarisation)."""
+        mi = mitsuba_module()
         resp = self.mode.response(self.stack, si, cos, active, inside=inside,
                                   transmission=transmission)
+        resp.R = mi.UnpolarizedSpectrum(resp.R)
+        if transmission:
+            resp.T = mi.UnpolarizedSpectrum(resp.T)
+        return resp
+
+    def crossing(self, weight, lobe, arrive, leave):
+        """A crossing of (or reflection at) the stack as the variant's value: ``weight``
+        (unpolarised) as a spectrum, or in polarized variants the Mueller matrix of
+        ``lobe`` for light travelling along ``arrive`` and then along ``leave``, in Mitsuba's
+        implicit Stokes bases of those directions (:meth:`modes.PolarizedMode.value`,
+        radiance transport: it arrives along ``-wo`` and leaves along ``wi``), so that the
+        products along a path chain bases that agree."""
         mi = mitsuba_module()
-        return (mi.Spectrum(resp.R), mi.Spectrum(resp.T)) if transmission else mi.Spectrum(resp.R)
+        if not self.mode.polarized:
+            return mi.Spectrum(weight)
+        return self.mode.value(weight, lobe, mi.BSDFContext(mi.TransportMode.Radiance),
+                               leave, -arrive)
 
     def attenuation(self, si, cos, active):
         """Beer–Lambert along one crossing of the coat at ``cos`` (``None``: no medium)."""
         if self.sigma_a is None:
             return None
         mi = mitsuba_module()
-        sigma = mi.Spectrum(self.sigma_a.eval(si, active))
-        return dr.exp(-sigma * self.thickness / dr.maximum(cos, 1e-6))
+        sigma = mi.UnpolarizedSpectrum(self.sigma_a.eval(si, active))
+        # a spectrum (diagonal Mueller matrix in polarized variants)
+        return mi.Spectrum(dr.exp(-sigma * self.thickness / dr.maximum(cos, 1e-6)))
 
     def _base_si(self, si, w):
         mi = mitsuba_module()
@@ -233,12 +266,16 @@ class Coating:
         si_b.wi = w
         return si_b
 
-    def underside(self, si, cos, active):
-        """``R_in(θ') A(θ')²``: what one reflection at the stack's underside and the two
-        crossings of the coat around it leave."""
-        r = self.top(si, cos, active, inside=True, transmission=False)
-        a = self.attenuation(si, cos, active)
-        return r if a is None else r * dr.square(a)
+    def underside(self, si, arrive, active):
+        """``R_in(θ') A(θ')²``: what one reflection at the stack's underside, of light
+        travelling up along ``arrive``, and the two crossings of the coat around it leave
+        (:meth:`crossing`: a Mueller matrix in polarized variants)."""
+        resp = self.top(si, arrive.z, active, inside=True, transmission=False)
+        mi = mitsuba_module()
+        leave = mi.Vector3f(arrive.x, arrive.y, -arrive.z)
+        r = self.crossing(resp.R, resp.reflection, arrive, leave)
+        a = self.attenuation(si, arrive.z, active)
+        return r if a is None else r * a * a
 
     def tracks_gradients(self, si, active) -> bool:
         """Whether a parameter of the coating or of the nested BSDF carries gradients
@@ -267,6 +304,10 @@ class Coating:
         mode without storing the trajectory."""
         if not self.tracks_gradients(si, active):
             return self._walk(ctx_mode, si, w0, wo_in, seed, active, None)
+        if self.mode.polarized:
+            raise ThinFilmError(f"{self.plugin}: gradients in polarized variants are not "
+                                "supported (the replay's per-vertex ratios are per "
+                                "wavelength, not per Mueller matrix)")
         with dr.suspend_grad():
             total = self._walk(ctx_mode, si, w0, wo_in, seed, active, None)
         surrogate = self._walk(ctx_mode, si, w0, wo_in, seed, active, total)
@@ -297,11 +338,14 @@ class Coating:
                 bs, g = base.sample(ctx, si_b, s1, s2, active)
                 cos = bs.wo.z
                 active = active & (cos > 0) & (depth < max_bounces) & (bs.pdf > 0)
-                step = g * self.underside(si, cos, active)
+                # the light that reached the base along -bs.wo left the previous vertex
+                # along w_next and reflected at the underside
+                w_next = mi.Vector3f(-bs.wo.x, -bs.wo.y, cos)
+                step = g * self.underside(si, w_next, active)
             if replay:
                 # this vertex's terms (their values do not matter: only their gradients)
                 g_r = base.eval(ctx, si_b, bs.wo, active) / dr.detach(
-                    dr.select(bs.pdf > 0, bs.pdf, 1.0)) * self.underside(si, cos, active)
+                    dr.select(bs.pdf > 0, bs.pdf, 1.0)) * self.underside(si, w_next, active)
                 live = dr.detach(g_r) != 0
                 ratio = dr.select(live, g_r / dr.select(live, dr.detach(g_r), 1.0), 0.0)
                 acc = mi.Spectrum(acc + dr.select(active, ratio * (total - gathered), zero)
@@ -310,15 +354,15 @@ class Coating:
                 acc = gathered
             with dr.suspend_grad(when=replay):
                 beta = dr.select(active, beta * step, zero)
-                w = mi.Vector3f(-bs.wo.x, -bs.wo.y, cos)
-                q = dr.minimum(dr.max(mi.UnpolarizedSpectrum(beta)), 0.95)
+                w = w_next
+                q = dr.minimum(dr.max(_intensity(beta, self.mode.polarized)), 0.95)
                 roulette = active & (depth >= RR_DEPTH)
                 u = rng.next_float32()
                 active = active & (_not(roulette) | (u < q)) & (q > 0)
                 beta = dr.select(roulette, beta / dr.select(q > 0, q, 1.0), beta)
             return acc, gathered, beta, w, depth, rng, active
 
-        state = (zero, zero, dr.full(mi.Spectrum, 1.0), mi.Vector3f(w0), mi.UInt32(0), rng,
+        state = (zero, zero, mi.Spectrum(1.0), mi.Vector3f(w0), mi.UInt32(0), rng,
                  mi.Bool(active))
         labels = ("acc", "gathered", "beta", "w", "depth", "rng", "active")
         # max_iterations=-1: the replay is a sum of per-vertex terms (Dr.Jit's fast path
@@ -326,16 +370,25 @@ class Coating:
         return dr.while_loop(state, cond, body, labels=labels,
                              max_iterations=-1 if replay else None)[0]
 
-    def transmitted(self, ctx_mode, si, wo, seed, active):
-        """The walk's estimate of the base part of ``f cos θ_o`` (outer ``si.wi``, ``wo``)."""
+    def transmitted(self, ctx_mode, si, wo, seed, active, top_i=None):
+        """The walk's estimate of the base part of ``f cos θ_o`` (outer ``si.wi``, ``wo``);
+        ``top_i``: the stack's response at ``si.wi`` where the caller has it."""
         mi = mitsuba_module()
         wi_in, ok_i = inward(si.wi, self.eta_f)
         wo_in, ok_o = inward(wo, self.eta_f)
         active = active & ok_i & ok_o
-        _, t_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
-        _, t_o = self.top(si, wo.z, active, inside=False, transmission=True)
+        if top_i is None:
+            top_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
+        top_o = self.top(si, wo.z, active, inside=False, transmission=True)
         acc = self.walk(ctx_mode, si, wi_in, wo_in, seed, active)
-        value = t_i * t_o * acc * (self.inv_eta2 * wo.z / dr.maximum(wo_in.z, 1e-12))
+        # light enters along -wo, is refracted along -wo', ..., leaves the base along wi'
+        # and the coat along wi (Mueller products right to left)
+        leave = self.crossing(top_i.T, top_i.transmission, wi_in, si.wi)
+        enter = self.crossing(top_o.T, top_o.transmission, -wo, -wo_in)
+        value = leave * acc * enter * (self.inv_eta2 * wo.z / dr.maximum(wo_in.z, 1e-12))
+        if self.mode.polarized and ctx_mode != mi.TransportMode.Radiance:
+            # importance transport: the chain's intensity for unpolarised light, depolarized
+            value = mi.depolarizer(mi.UnpolarizedSpectrum(value[0][0]))
         for a in (self.attenuation(si, wi_in.z, active), self.attenuation(si, wo_in.z, active)):
             if a is not None:
                 value = value * a
@@ -371,7 +424,7 @@ class Coating:
     # -- the BSDF interface ----------------------------------------------------
     def sample(self, ctx, si, sample1, sample2, active, has_delta: bool, has_base: bool):
         """``(bs, weight)``: the delta reflection or a direction of the mixture
-        (:meth:`pdf`), weighted by the walk's estimate of ``f cos θ_o`` over ``pdf``."""
+        (:meth:`base_pdf`), weighted by the walk's estimate of ``f cos θ_o`` over ``pdf``."""
         mi = mitsuba_module()
         bs = dr.zeros(mi.BSDFSample3f)
         active = mi.Bool(active) & (si.wi.z > 0)
@@ -379,18 +432,19 @@ class Coating:
             return bs, mi.Spectrum(0.0)
         if self.invisible:
             return self._sample_invisible(ctx, si, sample1, sample2, active, has_base)
-        r_i, t_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
+        top_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
         if has_delta and has_base:
-            p_r = self.prob_reflect(r_i, t_i)
+            p_r = self.prob_reflect(top_i.R, top_i.T)
         else:
             p_r = mi.Float(1.0 if has_delta else 0.0)
         sel_r = active & (sample1 < p_r)
         sel_b = active & (sample1 >= p_r)
         bs.eta = 1.0
         weight = mi.Spectrum(0.0)
-        if has_delta:
-            weight = dr.select(sel_r, r_i / dr.select(p_r > 0, p_r, 1.0), weight)
         wo = mi.reflect(si.wi)
+        if has_delta:
+            weight = dr.select(sel_r, self.mode.value(top_i.R / dr.select(p_r > 0, p_r, 1.0),
+                                                      top_i.reflection, ctx, si.wi, wo), weight)
         if has_base:
             s = (sample1 - p_r) / dr.select(p_r < 1, 1.0 - p_r, 1.0)
             cosine = sel_b & (s < self.mix)
@@ -406,7 +460,7 @@ class Coating:
             pdf = (1.0 - p_r) * self.base_pdf(ctx.mode, si, wo, ok)
             seed = (_bits(sample1) ^ _shl(_bits(sample2.y), 16), _bits(sample2.x))
             seed = mi.sample_tea_32(seed[0], seed[1], 4)
-            f = self.transmitted(ctx.mode, si, wo, seed, ok & (pdf > 0))
+            f = self.transmitted(ctx.mode, si, wo, seed, ok & (pdf > 0), top_i)
             weight = dr.select(ok & (pdf > 0), f / dr.select(pdf > 0, pdf, 1.0), weight)
             sel_b = ok & (pdf > 0)
             btype = dr.select(cosine, mi.UInt32(+mi.BSDFFlags.DiffuseReflection),
@@ -461,11 +515,12 @@ class Coating:
             if a is not None and want_value:
                 value = value * a * self.attenuation(si, wo.z, active)
             return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
+        top_i = self.top(si, si.wi.z, active, inside=False, transmission=True) \
+            if want_value or (want_pdf and has_delta) else None
         if want_value:
-            value = self.transmitted(ctx.mode, si, wo, self.eval_seed(si.wi, wo), active)
+            value = self.transmitted(ctx.mode, si, wo, self.eval_seed(si.wi, wo), active, top_i)
         if want_pdf:
             pdf = self.base_pdf(ctx.mode, si, wo, active)
             if has_delta:
-                r_i, t_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
-                pdf = pdf * (1.0 - self.prob_reflect(r_i, t_i))
+                pdf = pdf * (1.0 - self.prob_reflect(top_i.R, top_i.T))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)

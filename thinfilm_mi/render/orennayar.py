@@ -36,6 +36,7 @@ written in the plugin's doc block).
 from __future__ import annotations
 
 import math
+from abc import ABC, abstractmethod
 from typing import NamedTuple
 
 import drjit as dr
@@ -95,16 +96,16 @@ def _fon_albedo(mu, r, a_f):
     return a_f * (1.0 + r * (qualitative_h(mu) - (2.0 / (3.0 * math.pi)) * _sin(mu)))
 
 
-class RoughnessModel:
+class RoughnessModel(ABC):
     """One value of ``roughness_model``: the base BRDF at roughness ``σ`` (its
     qualitative coefficients ``a``, ``b``, :func:`coefficients`)."""
     #: the value of ``roughness_model`` that names it
     name = ""
 
+    @abstractmethod
     def terms(self, kd, a, b, mu_i, mu_o, s, t) -> BaseTerms:
         """:class:`BaseTerms` of albedo ``kd`` for ``μ_i``, ``μ_o``, ``s = sin θ_i sin θ_o
         cos(φ_o - φ_i)`` and ``t = max(μ_i, μ_o)`` (module docstring)."""
-        raise NotImplementedError
 
 
 class Qualitative(RoughnessModel):
