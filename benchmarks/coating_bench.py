@@ -63,7 +63,6 @@ import argparse
 import gc
 import json
 import os
-import subprocess
 import sys
 import time
 import warnings
@@ -74,6 +73,7 @@ os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+import plugin_bench  # noqa: E402
 from render_bench import render_sync, scene_dict  # noqa: E402
 
 VARIANTS = ("llvm_ad_spectral", "llvm_ad_rgb")
@@ -284,13 +284,8 @@ def first_child(which: str, index: int, res: int, spp: int) -> None:
 
 
 def child(*args: str) -> dict | list:
-    env = dict(os.environ, THINFILM_MI_TABLE_CACHE="off")
-    res = subprocess.run([sys.executable, os.path.abspath(__file__), *args], env=env,
-                         capture_output=True, text=True)
-    if res.returncode != 0:
-        raise RuntimeError(res.stderr[-3000:])
-    sys.stderr.write(res.stderr)
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    """This file run with ``args`` in a fresh process (``plugin_bench.child``)."""
+    return plugin_bench.child(*args, script=__file__)
 
 
 def first_images(repeats: int, res: int, spp: int) -> list:
