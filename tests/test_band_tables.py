@@ -12,7 +12,7 @@ from _stacks import benchmark_layers, benchmark_thicknesses
 import thinfilm_mi as tf
 from thinfilm_mi.colour import cie
 from thinfilm_mi.render import kernel as K
-from thinfilm_mi.tabulate import axes, band_amplitudes, band_rows
+from thinfilm_mi.tabulate import axes
 from thinfilm_mi.tabulate import band as band_tables
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate import exact as tables
@@ -29,13 +29,13 @@ def _resonant_side(monkeypatch, films=10):
     the build only tries, and fails, a table of the exact values)."""
     layers = benchmark_layers(films)
     captured = {}
-    build = tables.build_table
+    build = tables.build_exact_table
 
     def capture(side, *args, **kwargs):
         captured["side"] = side
         return build(side, *args, **kwargs)
 
-    monkeypatch.setattr(tables, "build_table", capture)
+    monkeypatch.setattr(tables, "build_exact_table", capture)
     K.TABLE_CACHE.clear()
     with pytest.warns(UserWarning):
         mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "layers": layers,
@@ -70,7 +70,7 @@ def test_band_limited_values_match_a_brute_force_convolution(monkeypatch):
     9e-4 with the looser Simpson tolerance 5e-5, 1.7e-2 without the panels'
     grading)."""
     side = _resonant_side(monkeypatch)
-    rows = band_rows.Rows(side, axes.BAND, 1.0)
+    rows = band_tables.Rows(side, axes.BAND, 1.0)
     xs = np.array([0.0, 0.3, 0.7])
     vals = rows.values(xs)
     bins = rows.b0 + np.array([100, 600, 1100, 1500])
@@ -96,7 +96,7 @@ def test_a_resonant_stack_gets_a_verified_band_limited_table(monkeypatch):
     wl = np.array([452.3, 537.9, 611.1])
     for theta in (20.0, 50.0):
         cos = math.cos(math.radians(theta))
-        ref = _brute_force(side, cos, 1.0 / wl, band_rows.sigma_nu(1.0))
+        ref = _brute_force(side, cos, 1.0 / wl, band_tables.sigma_nu(1.0))
         got = [table.lookup(mi.Float(cos), mi.Spectrum(1.0), mi.Spectrum(1.0),
                             mi.Spectrum(float(w)))[0][0] for w in wl]
         got = np.array([float(g[0]) for g in got])
@@ -125,7 +125,7 @@ def test_near_zeros_finds_a_narrow_pole():
     for z0, found in ((17.3 + 0.01j, True), (25.6 - 0.4j, True), (10.2 + 9.0j, False)):
         f = (x - z0) * (1.0 + 0.02 * x)
         samples = np.stack([f.real, f.imag], axis=-1)[None]
-        r, pos, dist = band_amplitudes.near_zeros(samples, 0)
+        r, pos, dist = band_tables.near_zeros(samples, 0)
         assert (r.size == 1) == found
         if found:
             assert abs(pos[0] - z0.real) < 1e-6 and abs(dist[0] - abs(z0.imag)) < 1e-6
@@ -139,8 +139,8 @@ def test_amplitudes_give_the_exact_reflectance(monkeypatch):
     side = _resonant_side(monkeypatch, films=10)
     wl = np.linspace(400.0, 700.0, 301)
     cos = np.full(wl.size, 0.8)
-    terms, _ = band_amplitudes.amplitudes(side, cos, np.arange(wl.size), wl, tabulate_base.side_indices(side, wl))
-    R = band_amplitudes.powers_of(terms, False)[:, 0]
+    terms, _ = band_tables.amplitudes(side, cos, np.arange(wl.size), wl, tabulate_base.side_indices(side, wl))
+    R = band_tables.powers_of(terms, False)[:, 0]
     layers = [(n(np.array([500.0]))[0].real, d) for n, d in side.films]
     ref = tf.Stack(layers=layers, substrate=complex(1.2, 7.0), ambient=1.0).rt(wl, math.acos(0.8)).R
     assert np.max(np.abs(R - ref)) < 1e-7
@@ -193,7 +193,7 @@ def test_band_table_of_a_side_lit_from_inside_glass():
     table = band_tables.build_band_table(inside, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0)
     assert table is not None and table.axis.name == "tir" and table.channels == 2
     assert table.error <= 1e-3
-    sig = band_rows.sigma_nu(1.0)
+    sig = band_tables.sigma_nu(1.0)
     for theta in (25.0, 55.0):
         cos = math.cos(math.radians(theta))
         for w in (471.3, 633.7):
@@ -247,9 +247,9 @@ def test_near_zeros_with_exponents_match_the_unscaled_function():
     E = np.random.default_rng(1).integers(-40, 40, x.size).astype(np.float64)
     plain = np.stack([f.real, f.imag], axis=-1)[None]
     scaled = np.stack([np.ldexp(f.real, -E.astype(int)), np.ldexp(f.imag, -E.astype(int))], axis=-1)[None]
-    for a, b in zip(band_amplitudes.near_zeros(plain, 0), band_amplitudes.near_zeros(scaled, 0, E[None])):
+    for a, b in zip(band_tables.near_zeros(plain, 0), band_tables.near_zeros(scaled, 0, E[None])):
         assert np.array_equal(a, b)
-    assert band_amplitudes.near_zeros(plain, 0)[0].size == 2
+    assert band_tables.near_zeros(plain, 0)[0].size == 2
 
 
 def test_amplitudes_stay_in_range_at_any_depth(monkeypatch):
@@ -263,7 +263,7 @@ def test_amplitudes_stay_in_range_at_any_depth(monkeypatch):
     def capture(side, *args, **kwargs):
         captured["side"] = side
 
-    monkeypatch.setattr(tables, "build_table", capture)
+    monkeypatch.setattr(tables, "build_exact_table", capture)
     layers = benchmark_layers(1000)
     K.TABLE_CACHE.clear()
     with pytest.warns(UserWarning):
@@ -275,16 +275,16 @@ def test_amplitudes_stay_in_range_at_any_depth(monkeypatch):
     cos = np.tile([1.0, 0.3], wl.size)
     rows = np.repeat(np.arange(wl.size), 2)
     idx = tabulate_base.side_indices(side, wl)
-    terms, E = band_amplitudes.amplitudes(side, cos, rows, wl, idx)
+    terms, E = band_tables.amplitudes(side, cos, rows, wl, idx)
     assert E.min() > 100.0
-    R = band_amplitudes.powers_of(terms, False)[:, 0]
+    R = band_tables.powers_of(terms, False)[:, 0]
     ref = tabulate_base.evaluate_side(side, cos, rows, wl, idx)[:, 0]
     assert np.all(np.isfinite(R)) and np.max(np.abs(R - ref)) < 1e-10
 
 
 def test_the_adaptive_panels_read_the_first_levels_amplitudes(monkeypatch):
     """The panels that refine resonances take ``R`` from the first level's smooth
-    amplitudes (a quintic through six samples, ``band_rows.Amplitudes``) instead of
+    amplitudes (a quintic through six samples, ``band_tables.Amplitudes``) instead of
     the films' loop: ``R_σ`` of whole rows agrees with the films' values within 1e-5
     (measured 4.5e-8 on this stack of constant indices; 2e-5 on the benchmark stacks,
     where the clamped dispersive data kink at 360 and 830 nm), with 38 % fewer
@@ -293,7 +293,7 @@ def test_the_adaptive_panels_read_the_first_levels_amplitudes(monkeypatch):
     xs = np.array([0.1, 0.5, 0.9])
     out = {}
     for interpolate in (False, True):
-        rows = band_rows.Rows(side, axes.BAND, 1.0)
+        rows = band_tables.Rows(side, axes.BAND, 1.0)
         assert rows.interpolate      # 32 samples per fringe or more here
         rows.interpolate = interpolate
         out[interpolate] = (rows.values(xs), rows.points)
@@ -303,7 +303,7 @@ def test_the_adaptive_panels_read_the_first_levels_amplitudes(monkeypatch):
 
 def test_a_sheared_table_of_r_and_t_matches_a_brute_force_convolution():
     """30 films on glass, lit from the ambient: a band-limited table of ``R`` and ``T``
-    on the sheared axis (``tabulate.shear``). Its lookups agree with ``R_σ`` and
+    on the sheared axis (``tabulate.band.Shear``). Its lookups agree with ``R_σ`` and
     ``T_σ`` convolved by direct summation (measured 4.2e-5 over 25 points, the
     verified error 2.5e-4) within the verified error plus 1e-4 (the float32 texture
     and the brute force's σ/400 steps); an axis sheared the wrong way, or nodes
@@ -313,7 +313,7 @@ def test_a_sheared_table_of_r_and_t_matches_a_brute_force_convolution():
     side = K.side_data(b.stack.plan[False], True)
     table = band_tables.build_band_table(side, 1e-3, K.GRID, tabulate_base.MAX_TEXELS, 1.0)
     assert table is not None and table.shear is not None and table.channels == 2
-    sig = band_rows.sigma_nu(1.0)
+    sig = band_tables.sigma_nu(1.0)
     for theta in (0.0, 50.0, 75.0):
         cos = math.cos(math.radians(theta))
         for wl in (405.3, 561.2, 781.4):
@@ -333,7 +333,7 @@ def test_the_shear_follows_the_films_and_refuses_bad_data():
     cubic's fit (measured 1.9e-5 for the 2.3/1.46 stack; bound 1e-4), 1 at normal incidence and
     falling to grazing; a stored shear that is not one raises (the table store then
     rebuilds)."""
-    from thinfilm_mi.tabulate.shear import Shear
+    from thinfilm_mi.tabulate.band import Shear
 
     d = benchmark_thicknesses(30)
     films = [((lambda wl, n=2.3 if i % 2 == 0 else 1.46: np.full(np.shape(wl), n + 0j)), float(d[i]))

@@ -36,7 +36,7 @@ from thinfilm_mi.optics.mueller import mueller_rt, mueller_rt_loop
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render.amplitudes import polarised_response
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR
-from thinfilm_mi.tabulate import axes, band_rows
+from thinfilm_mi.tabulate import axes, band
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.mueller import AUTO_MAX_FLOATS, AUTO_MIN_FILMS, MUELLER
 
@@ -264,7 +264,7 @@ def test_band_limited_mueller_rows_match_a_brute_force_convolution():
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "ext_ior": 1.0,
                          "layers": layers(10, 50.0, 200.0), "tabulate": False})
     data = K.side_data(bsdf.stack.plan[False], False, quantity=MUELLER)
-    rows = band_rows.Rows(data, axes.BAND, 1.0)
+    rows = band.Rows(data, axes.BAND, 1.0)
     xs = np.array([0.0, 0.55])
     vals = rows.values(xs)
     assert vals.shape[-1] == 4

@@ -270,7 +270,7 @@ class Table:
         # a split axis: node coordinates beyond the critical cell are in the
         # second segment, 2g texels further
         self._split = opaque_float(0.5 * self.nu - 0.5) if axis.split else None
-        #: a band-limited table's sheared v axis (:class:`~thinfilm_mi.tabulate.shear.Shear`)
+        #: a band-limited table's sheared v axis (:class:`~thinfilm_mi.tabulate.band.Shear`)
         self.shear = shear
         if shear is not None:
             self._v_scale = opaque_float((self.nv - 1) / (SIGMA_MAX - shear.low))

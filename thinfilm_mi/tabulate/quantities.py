@@ -25,8 +25,7 @@ import numpy as np
 
 from thinfilm_mi.optics.incoherent import incoherent_rt
 from thinfilm_mi.optics.unpolarised import unpolarised_rt, unpolarised_rt_loop
-from thinfilm_mi.tabulate.band_amplitudes import amplitudes, powers_of
-from thinfilm_mi.tabulate.band_rows import V_SPACING
+from thinfilm_mi.tabulate.band import V_SPACING, amplitudes, powers_of
 from thinfilm_mi.tabulate.mueller import MUELLER
 
 __all__ = ["AUTO_MAX_TEXELS", "AUTO_MIN_FILMS", "POWERS", "QUANTITIES", "RT_AUTO_MIN_FILMS",
