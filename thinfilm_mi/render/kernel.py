@@ -20,7 +20,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt
 from thinfilm_mi.render import mirror
-from thinfilm_mi.render.colour import (
+from thinfilm_mi.render.colour_variants import (
     GradientSampler,
     attach_gradient,
     colour_channels,
@@ -91,7 +91,7 @@ class SidePlan:
         #: What the build of :attr:`table` did (a ``tabulate.base.BuildReport``), or None
         self.build_report = None
         self.loop = None   # a LoopFilms where the films are evaluated in a loop
-        #: RGB/mono variants: the side's tabulate.colour.ColourTable, or None where the
+        #: RGB/mono variants: the side's tabulate.integrated.ColourTable, or None where the
         #: plugin evaluates per channel (no films over an index given per channel)
         self.colour = None
 
@@ -193,7 +193,7 @@ class KernelStack:
             side.lossless = lossless[inside]
         self.table_failed = []
         if colour_channels() is not None:
-            # RGB and mono variants read integrated colour tables (thinfilm_mi.tabulate.colour)
+            # RGB and mono variants read integrated colour tables (thinfilm_mi.tabulate.integrated)
             for side in self.plan.values():
                 side.colour = colour_table(self, side, side_data)
             if dr.is_diff_v(mitsuba_module().Float):
@@ -389,11 +389,11 @@ class KernelStack:
                transmission: bool = False):
         """RGB/mono variants: ``R`` (and ``T`` if asked) as ``mi.Spectrum`` colours,
         the spectral values integrated against colour matching
-        (:mod:`thinfilm_mi.tabulate.colour`), read from the side's colour table; a side
+        (:mod:`thinfilm_mi.tabulate.integrated`), read from the side's colour table; a side
         with no films over an index given per channel is evaluated per channel
         (Fresnel), as Mitsuba's ``conductor`` does. Where a thickness or an index
         carries gradients, they come from an unbiased estimate of the integral
-        (:class:`~thinfilm_mi.render.colour.GradientSampler`); the value stays the
+        (:class:`~thinfilm_mi.render.colour_variants.GradientSampler`); the value stays the
         table's. Arguments as :meth:`reflectance`."""
         scale = self.thickness_scale_at(si, active)
 

@@ -26,7 +26,7 @@ Modes:
 * ``colour`` (RGB and mono variants: ``*_rgb``, ``*_mono``): ``R``/``T`` are the
   spectral values integrated against colour matching (linear sRGB or Y under
   D65), read from the stack's colour tables (:meth:`KernelStack.colour`,
-  :mod:`thinfilm_mi.tabulate.colour`); the value is the weight itself. Factors the
+  :mod:`thinfilm_mi.tabulate.integrated`); the value is the weight itself. Factors the
   user gives as colours multiply per channel, as in Mitsuba's own plugins.
   Products of spectral factors (``thinfilm_diffuse``'s film-in x base x
   film-out) are integrated as products by the plugin's own tables.
@@ -39,7 +39,7 @@ from typing import Any
 import drjit as dr
 
 from thinfilm_mi.render.amplitudes import Shape, depolarizing_shape, polarised_response
-from thinfilm_mi.render.colour import colour_channels
+from thinfilm_mi.render.colour_variants import colour_channels
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
 

@@ -20,7 +20,7 @@ The refinement shared by the builders (budget, first step, convergence order, th
 linear tables' 4-point rule) is :mod:`thinfilm_mi.tabulate.refine`. The builders on
 top are :mod:`thinfilm_mi.tabulate.exact` (tables of the exact values),
 :mod:`thinfilm_mi.tabulate.band` (band-limited values of deep stacks),
-:mod:`thinfilm_mi.tabulate.colour` and :mod:`thinfilm_mi.tabulate.diffuse` (RGB and
+:mod:`thinfilm_mi.tabulate.integrated` and :mod:`thinfilm_mi.tabulate.diffuse` (RGB and
 mono tables) and :mod:`thinfilm_mi.tabulate.hemispherical`.
 """
 from __future__ import annotations

@@ -63,7 +63,7 @@ __all__ = ["CHUNK_POINTS", "ColourTable", "FIRST_NODES", "FIRST_SCALE_NODES", "F
            "LAMBDA_RELATIVE", "LAMBDA_TOLERANCE", "LINEAR_ABS", "LINEAR_DE", "MAX_FIRST_STEP",
            "MAX_LAMBDA_LEVEL", "MAX_NODES", "MAX_NODES_2D", "MAX_TEXELS_2D", "Source",
            "TOLERANCE_ABS", "TOLERANCE_ABS_2D", "TOLERANCE_DE", "TOLERANCE_DE_2D", "build",
-           "channel_count", "close_each", "first_step", "integrate", "integrate_points",
+           "channel_count", "close_each", "first_wavelength_step", "integrate", "integrate_points",
            "settings"]
 
 #: The nodes are dense enough when the 4-point rule predicts the integrals at
@@ -90,7 +90,7 @@ LAMBDA_TOLERANCE = 1e-5
 #: eye sees).
 LAMBDA_RELATIVE = 1e-4
 #: Largest first step (nm): 16 steps per interference fringe of the stack's whole
-#: optical thickness (:func:`first_step`) but never coarser than this. It divides
+#: optical thickness (:func:`first_wavelength_step`) but never coarser than this. It divides
 #: 470 nm and its halves reach the 1 nm knots of the colour-matching data, where the
 #: weights have kinks (D65's slope jumps at 430 nm): a 4 nm step (470/118 nm in
 #: fact) put kinks inside intervals and refined them to the finest level.
@@ -136,7 +136,7 @@ def close_each(a: np.ndarray, b: np.ndarray, channels: int, axis: int,
     return (d_abs <= abs_) & (d_col <= de)
 
 
-def first_step(optical_thickness: float) -> float:
+def first_wavelength_step(optical_thickness: float) -> float:
     """The first wavelength step (nm) for a stack of optical thickness ``Σ n_j d_j``
     (largest real index over 360-830 nm): the narrowest fringe of all the films
     together, ``Δλ = λ² / (2 Σ n_j d_j)`` at 360 nm, sampled 16 times, as a
@@ -158,7 +158,7 @@ class Source:
     the media are given per channel, e.g. ``eta``/``k`` as ``rgb``)."""
     evaluate: object
     channels: list = field(default_factory=list)
-    #: the first wavelength step (nm, :func:`first_step`)
+    #: the first wavelength step (nm, :func:`first_wavelength_step`)
     first_step: float = FIRST_STEP
 
 

@@ -4,7 +4,7 @@ obtained (no plugin classes here; below :mod:`kernel`, which calls it).
 
 * :func:`colour_channels` — ``"rgb"``, ``"mono"`` or ``None`` (spectral variants).
 * :func:`colour_table` — a side's ``R`` [and ``T``] integrated against colour
-  matching over the angle (:mod:`thinfilm_mi.tabulate.colour` builds it), cached by
+  matching over the angle (:mod:`thinfilm_mi.tabulate.integrated` builds it), cached by
   the side's optics.
 * :func:`channel_mean_texture` — the colour-weighted means of a dataset's index,
   the texture a plugin reads where it evaluates per channel.
@@ -31,7 +31,7 @@ from thinfilm_mi.materials.model import SPECTRAL_RANGE
 from thinfilm_mi.render.tabulation import table_key
 from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar, texture_range, uniform
 from thinfilm_mi.tabulate import base as tabulate_base
-from thinfilm_mi.tabulate import colour as integrated
+from thinfilm_mi.tabulate import integrated
 from thinfilm_mi.tabulate.axes import TIR
 from thinfilm_mi.tabulate.base import grid_coordinate, linear_texture
 from thinfilm_mi.tabulate.refine import LinearAxis, optical_thickness
@@ -43,7 +43,7 @@ __all__ = ["COLOUR_CACHE", "GradientSampler", "attach_gradient", "channel_mean_t
 
 def colour_channels() -> str | None:
     """``"rgb"`` or ``"mono"`` in the RGB and mono variants (whose plugins read
-    integrated colour tables, :mod:`thinfilm_mi.tabulate.colour`), ``None`` in the
+    integrated colour tables, :mod:`thinfilm_mi.tabulate.integrated`), ``None`` in the
     spectral ones."""
     mi = mitsuba_module()
     if mi.is_spectral:
@@ -73,7 +73,7 @@ COLOUR_CACHE = tabulate_base.TableCache()
 
 
 def colour_table(stack, side, side_data):
-    """The :class:`~thinfilm_mi.tabulate.colour.ColourTable` of the planned side ``side`` of the
+    """The :class:`~thinfilm_mi.tabulate.integrated.ColourTable` of the planned side ``side`` of the
     :class:`~thinfilm_mi.render.kernel.KernelStack` ``stack`` in RGB/mono variants, shared
     between stacks with identical optics; ``None`` where the plugin evaluates per
     channel (no films over an index given per channel). ``side_data(side,
@@ -140,7 +140,7 @@ def colour_table(stack, side, side_data):
         # the stack's optical thickness at its thickest (the largest scale)
         optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) \
             * optical_thickness(data.films, GRID, np.real)
-        return integrated.Source(evaluate, chans, integrated.first_step(optical))
+        return integrated.Source(evaluate, chans, integrated.first_wavelength_step(optical))
 
     C = integrated.channel_count(channels)
     if per_channel:
