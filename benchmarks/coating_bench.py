@@ -247,10 +247,11 @@ def noise_child(variant: str, res: int, spp: int, ref_factor: int) -> None:
                   "geometry": max(1, round(spp * per_render["coating"] / per_render["geometry"]))}
         row = {"label": label, "mask_pixels": int(mask.sum())}
         refs = {}
-        for name, d in dicts.items():
+        for ref_seed, (name, d) in enumerate(dicts.items(), 1000):
             scene = mi.load_dict(d)
             render_sync(scene, seed=0, spp=spp_of[name])   # compiles for this sample count
-            refs[name] = np.asarray(render_sync(scene, seed=1000, spp=ref_factor * spp_of[name]))
+            # seeds of their own: the two references' noise independent of each other's
+            refs[name] = np.asarray(render_sync(scene, seed=ref_seed, spp=ref_factor * spp_of[name]))
             seconds, rmse = [], []
             for seed in (7, 8, 9):
                 _, cpu, image = cpu_timed(render_sync, scene, seed=seed, spp=spp_of[name])
