@@ -1,5 +1,5 @@
 """The recursion as a symbolic loop over the films (``optics.stack_rt_loop``, used by
-the kernels for stacks of ``unpolarised.LOOP_MIN_FILMS`` films or more).
+the kernels for stacks of ``unpolarized.LOOP_MIN_FILMS`` films or more).
 
 References: the unrolled core (``optics.stack_rt``, itself checked against tmm
 and closed forms in tests/test_optics.py), tmm directly, and the float64 numpy

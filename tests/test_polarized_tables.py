@@ -6,7 +6,7 @@
   thick film's phase;
 * tables of 10 and 30 films on both sides of a dielectric (through the critical
   angle) against the exact float64 components, through the render path
-  (``amplitudes.polarised_response``), and a thick film's table against the
+  (``amplitudes.polarized_response``), and a thick film's table against the
   incoherent components;
 * the band-limited rows of a resonant stack against a brute-force convolution;
 * the plugins' Mueller matrices from a table against the exact path's, physical
@@ -34,7 +34,7 @@ from thinfilm_mi.optics.incoherent import incoherent_rt
 from thinfilm_mi.optics.incoherent_mueller import incoherent_mueller
 from thinfilm_mi.optics.mueller import mueller_rt, mueller_rt_loop
 from thinfilm_mi.render import kernel as K
-from thinfilm_mi.render.amplitudes import polarised_response
+from thinfilm_mi.render.amplitudes import polarized_response
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR
 from thinfilm_mi.tabulate import axes, band
 from thinfilm_mi.tabulate import base as tabulate_base
@@ -120,7 +120,7 @@ def test_incoherent_components_are_the_average_over_a_thick_films_phase():
     over the metal, the same with 128 thicknesses: rounding, not aliasing). (An absorbing
     film's attenuation changes across a period too, by ~1e-4 at k = 2e-5, so there
     the average is not the same quantity.) An absorbing thick film and several
-    thick films: R and T are exactly the unpolarised incoherent evaluator's (tmm's
+    thick films: R and T are exactly the unpolarized incoherent evaluator's (tmm's
     inc_tmm model, tests/test_tables.py: absorption enters both through the same
     single-pass P) and every lobe is physical, R >= sqrt(B² + |C|²)."""
     rng = np.random.default_rng(1)
@@ -166,8 +166,8 @@ def _si(wls):
 
 
 def _render_components(stack, inside, cos, wls) -> np.ndarray:
-    """``polarised_response`` as the 8 channels, shape (4 wavelengths, points, 8)."""
-    p = polarised_response(stack, _si(wls), mi.Float(cos.astype(np.float32)), inside=inside,
+    """``polarized_response`` as the 8 channels, shape (4 wavelengths, points, 8)."""
+    p = polarized_response(stack, _si(wls), mi.Float(cos.astype(np.float32)), inside=inside,
                            transmission=True)
     out = []
     for P, shape in ((p.R, p.reflection), (p.T, p.transmission)):

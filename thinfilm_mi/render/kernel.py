@@ -18,7 +18,7 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.optics.core import Cx
-from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt
+from thinfilm_mi.optics.unpolarized import LOOP_MIN_FILMS, unpolarized_rt
 from thinfilm_mi.render import mirror
 from thinfilm_mi.render.colour_variants import (
     GradientSampler,
@@ -430,7 +430,7 @@ class KernelStack:
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
                     transmission: bool = False, thickness_scale=None):
-        """Unpolarised ``R`` (and ``T`` if asked) as ``mi.Spectrum`` at ``si.wavelengths``.
+        """Unpolarized ``R`` (and ``T`` if asked) as ``mi.Spectrum`` at ``si.wavelengths``.
 
         ``cos_theta`` is the (positive) cosine of incidence measured on the side
         the light comes from. ``inside`` (a Python bool or a mask) selects the
@@ -453,12 +453,12 @@ class KernelStack:
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
-    """Coherent :func:`unpolarised_rt`, or the incoherent-aware evaluator when
+    """Coherent :func:`unpolarized_rt`, or the incoherent-aware evaluator when
     some film is beyond the coherence thickness."""
     if any(incoherent):
         from thinfilm_mi.optics.incoherent import incoherent_rt
         return incoherent_rt(n0, cos0, films, n_exit, wl, incoherent, transmission=transmission)
-    return unpolarised_rt(n0, cos0, films, n_exit, wl, transmission)
+    return unpolarized_rt(n0, cos0, films, n_exit, wl, transmission)
 
 
 #: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).

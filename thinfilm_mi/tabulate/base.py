@@ -100,10 +100,10 @@ class SideData:
     ``(index, thickness_nm)`` pairs from that side inwards (index: complex numpy
     array over ``wavelengths``), ``n_exit`` the complex exit index. ``rt`` is
     the evaluator ``(n0, cos0, films, n_exit, wl, transmission) -> R | (R, T)``
-    (the coherent :func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt` or the
+    (the coherent :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt` or the
     incoherent-aware one), ``transmission`` whether ``T`` is tabulated too.
     ``rt_loop``, where given, evaluates :data:`BUILD_LOOP_MIN_FILMS` films or
-    more as a loop (:func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt_loop`).
+    more as a loop (:func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt_loop`).
     ``kinks``: wavelengths where an index's slope jumps (tabulated data), at
     which the build checks the table too. ``absorbing`` (set by the builds,
     :meth:`set_absorbing`): whether each film and the exit medium absorb

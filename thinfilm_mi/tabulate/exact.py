@@ -3,9 +3,9 @@
 Hirayama et al. (sec. 4) precompute ``k_r`` and ``k_t`` at sampled incidence
 angles and wavelengths and interpolate linearly, which they found 6x faster than
 the recursion at every hit. Here a table is a ``Texture2f`` (Dr.Jit's texture,
-float32) whose channels are the unpolarised ``R`` and, where a BSDF needs it,
+float32) whose channels are the unpolarized ``R`` and, where a BSDF needs it,
 ``T`` of one lighting side of the stack. It is built in float64 with the optics
-core (:func:`thinfilm_mi.optics.unpolarised.unpolarised_rt` on ``drjit.llvm.Float64``) and
+core (:func:`thinfilm_mi.optics.unpolarized.unpolarized_rt` on ``drjit.llvm.Float64``) and
 looked up in the render kernel, where its cost does not depend on the number of
 films.
 
