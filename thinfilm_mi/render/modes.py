@@ -64,7 +64,7 @@ class SpectralMode:
     polarized = False
     #: Whether values are integrated over wavelengths at load time (RGB and mono)
     integrated = False
-    #: The lobe of a diffuse (depolarising) component.
+    #: The lobe of a diffuse (depolarizing) component.
     depolarized = None
 
     def response(self, stack: KernelStack, si, cos_theta, active=True, *,

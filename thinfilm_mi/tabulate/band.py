@@ -506,7 +506,7 @@ class _Resonances:
     0.017 off)."""
 
     #: The zeros checked per panel: the last one before it and the first ones
-    #: from its start (two polarisations, a few per panel at most).
+    #: from its start (two polarizations, a few per panel at most).
     PER_PANEL = 4
 
     def __init__(self, rows: np.ndarray, pos: np.ndarray, dist: np.ndarray, nb: int):
