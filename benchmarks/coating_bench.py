@@ -45,8 +45,10 @@ constant emitter, ``path``, box filter). The sphere's BSDF is one of :data:`BASE
    Efficiency ratio: ``(RMSE_geometry² t_geometry) / (RMSE_coating² t_coating)`` with the
    measured times; above 1 the coating is the more efficient. The two high-spp images'
    relative RMSE to each other is reported too, beside what their own noise alone puts
-   between them: the excess is the gap's offset, and in RGB the plugin's product of channel
-   integrals against the geometry's per-channel crossings. In spectral variants four
+   between them (estimated from the three images, so fireflies make it an underestimate),
+   and the relative difference of their mean radiance over the sphere (robust to fireflies):
+   an excess is the gap's offset, and in RGB the plugin's product of channel integrals
+   against the geometry's per-channel crossings. In spectral variants four
    wavelengths per path make most of the RMSE (colour noise) on both sides.
 4. **First image** (``llvm_ad_spectral``, --res², --spp): a fresh process, the kernel cache
    warm (one untimed run of each first) and the table store off (every table is built),
@@ -63,7 +65,6 @@ import argparse
 import gc
 import json
 import os
-import subprocess
 import sys
 import time
 import warnings
@@ -74,6 +75,7 @@ os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
+import plugin_bench  # noqa: E402
 from render_bench import render_sync, scene_dict  # noqa: E402
 
 VARIANTS = ("llvm_ad_spectral", "llvm_ad_rgb")
@@ -245,10 +247,11 @@ def noise_child(variant: str, res: int, spp: int, ref_factor: int) -> None:
                   "geometry": max(1, round(spp * per_render["coating"] / per_render["geometry"]))}
         row = {"label": label, "mask_pixels": int(mask.sum())}
         refs = {}
-        for name, d in dicts.items():
+        for ref_seed, (name, d) in enumerate(dicts.items(), 1000):
             scene = mi.load_dict(d)
             render_sync(scene, seed=0, spp=spp_of[name])   # compiles for this sample count
-            refs[name] = np.asarray(render_sync(scene, seed=1000, spp=ref_factor * spp_of[name]))
+            # seeds of their own: the two references' noise independent of each other's
+            refs[name] = np.asarray(render_sync(scene, seed=ref_seed, spp=ref_factor * spp_of[name]))
             seconds, rmse = [], []
             for seed in (7, 8, 9):
                 _, cpu, image = cpu_timed(render_sync, scene, seed=seed, spp=spp_of[name])
@@ -263,6 +266,9 @@ def noise_child(variant: str, res: int, spp: int, ref_factor: int) -> None:
         row["references_rmse"] = relative_rmse(refs["geometry"], refs["coating"], mask)
         # what the two high-spp images' own noise alone puts between them
         row["references_noise"] = float(np.hypot(c["rmse"], g["rmse"]) / np.sqrt(ref_factor))
+        # their mean radiance over the sphere: a bias shows here, fireflies average out
+        mean_c, mean_g = (float(np.mean(refs[k][mask])) for k in ("coating", "geometry"))
+        row["references_means"] = (mean_c - mean_g) / mean_g
         out.append(row)
         print(f"  noise, {variant}: {label}: coating {c}, geometry {g}", file=sys.stderr, flush=True)
     print(json.dumps(out))
@@ -284,13 +290,8 @@ def first_child(which: str, index: int, res: int, spp: int) -> None:
 
 
 def child(*args: str) -> dict | list:
-    env = dict(os.environ, THINFILM_MI_TABLE_CACHE="off")
-    res = subprocess.run([sys.executable, os.path.abspath(__file__), *args], env=env,
-                         capture_output=True, text=True)
-    if res.returncode != 0:
-        raise RuntimeError(res.stderr[-3000:])
-    sys.stderr.write(res.stderr)
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    """This file run with ``args`` in a fresh process (``plugin_bench.child``)."""
+    return plugin_bench.child(*args, script=__file__)
 
 
 def first_images(repeats: int, res: int, spp: int) -> list:
@@ -344,11 +345,13 @@ def markdown(data: dict, args) -> str:
                   f"against its own scene at {args.ref_factor}× its samples. Efficiency = RMSE² × "
                   f"time of the geometry over that of the coating (> 1: the coating is the more "
                   f"efficient). The last column is the two high-spp images' RMSE to each other, and "
-                  f"in brackets what their own noise alone puts between them (in RGB the plugin's "
-                  f"product of channel integrals differs from the geometry's per-channel crossings "
-                  f"too):", "",
+                  f"in brackets what their own noise alone puts between them as estimated from the "
+                  f"three images (fireflies make it an underestimate), then the relative difference "
+                  f"of their mean radiance over the sphere, where a bias would show (in RGB the "
+                  f"plugin's product of channel integrals differs from the geometry's per-channel "
+                  f"crossings too):", "",
                   "| base | variant | coating: spp, s, RMSE | geometry: spp, s, RMSE | efficiency | "
-                  "high-spp images apart |", "|---|---|---|---|---:|---:|"]
+                  "high-spp images apart | their means apart |", "|---|---|---|---|---:|---:|---:|"]
         for i, (label, _) in enumerate(BASES):
             for v, rows in noise.items():
                 row = rows[i]
@@ -356,7 +359,7 @@ def markdown(data: dict, args) -> str:
                 lines.append(f"| {label} | `{v}` | {c['spp']}, {c['seconds']:.2f} s, {c['rmse']:.3f} | "
                              f"{g['spp']}, {g['seconds']:.2f} s, {g['rmse']:.3f} | "
                              f"{row['efficiency']:.1f}× | {row['references_rmse']:.3f} "
-                             f"({row['references_noise']:.3f}) |")
+                             f"({row['references_noise']:.3f}) | {row['references_means']:+.2%} |")
         lines.append("")
     first = data.get("first")
     if first:

@@ -15,8 +15,8 @@ import time
 
 import mitsuba as mi
 
-VARIANTS = sys.argv[1:] or ["llvm_ad_spectral", "llvm_ad_spectral_polarized", "llvm_ad_rgb",
-                            "llvm_ad_mono"]
+VARIANTS = [a for a in sys.argv[1:] if a != "--write-docs"] or [
+    "llvm_ad_spectral", "llvm_ad_spectral_polarized", "llvm_ad_rgb", "llvm_ad_mono"]
 
 
 def scene(thickness):

@@ -180,9 +180,11 @@ def demo_steady_child(repeats: int, size: str, spp: int) -> None:
                       "ratio": float(np.median(ours_cpu / twin_cpu))}))
 
 
-def child(*args: str) -> dict | list:
+def child(*args: str, script: str = __file__) -> dict | list:
+    """``script`` (this file) run with ``args`` in a fresh process, the table store off: the
+    JSON of its last line of output (its stderr passed on)."""
     env = dict(os.environ, THINFILM_MI_TABLE_CACHE="off")
-    res = subprocess.run([sys.executable, os.path.abspath(__file__), *args], env=env,
+    res = subprocess.run([sys.executable, os.path.abspath(script), *args], env=env,
                          capture_output=True, text=True)
     if res.returncode != 0:
         raise RuntimeError(res.stderr[-3000:])

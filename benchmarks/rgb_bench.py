@@ -9,7 +9,7 @@
 
 In RGB and mono variants every stack's ``R`` (and ``T``) integrated against colour
 matching is tabulated over the angle when the scene loads
-(``thinfilm_mi/tabulate/colour.py``; ``thinfilm_mi/tabulate/diffuse.py`` for
+(``thinfilm_mi/tabulate/integrated.py``; ``thinfilm_mi/tabulate/diffuse.py`` for
 ``thinfilm_diffuse``), so at render time a deep stack costs one texture lookup,
 whatever its depth. One process, two parts:
 

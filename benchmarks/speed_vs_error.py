@@ -60,7 +60,7 @@ mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
 from thinfilm_mi.render import kernel as tf_kernel  # noqa: E402
 from thinfilm_mi.tabulate import base as tabulate_base  # noqa: E402
-from thinfilm_mi.tabulate.band_rows import sigma_nu  # noqa: E402
+from thinfilm_mi.tabulate.band import sigma_nu  # noqa: E402
 
 AMBIENT = 1.000277
 ERRORS = (1e-2, 3e-3, 1e-3, 3e-4)

@@ -5,7 +5,7 @@
 
 For each regime below, ``--points`` extreme evaluations (default 10^6) of the
 unpolarised ``R`` and ``T`` are made in **one** float32 Dr.Jit call of
-``unpolarised.unpolarised_rt`` (the function every BSDF evaluates in its render
+``unpolarized.unpolarized_rt`` (the function every BSDF evaluates in its render
 kernel: ``optics.stack_amplitudes`` then the power factors) on
 ``drjit.llvm.Float`` arrays, one lane per point, with per-lane random indices,
 thicknesses, angles and wavelengths (opaque inputs). The same function then runs
@@ -37,7 +37,7 @@ from drjit.llvm import Float, Float64, UInt32
 
 from thinfilm_mi.llvm import require_llvm
 from thinfilm_mi.optics.core import Cx, real_loop_applies, stack_rt_loop
-from thinfilm_mi.optics.unpolarised import unpolarised_rt
+from thinfilm_mi.optics.unpolarized import unpolarized_rt
 
 F32 = np.float32
 
@@ -301,9 +301,9 @@ def real_hints(c: Case):
 
 
 def run_core(c: Case, Arr, loop: bool | str = False):
-    """unpolarised_rt on Dr.Jit arrays of type Arr (Float or Float64): (R, T) as numpy.
+    """unpolarized_rt on Dr.Jit arrays of type Arr (Float or Float64): (R, T) as numpy.
 
-    ``loop``: the form render kernels use for stacks of ``unpolarised.LOOP_MIN_FILMS``
+    ``loop``: the form render kernels use for stacks of ``unpolarized.LOOP_MIN_FILMS``
     films or more, ``optics.stack_rt_loop``, with each lane's films gathered
     from film-major buffers (as ``kernel._LoopFilms`` gathers a film's index),
     ``R = (Rs + Rp) / 2`` and ``T`` clipped to ``[0, 1 - R]`` as in the kernel;
@@ -340,7 +340,7 @@ def run_core(c: Case, Arr, loop: bool | str = False):
         T = dr.clip(0.5 * (Ts + Tp), 0.0, 1.0 - R)
     else:
         films = [(cx(n), real(d)) for n, d in c.films]
-        R, T = unpolarised_rt(real(c.n0), real(c.cos0), films, cx(c.n_exit), real(c.wl), True)
+        R, T = unpolarized_rt(real(c.n0), real(c.cos0), films, cx(c.n_exit), real(c.wl), True)
     dr.eval(R, T)
     return np.array(R, dtype=np.float64), np.array(T, dtype=np.float64)
 
@@ -447,7 +447,7 @@ def main(argv=None):
     require_llvm()
     rng = np.random.default_rng(args.seed)
     print(f"drjit {dr.__version__}, LLVM {'.'.join(map(str, dr.detail.llvm_version()))}, "
-          f"{dr.thread_count()} threads; float32 unpolarised.unpolarised_rt vs the float64 run of the "
+          f"{dr.thread_count()} threads; float32 unpolarized.unpolarized_rt vs the float64 run of the "
           f"same code on the same float32-rounded inputs; tmm on {args.tmm_points} random points "
           "per regime")
     print()
@@ -472,7 +472,7 @@ def main(argv=None):
     print()
     for key, title in (
             ("loop", "The loop over films (optics.stack_rt_loop: render kernels for stacks of "
-                     "unpolarised.LOOP_MIN_FILMS films or more), float32, against the same float64 "
+                     "unpolarized.LOOP_MIN_FILMS films or more), float32, against the same float64 "
                      "reference:"),
             ("loop_real", "The real-amplitude loop (optics.stack_rt_loop_real: render kernels "
                           "whose films are all real and above the ambient, at any depth), on "

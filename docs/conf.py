@@ -28,9 +28,10 @@ extensions = [
     "sphinx.ext.napoleon",      # the numpy-style "Parameters" sections of the docstrings
     "sphinx.ext.mathjax",
     "thinfilm_plugins",
+    "thinfilm_generated",       # {generated} NAME: a benchmark's tables, docs/_generated/NAME.md
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
-exclude_patterns = ["_build"]
+exclude_patterns = ["_build", "_generated"]   # _generated: benchmark tables, shown by {generated}
 root_doc = "index"
 rst_prolog = RST_PROLOG
 myst_enable_extensions = ["dollarmath", "colon_fence"]

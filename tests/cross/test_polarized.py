@@ -61,7 +61,7 @@ def test_bare_interface_map_matches_mitsuba_fresnel():
     modes.sp_matrix) equal mueller.specular_reflection/transmission for a conductor
     (complex eta) and a dielectric lit from both sides, TIR included."""
     from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
-    from thinfilm_mi.optics.unpolarised import unpolarised_powers
+    from thinfilm_mi.optics.unpolarized import unpolarized_powers
     from thinfilm_mi.render.amplitudes import jones_shape
     from thinfilm_mi.render.modes import sp_matrix
 
@@ -75,7 +75,7 @@ def test_bare_interface_map_matches_mitsuba_fresnel():
     for n0, n_exit, eta, side in cases:
         a = stack_amplitudes(U(n0), U(mi.Float(c)), [], Cx(U(n_exit.real), U(n_exit.imag)),
                              U(500.0))
-        R, T = unpolarised_powers(a, True)
+        R, T = unpolarized_powers(a, True)
         ours = mat(sp_matrix(R, jones_shape(a.rs, a.rp)))[:, 0]
         ref = np.array(mi.mueller.specular_reflection(
             mi.Float(side * c), mi.Complex2f(eta.real, eta.imag))).transpose(2, 0, 1)

@@ -50,13 +50,13 @@ import thinfilm_mi  # noqa: F401  (registers the plugins)
 from tests.support import bsdf
 from tests.support.plugin_modules import import_error, plugin_dict
 from thinfilm_mi.optics.core import Cx
-from thinfilm_mi.optics.unpolarised import unpolarised_rt
+from thinfilm_mi.optics.unpolarized import unpolarized_rt
 from thinfilm_mi.plugins import PLUGINS
 
 VARIANT = "llvm_ad_spectral"
 # Few distinct kernel shapes, so that compiled kernels are reused across examples.
 # 1 and 2 films are unrolled in the kernel; 7 and 30 go through the loop over
-# films (unpolarised.LOOP_MIN_FILMS), whose kernel does not depend on the depth: a
+# films (unpolarized.LOOP_MIN_FILMS), whose kernel does not depend on the depth: a
 # 30-film draw compiles in about a second (the unrolled 30-film kernels of the
 # rough plugins took 10-60 s).
 FILM_COUNTS = (1, 2, 7, 30)
@@ -241,7 +241,7 @@ def lossless_tolerance(s: dict, cos: np.ndarray, wl: np.ndarray) -> np.ndarray:
         f.append((Cx(arr(n), arr(4 * U32 * n)), arr(d)))
     n0 = np.where(inside, n_in, n_out)
     nex = np.where(inside, n_out, n_in)
-    R, T = unpolarised_rt(arr(n0), arr(c), f, Cx(arr(nex), arr(4 * U32 * nex)), arr(lam), True)
+    R, T = unpolarized_rt(arr(n0), arr(c), f, Cx(arr(nex), arr(4 * U32 * nex)), arr(lam), True)
     A = 1.0 - np.array(R, dtype=np.float64) - np.array(T, dtype=np.float64)
     tol = 1e-5 + np.maximum(A, 0.0).reshape(4, n_lanes).T
     near = np.zeros(n_lanes)

@@ -26,7 +26,7 @@ from hypothesis import strategies as st
 
 from tests.support.kernels import loop_rt
 from thinfilm_mi.optics import core as optics
-from thinfilm_mi.optics.unpolarised import unpolarised_rt, unpolarised_rt_loop
+from thinfilm_mi.optics.unpolarized import unpolarized_rt, unpolarized_rt_loop
 
 FILM_COUNTS = (1, 2, 7, 30)
 
@@ -78,7 +78,7 @@ def evaluate(Arr, n0, films, n_exit, wl, cos0):
     dr.make_opaque(c)
     out = optics.stack_rt(arr(n0), c, f, ne, arr(wl))
     amp = optics.stack_amplitudes(arr(n0), c, f, ne, arr(wl))
-    # The loop over films of the render kernels (unpolarised.LOOP_MIN_FILMS), its
+    # The loop over films of the render kernels (unpolarized.LOOP_MIN_FILMS), its
     # films gathered from buffers.
     n, k, d = (np.array([v(film) for film in films], np.float64)
                for v in (lambda x: complex(x[0]).real, lambda x: complex(x[0]).imag,
@@ -203,8 +203,8 @@ U32 = 2.0 ** -24
 
 
 def _unpolarised(Arr, n0, films, n_exit, wl, cos0, loop=False):
-    """Unpolarised R, T as the kernels form them: ``unpolarised_rt`` (films unrolled)
-    or, with ``loop``, ``unpolarised_rt_loop`` (``optics.stack_rt_loop`` with R =
+    """Unpolarised R, T as the kernels form them: ``unpolarized_rt`` (films unrolled)
+    or, with ``loop``, ``unpolarized_rt_loop`` (``optics.stack_rt_loop`` with R =
     (Rs + Rp) / 2 and T clipped to [0, 1 - R]) over buffers of the (per-point
     constant) films;
     ``loop="real"`` passes the hints of real films (:func:`real_hints`)."""
@@ -220,11 +220,11 @@ def _unpolarised(Arr, n0, films, n_exit, wl, cos0, loop=False):
         n, k, d = (np.array([g(n, d) for n, d in films], np.float64)
                    for g in (lambda n, d: np.real(n), lambda n, d: np.imag(n), lambda n, d: d))
         hints = real_hints(n0, films) if loop == "real" else {}
-        R, T = loop_rt(arr(n0), arr(cos0), n, k, d, ne, arr(wl), Arr, rt=unpolarised_rt_loop,
+        R, T = loop_rt(arr(n0), arr(cos0), n, k, d, ne, arr(wl), Arr, rt=unpolarized_rt_loop,
                        **hints)
     else:
         f = [(optics.Cx(arr(np.real(n)), arr(np.imag(n))), arr(d)) for n, d in films]
-        R, T = unpolarised_rt(arr(n0), arr(cos0), f, ne, arr(wl), True)
+        R, T = unpolarized_rt(arr(n0), arr(cos0), f, ne, arr(wl), True)
     dr.eval(R, T)
     return np.array(R, np.float64), np.array(T, np.float64)
 

@@ -20,7 +20,7 @@ from drjit.llvm import Float, Float64
 
 from thinfilm_mi.optics import core as optics
 from thinfilm_mi.optics.incoherent import incoherent_rt, incoherent_rt_sp, reference_incoherent_rt
-from thinfilm_mi.optics.unpolarised import unpolarised_rt
+from thinfilm_mi.optics.unpolarized import unpolarized_rt
 
 tmm = pytest.importorskip("tmm")
 
@@ -214,7 +214,7 @@ def test_all_coherent_is_the_coherent_core():
     cos = Float64(COS)
     wl = Float64(np.linspace(400.0, 700.0, COS.size))
     R, T = incoherent_rt(1.0, cos, films, 0.17 + 3.1j, wl, [False] * 3)
-    R0, T0 = unpolarised_rt(1.0, cos, films, 0.17 + 3.1j, wl)
+    R0, T0 = unpolarized_rt(1.0, cos, films, 0.17 + 3.1j, wl)
     # stack_rt (power recursion) vs stack_amplitudes (amplitudes): same
     # recursion, rounding only; a 20 um film has a phase ~ 1e3 rad, ulp ~ 1e-13.
     np.testing.assert_allclose(np.array(R), np.array(R0), rtol=0, atol=1e-12)
@@ -447,7 +447,7 @@ def test_wavelength_average_of_coherent_result_converges_to_incoherent():
         for slab in (1.5, 1.5 + 2e-6j):
             films = [(1.38, 100.0), (slab, d), (2.1, 60.0)]
             c, wl_d = Float64(np.full(n, cos)), Float64(wl)
-            Rc, Tc = unpolarised_rt(1.0, c, films, 0.2 + 3.4j, wl_d)
+            Rc, Tc = unpolarized_rt(1.0, c, films, 0.2 + 3.4j, wl_d)
             Ri, Ti = incoherent_rt(1.0, c, films, 0.2 + 3.4j, wl_d, [False, True, False])
             err = max(abs(np.dot(w, np.array(Rc)) - np.dot(w, np.array(Ri))),
                       abs(np.dot(w, np.array(Tc)) - np.dot(w, np.array(Ti))))

@@ -24,7 +24,7 @@ def test_incoherent_components_are_the_average_over_a_thick_films_phase():
     over the metal, the same with 128 thicknesses: rounding, not aliasing). (An absorbing
     film's attenuation changes across a period too, by ~1e-4 at k = 2e-5, so there
     the average is not the same quantity.) An absorbing thick film and several
-    thick films: R and T are exactly the unpolarised incoherent evaluator's (tmm's
+    thick films: R and T are exactly the unpolarized incoherent evaluator's (tmm's
     inc_tmm model, tests/tabulate/test_exact.py: absorption enters both through the same
     single-pass P) and every lobe is physical, R >= sqrt(B² + |C|²)."""
     rng = np.random.default_rng(1)

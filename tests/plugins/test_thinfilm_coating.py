@@ -220,7 +220,7 @@ def test_edits_do_not_recompile():
     """The kernel reads every edited value as an opaque input: an edit of a film's
     thickness, the coat's absorption and thickness, and the nested BSDF's albedo renders
     from the cached kernel (exact stack: a table is rebuilt on an edit, which
-    tests/test_tables.py covers for every plugin)."""
+    tests/tabulate/test_exact.py covers for every plugin)."""
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "path", "max_depth": 3},
         "sensor": {"type": "perspective", "fov": 30,

@@ -23,7 +23,7 @@ def compiled(history):
 
 
 def loop_rt(n0, cos, n, k, d, n_exit, wl, Arr=Float64, rt=optics.stack_rt_loop, **hints):
-    """``rt`` (``optics.stack_rt_loop``, or ``unpolarised.unpolarised_rt_loop``) with the
+    """``rt`` (``optics.stack_rt_loop``, or ``unpolarized.unpolarized_rt_loop``) with the
     films gathered from buffers of type ``Arr``, as the render kernels do (padded: a
     gather needs a non-empty source); ``k = None``: real films (a literal 0
     imaginary part)."""

@@ -3,7 +3,7 @@ over the surface (``ScaledColourDiffuse`` in ``thinfilm_mi/tabulate/diffuse.py``
 
 Reference: the same BSDF with a constant thickness scale ``s``, whose diffuse table is
 the 2-D one of ``tabulate/diffuse.py`` built at ``s`` (itself checked against the
-spectral integral in ``tests/render/test_colour.py``). At a texel of scale ``s`` the table over
+spectral integral in ``tests/render/test_colour_variants.py``). At a texel of scale ``s`` the table over
 the scale must give the same value within its tolerances (see each test). The module
 fixture restores the suite's default variant (``llvm_ad_spectral``).
 """

@@ -12,7 +12,7 @@ import thinfilm_mi as tf
 from tests.support.kernels import compiled, interaction
 from tests.support.stacks import benchmark_layers
 from tests.support.tables import F32, STACK, f32, random_points, ref_R
-from thinfilm_mi.optics import unpolarised
+from thinfilm_mi.optics import unpolarized
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
 from thinfilm_mi.tabulate import axes, quantities
@@ -362,7 +362,7 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
     first test)."""
     from thinfilm_mi.tabulate import base as tabulate_base
     calls = []
-    loop = unpolarised.unpolarised_rt_loop
+    loop = unpolarized.unpolarized_rt_loop
 
     def counted(*a, **k):
         calls.append(k["film_n_min"])

@@ -18,9 +18,9 @@ from tests.support.stacks import benchmark_thicknesses
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.optics.incoherent_mueller import incoherent_mueller
 from thinfilm_mi.render import kernel as K
-from thinfilm_mi.render.amplitudes import polarised_response
+from thinfilm_mi.render.amplitudes import polarized_response
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR
-from thinfilm_mi.tabulate import axes, band_rows
+from thinfilm_mi.tabulate import axes, band
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.mueller import AUTO_MAX_FLOATS, AUTO_MIN_FILMS, MUELLER
 
@@ -48,8 +48,8 @@ def _si(wls):
 
 
 def _render_components(stack, inside, cos, wls) -> np.ndarray:
-    """``polarised_response`` as the 8 channels, shape (4 wavelengths, points, 8)."""
-    p = polarised_response(stack, _si(wls), mi.Float(cos.astype(np.float32)), inside=inside,
+    """``polarized_response`` as the 8 channels, shape (4 wavelengths, points, 8)."""
+    p = polarized_response(stack, _si(wls), mi.Float(cos.astype(np.float32)), inside=inside,
                            transmission=True)
     out = []
     for P, shape in ((p.R, p.reflection), (p.T, p.transmission)):
@@ -139,14 +139,14 @@ def test_a_thick_films_table_holds_the_incoherent_components():
 
 def test_band_limited_mueller_rows_match_a_brute_force_convolution():
     """A 10-film stack on a metal (resonances ~0.1 nm wide, as in
-    tests/tabulate/test_band_rows.py): the band-limited rows of its Mueller components
+    tests/tabulate/test_band.py): the band-limited rows of its Mueller components
     against each exact component convolved by direct summation on a 0.0005 nm
     grid. Bound 1e-4 as there (a tenth of the default table_error; a missed
     resonance errs by ~1e-3 or more); measured <= 1.3e-5."""
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "ext_ior": 1.0,
                          "layers": layers(10, 50.0, 200.0), "tabulate": False})
     data = K.side_data(bsdf.stack.plan[False], False, quantity=MUELLER)
-    rows = band_rows.Rows(data, axes.BAND, 1.0)
+    rows = band.Rows(data, axes.BAND, 1.0)
     xs = np.array([0.0, 0.55])
     vals = rows.values(xs)
     assert vals.shape[-1] == 4

@@ -766,7 +766,7 @@ def stack_loop_terms(n0, cos0, count, film, n_exit, wavelength, *, transmission:
     the wavelength made of the two media's admittances only: ``N 2^E``, ``D 2^E``
     are then smooth where ``R`` has resonances, with no magnitude growing along the
     stack (what the band-limited tables' resonance search samples,
-    :func:`thinfilm_mi.tabulate.band_rows.amplitudes`). The power of two is exact,
+    :func:`thinfilm_mi.tabulate.band.amplitudes`). The power of two is exact,
     so ``R`` and the ratios of neighbouring samples do not depend on it.
     """
     cos0, beta2, q0 = incidence(n0, cos0)

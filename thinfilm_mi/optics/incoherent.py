@@ -46,7 +46,7 @@ Conventions (those of :mod:`thinfilm_mi.optics.core` and of ``inc_tmm``):
   underflowing to 0) or an interface with ``T = 0`` gives no 0/0.
 * s and p are combined separately (a planar stack does not mix them), then
   ``R = (Rs + Rp) / 2`` and ``T = (Ts + Tp) / 2`` as in
-  :func:`thinfilm_mi.optics.unpolarised.unpolarised_rt`: ``R`` clamped to 1, ``T`` clipped
+  :func:`thinfilm_mi.optics.unpolarized.unpolarized_rt`: ``R`` clamped to 1, ``T`` clipped
   to ``[0, 1 - R]``, and ``R = 1``, ``T = 0`` exactly at grazing incidence.
   ``T`` is the power entering the exit medium (into a metal substrate: the
   power it absorbs).
@@ -199,7 +199,7 @@ def incoherent_rt(n0, cos0, films: Sequence[tuple[Any, Any]], n_exit, wl,
     """Unpolarised ``R`` (and ``T``, the power entering ``n_exit``) of a stack with
     incoherent thick films; any array type (floats, Dr.Jit arrays, ``mi.Spectrum``).
 
-    Same arguments and conventions as :func:`thinfilm_mi.optics.unpolarised.unpolarised_rt`
+    Same arguments and conventions as :func:`thinfilm_mi.optics.unpolarized.unpolarized_rt`
     plus ``incoherent`` (a Python list of bools, one per film, from the ambient
     side inwards): ``R = (Rs + Rp) / 2`` clamped to 1, ``T`` clipped to
     ``[0, 1 - R]``, ``R = 1`` and ``T = 0`` at grazing incidence. With no film

@@ -33,7 +33,7 @@ Mueller table's first channels are what a table of powers holds:
 * reflection only: ``R, B_R, C_R.re, C_R.im``;
 * with transmission: ``R, T, B_R, C_R.re, C_R.im, B_T, C_T.re, C_T.im``.
 
-``R`` and ``T`` are formed as :func:`thinfilm_mi.optics.unpolarised.unpolarised_powers`
+``R`` and ``T`` are formed as :func:`thinfilm_mi.optics.unpolarized.unpolarized_powers`
 forms them (``R <= 1``, ``0 <= T <= 1 - R``, ``R = 1`` and ``T = 0`` at grazing
 incidence, where ``r_s = r_p = -1``: ``C_R = 1``).
 
@@ -107,7 +107,7 @@ def _transmitted(ts: Cx, tp: Cx, w_s, w_p):
 
 def mueller_rt(n0, cos0, films, n_exit, wl, transmission: bool = True) -> tuple:
     """The channels of a coherent stack, films unrolled; arguments as
-    :func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt`."""
+    :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt`."""
     a = stack_amplitudes(n0, cos0, films, n_exit, wl, transmission=transmission)
     c_r = cmul(a.rs, a.rp.conj())
     if not transmission:
@@ -234,7 +234,7 @@ def loop_amplitudes(n0, cos0, count, film, n_exit, wl, transmission: bool = True
                     film_n_max: float | None = None, films_max: int | None = None) -> StackAmplitudes:
     """:func:`~thinfilm_mi.optics.core.stack_amplitudes` with the films visited by a loop
     (:func:`amplitude_loop`; the signature of
-    :func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt_loop`, ``film_n_max`` and
+    :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt_loop`, ``film_n_max`` and
     ``films_max`` accepted and not needed): the exact path of polarized variants for
     deep stacks, whose kernel does not grow with the number of films. ``r = -1`` and
     ``t = 0`` at grazing incidence."""
@@ -255,7 +255,7 @@ def mueller_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = True
                     n0_max: float | None = None, film_n_min: float | None = None,
                     film_n_max: float | None = None, films_max: int | None = None) -> tuple:
     """:func:`mueller_rt` with the films visited by a loop (:func:`amplitude_loop`);
-    the signature of :func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt_loop`
+    the signature of :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt_loop`
     (``film_n_max`` and ``films_max`` are accepted and not needed)."""
     amps = amplitude_loop(n0, cos0, count, film, n_exit, wl, transmission=transmission,
                           n0_max=n0_max, film_n_min=film_n_min)

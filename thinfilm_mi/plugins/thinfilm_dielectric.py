@@ -103,7 +103,7 @@ against colour matching: CIE 1931 2° under D65 to linear sRGB, normalised so th
 perfect reflector gives (1, 1, 1), or the luminance Y in mono; this is the
 convention of Mitsuba's spectral pipeline, so an RGB render and a spectral render of
 a scene agree. They are tabulated over the angle at scene load with the float64
-recursion (``thinfilm_mi/tabulate/colour.py``; over the angle and the thickness scale
+recursion (``thinfilm_mi/tabulate/integrated.py``; over the angle and the thickness scale
 with a ``thickness`` texture), so a deep stack costs what one film costs at render
 time; ``tabulate``, ``table_error`` and ``spectral_resolution`` do not apply.
 ``specular_reflectance`` and ``specular_transmittance`` multiply per channel.

@@ -109,7 +109,7 @@ matching: CIE 1931 2° under D65 to linear sRGB, normalised so that a perfect
 reflector gives (1, 1, 1), or the luminance Y in mono; this is the convention of
 Mitsuba's spectral pipeline, so an RGB render and a spectral render of a scene
 agree. It is tabulated over the angle at scene load with the float64 recursion
-(``thinfilm_mi/tabulate/colour.py``; over the angle and the thickness scale with a
+(``thinfilm_mi/tabulate/integrated.py``; over the angle and the thickness scale with a
 ``thickness`` texture), so a deep stack costs what one film costs at render time;
 ``tabulate``, ``table_error`` and ``spectral_resolution`` do not apply.
 ``eta``/``k`` given as ``rgb`` evaluate per channel, as in ``roughconductor``; films

@@ -5,7 +5,7 @@
 * :mod:`thinfilm_mi.render.modes` -- the one place that decides what a plugin returns in
   each variant family (spectral, polarized, RGB/mono).
 * :mod:`thinfilm_mi.render.amplitudes` -- Mueller matrices from complex amplitudes.
-* :mod:`thinfilm_mi.render.colour` -- colour tables and gradients in RGB/mono variants.
+* :mod:`thinfilm_mi.render.colour_variants` -- colour tables and gradients in RGB/mono variants.
 * :mod:`thinfilm_mi.render.textures` -- Mitsuba textures made and read by the plugins.
 * :mod:`thinfilm_mi.render.params` -- validation of ``mi.traverse`` edits.
 * :mod:`thinfilm_mi.render.props` -- reading the plugins' properties.

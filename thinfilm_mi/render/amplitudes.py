@@ -1,4 +1,4 @@
-"""Polarised response of a :class:`~thinfilm_mi.render.kernel.KernelStack` at a hit.
+"""Polarized response of a :class:`~thinfilm_mi.render.kernel.KernelStack` at a hit.
 
 Polarized variants need the stack's Mueller matrices, not only its powers. A side
 planned with a table (:mod:`thinfilm_mi.tabulate.mueller`: ``tabulate`` true, or
@@ -6,17 +6,17 @@ planned with a table (:mod:`thinfilm_mi.tabulate.mueller`: ``tabulate`` true, or
 Mueller components from it (:func:`table_response`); otherwise it is evaluated
 exactly from the complex amplitudes ``r_s, r_p, t_s, t_p`` at ``si.wavelengths``
 (:func:`optics.stack_amplitudes`, films unrolled; from
-:data:`~thinfilm_mi.optics.unpolarised.LOOP_MIN_FILMS` films a loop over the films'
+:data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films a loop over the films'
 buffers, :func:`optics.mueller.loop_amplitudes`, so that the kernel does not grow
-with the depth), after the same skips as the unpolarised path (films of zero
+with the depth), after the same skips as the unpolarized path (films of zero
 thickness dropped, nothing below an optically opaque film).
 
 The result is what a Mueller matrix needs, in Mitsuba's convention (see the
 docstring of :mod:`thinfilm_mi.optics.core`: Mitsuba's amplitudes are the complex
 conjugates of ours):
 
-* ``R`` and ``T``: the unpolarised reflectance and transmittance, formed exactly
-  as :func:`unpolarised.unpolarised_rt` forms them (the Mueller matrices' ``M00``;
+* ``R`` and ``T``: the unpolarized reflectance and transmittance, formed exactly
+  as :func:`unpolarized.unpolarized_rt` forms them (the Mueller matrices' ``M00``;
   the plugins use them for weights and lobe probabilities);
 * a :class:`Shape` per lobe: the Mueller matrix in the s/p frame divided by its
   ``M00``, so that ``M = R * shape`` (:mod:`thinfilm_mi.render.modes` rotates it).
@@ -26,7 +26,7 @@ Films thicker than ``coherence_thickness`` are averaged incoherently by the tabl
 intensities do). The exact path (no table: ``tabulate`` false, fewer films, a
 ``thickness`` texture, gradients) evaluates them coherently (an incoherent average
 has no amplitude): there polarized renders of such stacks show their fine fringes
-where the unpolarised ones average them.
+where the unpolarized ones average them.
 """
 from __future__ import annotations
 
@@ -37,12 +37,12 @@ import drjit as dr
 
 from thinfilm_mi.optics.core import Cx, stack_amplitudes, transmittance_factor_p, transmittance_factor_s
 from thinfilm_mi.optics.mueller import loop_amplitudes
-from thinfilm_mi.optics.unpolarised import unpolarised_powers
+from thinfilm_mi.optics.unpolarized import unpolarized_powers
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
 
-__all__ = ["Polarised", "Shape", "depolarizing_shape", "jones_shape", "physical",
-           "polarised_response", "table_response", "table_shape"]
+__all__ = ["Polarized", "Shape", "depolarizing_shape", "jones_shape", "physical",
+           "polarized_response", "table_response", "table_shape"]
 
 
 @dataclass
@@ -95,18 +95,18 @@ def jones_shape(a_s: Cx, a_p: Cx, w_s=1.0, w_p=1.0) -> Shape:
 
 
 @dataclass
-class Polarised:
-    """The polarised response of one stack at a hit (see the module docstring)."""
+class Polarized:
+    """The polarized response of one stack at a hit (see the module docstring)."""
 
     R: Any
     T: Any | None
     reflection: Shape
     transmission: Shape | None
 
-    def select(self, mask, other: "Polarised") -> "Polarised":
+    def select(self, mask, other: "Polarized") -> "Polarized":
         T = None if self.T is None else dr.select(mask, self.T, other.T)
         t = None if self.transmission is None else self.transmission.select(mask, other.transmission)
-        return Polarised(dr.select(mask, self.R, other.R), T,
+        return Polarized(dr.select(mask, self.R, other.R), T,
                          self.reflection.select(mask, other.reflection), t)
 
 
@@ -140,8 +140,8 @@ def table_shape(P, B, c_re, c_im) -> Shape:
     return Shape(B * inv, 1.0, c_re * inv, c_im * inv)
 
 
-def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised:
-    """The :class:`Polarised` response of a planned ``side`` from its Mueller table
+def table_response(side, si, cos_theta, active, transmission: bool) -> Polarized:
+    """The :class:`Polarized` response of a planned ``side`` from its Mueller table
     (channels of :mod:`thinfilm_mi.optics.mueller`), each lobe made physical
     (:func:`physical`)."""
     mi = mitsuba_module()
@@ -156,14 +156,14 @@ def table_response(side, si, cos_theta, active, transmission: bool) -> Polarised
         R, *refl = physical(ch[0], *ch[1:4], 1.0)
     r_shape = table_shape(R, *refl)
     if not transmission:
-        return Polarised(R, None, r_shape, None)
+        return Polarized(R, None, r_shape, None)
     if side.opaque:
-        return Polarised(R, mi.UnpolarizedSpectrum(0.0), r_shape, depolarizing_shape())
-    return Polarised(R, T, r_shape, table_shape(T, *trans))
+        return Polarized(R, mi.UnpolarizedSpectrum(0.0), r_shape, depolarizing_shape())
+    return Polarized(R, T, r_shape, table_shape(T, *trans))
 
 
 def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
-          thickness_scale) -> Polarised:
+          thickness_scale) -> Polarized:
     mi = mitsuba_module()
     side = stack.current_plan(inside, transmission, stack.index_gradients(si, active))
     if side.table is not None and thickness_scale is None and (
@@ -182,20 +182,20 @@ def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission:
         a = stack_amplitudes(n0, cos_theta, films, exit_, si.wavelengths, transmission=want_t)
     r_shape = jones_shape(a.rs, a.rp)
     if not transmission:
-        return Polarised(unpolarised_powers(a, False), None, r_shape, None)
+        return Polarized(unpolarized_powers(a, False), None, r_shape, None)
     if side.opaque:
         zero = mi.UnpolarizedSpectrum(0.0)
-        return Polarised(unpolarised_powers(a, False), zero, r_shape, depolarizing_shape())
-    R, T = unpolarised_powers(a, True)
+        return Polarized(unpolarized_powers(a, False), zero, r_shape, depolarizing_shape())
+    R, T = unpolarized_powers(a, True)
     q0 = dr.select(a.grazing, 1.0, a.q0)
     t_shape = jones_shape(a.ts, a.tp, transmittance_factor_s(a.q_exit, q0),
                           transmittance_factor_p(a.n_exit, a.q_exit, q0))
-    return Polarised(R, T, r_shape, t_shape)
+    return Polarized(R, T, r_shape, t_shape)
 
 
-def polarised_response(stack: KernelStack, si, cos_theta, active=True, *,
-                       inside: bool | Any = False, transmission: bool = False) -> Polarised:
-    """The exact :class:`Polarised` response of ``stack`` for light arriving at
+def polarized_response(stack: KernelStack, si, cos_theta, active=True, *,
+                       inside: bool | Any = False, transmission: bool = False) -> Polarized:
+    """The exact :class:`Polarized` response of ``stack`` for light arriving at
     ``cos_theta`` (positive, measured on its own side) from the ambient
     (``inside`` false), the substrate (true), or per lane (a mask: both sides are
     evaluated and selected), as :meth:`KernelStack.reflectance` takes them."""

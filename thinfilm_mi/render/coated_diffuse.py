@@ -28,7 +28,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.optics.choices import choose
 from thinfilm_mi.optics.core import Cx, film_attenuation
-from thinfilm_mi.render.colour import (
+from thinfilm_mi.render.colour_variants import (
     GradientSampler,
     attach_gradient,
     colour_channels,
@@ -349,7 +349,7 @@ class CoatedDiffuse:
 
     def colour_estimate(self, si, cos_i, cos_o, active, g):
         """An unbiased estimate of the integrated diffuse term at stratified wavelengths
-        (:class:`~thinfilm_mi.render.colour.GradientSampler`), whose gradients the table's
+        (:class:`~thinfilm_mi.render.colour_variants.GradientSampler`), whose gradients the table's
         value takes; ``g(c, R_dh)``: the base's term of channel ``c`` (``G(k_d,c, R_dh)``
         for Lambert's), ``R_dh`` with its derivatives; the thickness texture scales every
         film."""

@@ -33,7 +33,7 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.render.colour import with_absorbing
+from thinfilm_mi.render.colour_variants import with_absorbing
 from thinfilm_mi.render.kernel import KernelStack, side_data
 from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.params import ALBEDO_SLACK

@@ -18,9 +18,9 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.optics.core import Cx
-from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt
+from thinfilm_mi.optics.unpolarized import LOOP_MIN_FILMS, unpolarized_rt
 from thinfilm_mi.render import mirror
-from thinfilm_mi.render.colour import (
+from thinfilm_mi.render.colour_variants import (
     GradientSampler,
     attach_gradient,
     colour_channels,
@@ -33,7 +33,7 @@ from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.tabulation import Route, table_key, tabulate_option
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 from thinfilm_mi.tabulate import band
-from thinfilm_mi.tabulate import base as tabulate_base
+from thinfilm_mi.tabulate.base import MAX_TEXELS, BuildReport, SideData, TableCache, opaque_float
 from thinfilm_mi.tabulate.mueller import MUELLER
 from thinfilm_mi.tabulate.quantities import POWERS
 from thinfilm_mi.tabulate.store import default_store
@@ -91,7 +91,7 @@ class SidePlan:
         #: What the build of :attr:`table` did (a ``tabulate.base.BuildReport``), or None
         self.build_report = None
         self.loop = None   # a LoopFilms where the films are evaluated in a loop
-        #: RGB/mono variants: the side's tabulate.colour.ColourTable, or None where the
+        #: RGB/mono variants: the side's tabulate.integrated.ColourTable, or None where the
         #: plugin evaluates per channel (no films over an index given per channel)
         self.colour = None
 
@@ -126,7 +126,7 @@ class KernelStack:
                  coherence_thickness: float = DEFAULT_COHERENCE_THICKNESS,
                  sides: dict | None = None, plugin: str = "thin-film BSDF"):
         self.indices = [f[0] for f in films]
-        self.thickness = [tabulate_base.opaque_float(f[1]) for f in films]
+        self.thickness = [opaque_float(f[1]) for f in films]
         self.ambient = ambient
         self.substrate = substrate
         #: Optional Mitsuba texture; every film's thickness is multiplied by its
@@ -193,7 +193,7 @@ class KernelStack:
             side.lossless = lossless[inside]
         self.table_failed = []
         if colour_channels() is not None:
-            # RGB and mono variants read integrated colour tables (thinfilm_mi.tabulate.colour)
+            # RGB and mono variants read integrated colour tables (thinfilm_mi.tabulate.integrated)
             for side in self.plan.values():
                 side.colour = colour_table(self, side, side_data)
             if dr.is_diff_v(mitsuba_module().Float):
@@ -257,7 +257,7 @@ class KernelStack:
             why = "; ".join(sorted({str((self.plan[i].build_report or {}).get("result"))
                                     for i in self.table_failed}))
             warnings.warn(f"{self.plugin}: the stack {self.describe()} cannot be tabulated "
-                          f"within table_error={self.table_error:g} in {tabulate_base.MAX_TEXELS} "
+                          f"within table_error={self.table_error:g} in {MAX_TEXELS} "
                           f"texels and {option.budget_scale:g}x the build budget of 'auto' "
                           f"({why}); it is evaluated exactly", stacklevel=3)
 
@@ -389,11 +389,11 @@ class KernelStack:
                transmission: bool = False):
         """RGB/mono variants: ``R`` (and ``T`` if asked) as ``mi.Spectrum`` colours,
         the spectral values integrated against colour matching
-        (:mod:`thinfilm_mi.tabulate.colour`), read from the side's colour table; a side
+        (:mod:`thinfilm_mi.tabulate.integrated`), read from the side's colour table; a side
         with no films over an index given per channel is evaluated per channel
         (Fresnel), as Mitsuba's ``conductor`` does. Where a thickness or an index
         carries gradients, they come from an unbiased estimate of the integral
-        (:class:`~thinfilm_mi.render.colour.GradientSampler`); the value stays the
+        (:class:`~thinfilm_mi.render.colour_variants.GradientSampler`); the value stays the
         table's. Arguments as :meth:`reflectance`."""
         scale = self.thickness_scale_at(si, active)
 
@@ -430,7 +430,7 @@ class KernelStack:
 
     def reflectance(self, si, cos_theta, active=True, *, inside: bool | Any = False,
                     transmission: bool = False, thickness_scale=None):
-        """Unpolarised ``R`` (and ``T`` if asked) as ``mi.Spectrum`` at ``si.wavelengths``.
+        """Unpolarized ``R`` (and ``T`` if asked) as ``mi.Spectrum`` at ``si.wavelengths``.
 
         ``cos_theta`` is the (positive) cosine of incidence measured on the side
         the light comes from. ``inside`` (a Python bool or a mask) selects the
@@ -453,16 +453,16 @@ class KernelStack:
 
 
 def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
-    """Coherent :func:`unpolarised_rt`, or the incoherent-aware evaluator when
+    """Coherent :func:`unpolarized_rt`, or the incoherent-aware evaluator when
     some film is beyond the coherence thickness."""
     if any(incoherent):
         from thinfilm_mi.optics.incoherent import incoherent_rt
         return incoherent_rt(n0, cos0, films, n_exit, wl, incoherent, transmission=transmission)
-    return unpolarised_rt(n0, cos0, films, n_exit, wl, transmission)
+    return unpolarized_rt(n0, cos0, films, n_exit, wl, transmission)
 
 
 #: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).
-TABLE_CACHE = tabulate_base.TableCache()
+TABLE_CACHE = TableCache()
 #: Builds of at least this many exact evaluations (~30 ms and more: the probes of
 #: 10 films and more, every band-limited build) are kept in the table store
 #: (:mod:`thinfilm_mi.tabulate.store`) for later processes; cheaper ones are rebuilt.
@@ -496,26 +496,26 @@ def _tables_cache(stack: KernelStack, side: SidePlan, quantity=POWERS):
     transmission = side.transmission and not side.opaque
     channels = quantity.channels(transmission)
     option = stack.tabulate
-    max_texels = quantity.auto_max_floats // channels if option.selective else tabulate_base.MAX_TEXELS
+    max_texels = quantity.auto_max_floats // channels if option.selective else MAX_TEXELS
     budget_scale = option.budget_scale
     key = table_key(arrays, side.films, (mi.variant(), side.transmission, side.exit_real, side.opaque,
                                          stack.table_error, stack.spectral_resolution, max_texels,
                                          budget_scale, quantity.name))
     found, table = TABLE_CACHE.get(key)
     if found:
-        side.build_report = tabulate_base.BuildReport(result="from the cache")
+        side.build_report = BuildReport(result="from the cache")
         return table
     disk = default_store()
     if disk is not None:
         found, table, report = disk.get(key)
         if found:
-            side.build_report = tabulate_base.BuildReport(result="from the table store",
+            side.build_report = BuildReport(result="from the table store",
                                                           build=report)
             TABLE_CACHE.put(key, table)
             return table
 
     data = side_data(side, transmission, quantity=quantity)
-    side.build_report = report = tabulate_base.BuildReport()
+    side.build_report = report = BuildReport()
     table = band.build_table(data, stack.table_error, GRID, max_texels,
                              stack.spectral_resolution, report=report,
                              budget_scale=budget_scale)
@@ -544,7 +544,7 @@ def _index_function(ix: SpectralIndex, real: bool = False, channel: complex | No
 
 
 def side_data(side: SidePlan, transmission: bool, channel: dict | None = None,
-              quantity=POWERS) -> tabulate_base.SideData:
+              quantity=POWERS) -> SideData:
     """The float64 build data (:class:`~thinfilm_mi.tabulate.base.SideData`) of ``side``; ``channel`` maps
     media (by ``id``) given per channel to their index in the channel built;
     ``quantity``: what is tabulated (:data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`)."""
@@ -555,7 +555,7 @@ def side_data(side: SidePlan, transmission: bool, channel: dict | None = None,
 
     incoherent = side.incoherent
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]
-    return tabulate_base.SideData(
+    return SideData(
         n0=on(side.n0, real=True), films=[(on(ix), scalar(d)) for ix, d, _ in side.films],
         n_exit=on(side.exit, real=True) if side.exit_real else on(side.exit),
         transmission=transmission, rt=quantity.rt(incoherent), quantity=quantity,

@@ -9,7 +9,7 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.optics.core import Cx, real_loop_applies
-from thinfilm_mi.optics.unpolarised import unpolarised_rt_loop
+from thinfilm_mi.optics.unpolarized import unpolarized_rt_loop
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 
@@ -103,9 +103,9 @@ class LoopFilms:
         return i, dr.clip((w - lo) / (hi - lo), 0.0, 1.0)
 
     def rt(self, n0, cos_theta, exit_: Cx, wl, transmission: bool, thickness_scale,
-           evaluator=unpolarised_rt_loop):
+           evaluator=unpolarized_rt_loop):
         """``evaluator(n0, cos, count, film, n_exit, wl, transmission, **hints)`` over
-        these films: the powers (:func:`unpolarised.unpolarised_rt_loop`) or, in
+        these films: the powers (:func:`unpolarized.unpolarized_rt_loop`) or, in
         polarized variants, the amplitudes (:func:`optics.mueller.loop_amplitudes`)."""
         mi = mitsuba_module()
         if self.constant:

@@ -16,7 +16,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import catalog as _materials
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL
 from thinfilm_mi.optics.core import Cx
-from thinfilm_mi.render.colour import channel_mean_texture, colour_channels
+from thinfilm_mi.render.colour_variants import channel_mean_texture, colour_channels
 from thinfilm_mi.render.params import unchanged
 from thinfilm_mi.render.textures import GRID, irregular, mitsuba_module, texture_on_grid, uniform
 

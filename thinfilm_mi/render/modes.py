@@ -3,10 +3,10 @@
 Every plugin asks its mode (:func:`current`, chosen once from the Mitsuba variant
 when the plugin is built) two things, and writes no ``if variant`` of its own:
 
-* :meth:`SpectralMode.response` — the stack's unpolarised ``R`` (and ``T``) at the
+* :meth:`SpectralMode.response` — the stack's unpolarized ``R`` (and ``T``) at the
   hit, for the weights and lobe probabilities, together with whatever the mode
-  needs to form its value later (nothing, or the polarisation of each lobe);
-* :meth:`SpectralMode.value` — the plugin's unpolarised weight of a lobe (``R``
+  needs to form its value later (nothing, or the polarization of each lobe);
+* :meth:`SpectralMode.value` — the plugin's unpolarized weight of a lobe (``R``
   or ``T`` times its factors, as a spectrum) turned into the variant's return
   value for the directions of the sample.
 
@@ -14,7 +14,7 @@ Modes:
 
 * ``spectral`` (``*_spectral``): ``R``/``T`` from the stack's tables or film loops
   (:meth:`KernelStack.reflectance`); the value is the weight itself.
-* ``polarized`` (``*_spectral_polarized``): ``R``/``T`` and the s/p polarisation
+* ``polarized`` (``*_spectral_polarized``): ``R``/``T`` and the s/p polarization
   from the exact complex amplitudes (:mod:`thinfilm_mi.render.amplitudes`); the value is
   the Mueller matrix ``weight * shape``, rotated from the s/p frame of the plane
   of incidence into the implicit Stokes bases of the incident and outgoing
@@ -26,7 +26,7 @@ Modes:
 * ``colour`` (RGB and mono variants: ``*_rgb``, ``*_mono``): ``R``/``T`` are the
   spectral values integrated against colour matching (linear sRGB or Y under
   D65), read from the stack's colour tables (:meth:`KernelStack.colour`,
-  :mod:`thinfilm_mi.tabulate.colour`); the value is the weight itself. Factors the
+  :mod:`thinfilm_mi.tabulate.integrated`); the value is the weight itself. Factors the
   user gives as colours multiply per channel, as in Mitsuba's own plugins.
   Products of spectral factors (``thinfilm_diffuse``'s film-in x base x
   film-out) are integrated as products by the plugin's own tables.
@@ -38,8 +38,8 @@ from typing import Any
 
 import drjit as dr
 
-from thinfilm_mi.render.amplitudes import Shape, depolarizing_shape, polarised_response
-from thinfilm_mi.render.colour import colour_channels
+from thinfilm_mi.render.amplitudes import Shape, depolarizing_shape, polarized_response
+from thinfilm_mi.render.colour_variants import colour_channels
 from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.textures import mitsuba_module
 
@@ -48,7 +48,7 @@ __all__ = ["ColourMode", "PolarizedMode", "Response", "SpectralMode", "current",
 
 @dataclass
 class Response:
-    """A stack's unpolarised ``R`` and ``T`` at a hit, and per lobe what the mode
+    """A stack's unpolarized ``R`` and ``T`` at a hit, and per lobe what the mode
     needs to form its value (``None`` in the spectral mode)."""
 
     R: Any
@@ -58,13 +58,13 @@ class Response:
 
 
 class SpectralMode:
-    """Unpolarised spectral variants: spectra in, spectra out."""
+    """Unpolarized spectral variants: spectra in, spectra out."""
 
     name = "spectral"
     polarized = False
     #: Whether values are integrated over wavelengths at load time (RGB and mono)
     integrated = False
-    #: The lobe of a diffuse (depolarising) component.
+    #: The lobe of a diffuse (depolarizing) component.
     depolarized = None
 
     def response(self, stack: KernelStack, si, cos_theta, active=True, *,
@@ -77,7 +77,7 @@ class SpectralMode:
         return None
 
     def value(self, weight, lobe, ctx, wi, wo, normal=None):
-        """The return value of a sample or evaluation with the unpolarised ``weight``
+        """The return value of a sample or evaluation with the unpolarized ``weight``
         (``mi.Spectrum``) on ``lobe`` (a :class:`Response`'s ``reflection`` or
         ``transmission``, or :attr:`depolarized`) between ``wi`` and ``wo`` about
         ``normal`` (default: the shading normal). Here: ``weight``."""
@@ -93,7 +93,7 @@ class PolarizedMode(SpectralMode):
 
     def response(self, stack, si, cos_theta, active=True, *, inside=False,
                  transmission=False) -> Response:
-        p = polarised_response(stack, si, cos_theta, active, inside=inside,
+        p = polarized_response(stack, si, cos_theta, active, inside=inside,
                                transmission=transmission)
         return Response(p.R, p.T, p.reflection, p.transmission)
 

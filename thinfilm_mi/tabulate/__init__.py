@@ -24,10 +24,9 @@ The builders on top:
 * :mod:`thinfilm_mi.tabulate.exact` -- cubic B-spline tables of the exact ``R``/``T`` over
   (angle, wavelength) and their verification.
 * :mod:`thinfilm_mi.tabulate.band` -- tables of ``R``/``T`` convolved with a Gaussian in
-  wavenumber (deep stacks), on a sheared axis (:mod:`thinfilm_mi.tabulate.shear`), from
-  rows (:mod:`thinfilm_mi.tabulate.band_rows`) sampled through the stack's smooth
-  amplitudes (:mod:`thinfilm_mi.tabulate.band_amplitudes`).
-* :mod:`thinfilm_mi.tabulate.colour` -- colour tables: ``R``/``T`` integrated against colour
+  wavenumber (deep stacks), on a sheared axis, from rows sampled through the stack's
+  smooth amplitudes: one algorithm in one module.
+* :mod:`thinfilm_mi.tabulate.integrated` -- colour tables: ``R``/``T`` integrated against colour
   matching over the angle (RGB and mono variants).
 * :mod:`thinfilm_mi.tabulate.diffuse` -- the coated-diffuse product film-in x base x film-out.
 * :mod:`thinfilm_mi.tabulate.hemispherical` -- hemispherical terms ``R_dh``, ``T_hemi``.

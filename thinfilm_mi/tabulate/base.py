@@ -20,7 +20,7 @@ The refinement shared by the builders (budget, first step, convergence order, th
 linear tables' 4-point rule) is :mod:`thinfilm_mi.tabulate.refine`. The builders on
 top are :mod:`thinfilm_mi.tabulate.exact` (tables of the exact values),
 :mod:`thinfilm_mi.tabulate.band` (band-limited values of deep stacks),
-:mod:`thinfilm_mi.tabulate.colour` and :mod:`thinfilm_mi.tabulate.diffuse` (RGB and
+:mod:`thinfilm_mi.tabulate.integrated` and :mod:`thinfilm_mi.tabulate.diffuse` (RGB and
 mono tables) and :mod:`thinfilm_mi.tabulate.hemispherical`.
 """
 from __future__ import annotations
@@ -100,10 +100,10 @@ class SideData:
     ``(index, thickness_nm)`` pairs from that side inwards (index: complex numpy
     array over ``wavelengths``), ``n_exit`` the complex exit index. ``rt`` is
     the evaluator ``(n0, cos0, films, n_exit, wl, transmission) -> R | (R, T)``
-    (the coherent :func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt` or the
+    (the coherent :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt` or the
     incoherent-aware one), ``transmission`` whether ``T`` is tabulated too.
     ``rt_loop``, where given, evaluates :data:`BUILD_LOOP_MIN_FILMS` films or
-    more as a loop (:func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt_loop`).
+    more as a loop (:func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt_loop`).
     ``kinks``: wavelengths where an index's slope jumps (tabulated data), at
     which the build checks the table too. ``absorbing`` (set by the builds,
     :meth:`set_absorbing`): whether each film and the exit medium absorb
@@ -270,7 +270,7 @@ class Table:
         # a split axis: node coordinates beyond the critical cell are in the
         # second segment, 2g texels further
         self._split = opaque_float(0.5 * self.nu - 0.5) if axis.split else None
-        #: a band-limited table's sheared v axis (:class:`~thinfilm_mi.tabulate.shear.Shear`)
+        #: a band-limited table's sheared v axis (:class:`~thinfilm_mi.tabulate.band.Shear`)
         self.shear = shear
         if shear is not None:
             self._v_scale = opaque_float((self.nv - 1) / (SIGMA_MAX - shear.low))

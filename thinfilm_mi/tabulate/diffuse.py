@@ -9,7 +9,7 @@ must be the *integral of that product* against colour matching, not a product
 of integrated factors (the fringes of ``t(θ_i)`` and ``t(θ_o)`` line up at some
 angles and cancel at others). ``k_d`` is the user's colour (``reflectance``,
 per channel as in Mitsuba's ``diffuse``), so with ``ŵ_c`` the channel weights
-of :mod:`thinfilm_mi.tabulate.colour` (unit integral):
+of :mod:`thinfilm_mi.tabulate.integrated` (unit integral):
 
     π f_c(θ_i, θ_o) = ∫ ŵ_c(λ) t(λ, θ_i) t(λ, θ_o) G(k_d,c, R_dh(λ)) dλ,
     G(k, r) = k / (1 - k r)   (interreflection),   G(k, r) = k   ("single").
@@ -87,7 +87,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
 from thinfilm_mi.tabulate.axes import PLAIN
 from thinfilm_mi.tabulate.base import BuildReport, grid_coordinate, linear_texture, opaque_float
-from thinfilm_mi.tabulate.colour import TOLERANCE_ABS_2D
+from thinfilm_mi.tabulate.integrated import TOLERANCE_ABS_2D
 from thinfilm_mi.tabulate.refine import Budget, LinearAxis, interleave, linear_error, subdivide
 
 __all__ = ["ColourDiffuse", "ScaledColourDiffuse", "series_nodes", "lagrange_basis", "level_weights",
@@ -124,7 +124,7 @@ MAX_SCALE_NODES = 257
 #: Largest abs error of the lookup's cubic interpolation over the scale, of ``π f`` and
 #: its albedo at ``k_d = 1`` (checked at every midpoint of the scale nodes): the
 #: tolerance of the colour tables' nodes over the scale
-#: (:data:`~thinfilm_mi.tabulate.colour.TOLERANCE_ABS_2D`), ΔE2000 <= ~0.2 where Y >= 0.05.
+#: (:data:`~thinfilm_mi.tabulate.integrated.TOLERANCE_ABS_2D`), ΔE2000 <= ~0.2 where Y >= 0.05.
 SCALE_ABS = TOLERANCE_ABS_2D
 #: Most floats in the 3-D table and its albedo table (128 MiB of float32).
 MAX_SCALED_FLOATS = 1 << 25
@@ -341,7 +341,7 @@ class ColourDiffuse:
         for j, g in enumerate(self._weights(kd)):
             vals = res[j * C:(j + 1) * C]
             out += g * (mi.Spectrum(*vals) if C > 1 else mi.Spectrum(vals[0]))
-        return out   # not clamped: see tabulate.colour.ColourTable.lookup
+        return out   # not clamped: see tabulate.integrated.ColourTable.lookup
 
     def r_dh_at(self, wavelengths, active=True):
         """``R_dh`` at ``wavelengths`` (``mi.Spectrum``, nm), detached."""

@@ -3,9 +3,9 @@
 Hirayama et al. (sec. 4) precompute ``k_r`` and ``k_t`` at sampled incidence
 angles and wavelengths and interpolate linearly, which they found 6x faster than
 the recursion at every hit. Here a table is a ``Texture2f`` (Dr.Jit's texture,
-float32) whose channels are the unpolarised ``R`` and, where a BSDF needs it,
+float32) whose channels are the unpolarized ``R`` and, where a BSDF needs it,
 ``T`` of one lighting side of the stack. It is built in float64 with the optics
-core (:func:`thinfilm_mi.optics.unpolarised.unpolarised_rt` on ``drjit.llvm.Float64``) and
+core (:func:`thinfilm_mi.optics.unpolarized.unpolarized_rt` on ``drjit.llvm.Float64``) and
 looked up in the render kernel, where its cost does not depend on the number of
 films.
 
@@ -91,7 +91,7 @@ from thinfilm_mi.tabulate.base import (
 from thinfilm_mi.tabulate.refine import Budget, convergence_factor
 
 __all__ = ["MAX_PROBE_WORK", "PROBE_HOT_LINES", "PROBE_POINTS", "PROBE_SHARE", "PROBE_U",
-           "PROBE_U_FINE", "PROBE_V", "PROBE_V_FINE", "build_table", "ghost_count", "line_levels",
+           "PROBE_U_FINE", "PROBE_V", "PROBE_V_FINE", "build_exact_table", "ghost_count", "line_levels",
            "table_resolution"]
 
 
@@ -111,7 +111,7 @@ def table_resolution(side: SideData, error: float, wavelengths: np.ndarray) -> t
     plus a floor for the Fresnel terms. The total phase over the wavenumber
     range is ``4 pi sum_j n_j d_j (sigma_max - sigma_min)`` and over the angles
     ``4 pi / lambda_min sum_j d_j (Re q_j(0) - Re q_j(grazing))``. The estimate
-    is then verified and refined by :func:`build_table`.
+    is then verified and refined by :func:`build_exact_table`.
     """
     h = _phase_step(error)
     n0 = side.n0(wavelengths)
@@ -370,7 +370,7 @@ def _estimate(side: SideData, angle: AngleAxis, error: float, max_texels: int, s
     return cu.need(a * budget), cv.need((1.0 - a) * budget)
 
 
-def build_table(side: SideData, error: float, wavelengths: np.ndarray,
+def build_exact_table(side: SideData, error: float, wavelengths: np.ndarray,
                 max_texels: int = MAX_TEXELS, report: BuildReport | None = None,
                 budget_scale: float = 1.0) -> Table | None:
     """Build and verify a table of the exact values of one side, or ``None`` if

@@ -62,7 +62,7 @@ from thinfilm_mi.llvm import require_llvm
 from thinfilm_mi.materials.model import GRID  # where the factors are tabulated
 from thinfilm_mi.optics.backend import aligned_array, float64_array
 from thinfilm_mi.optics.core import Cx, film_attenuation
-from thinfilm_mi.optics.unpolarised import LOOP_MIN_FILMS, unpolarised_rt, unpolarised_rt_loop
+from thinfilm_mi.optics.unpolarized import LOOP_MIN_FILMS, unpolarized_rt, unpolarized_rt_loop
 from thinfilm_mi.tabulate.base import film_gather, grid_coordinate, linear_texture, opaque_float
 from thinfilm_mi.tabulate.refine import interleave
 
@@ -168,13 +168,13 @@ def _over_scales(n_in, mu, films, n_exit, wavelengths, scales, reduce, film_n=No
             at = UInt32(np.tile(np.repeat(np.arange(nw, dtype=np.uint32), nm), ns))
             indices = [np.asarray(ix, np.complex128) * np.ones(nw) for ix, _ in films] + [np.zeros(1)]
             film = film_gather(indices, [float(d) for _, d in films] + [0.0], at, nw, False, lane_s)
-            rt = unpolarised_rt_loop(n0, cos, UInt32(len(films)), film, exit_, lane_wl, transmission)
+            rt = unpolarized_rt_loop(n0, cos, UInt32(len(films)), film, exit_, lane_wl, transmission)
         else:
             # opaque thicknesses: a thickness edit reuses the kernel
             stack = [(Cx(float64_array(_lanes(np.real(n), ns, nm)),
                          float64_array(_lanes(np.imag(n), ns, nm))),
                       lane_s * dr.opaque(Float64, float(d))) for n, d in films]
-            rt = unpolarised_rt(n0, cos, stack, exit_, lane_wl, transmission)
+            rt = unpolarized_rt(n0, cos, stack, exit_, lane_wl, transmission)
         R, T = rt if transmission else (rt, None)
         k_a = None
         if film_n is not None:
@@ -280,7 +280,7 @@ def r_dh_partials(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]]
     read). The base medium and the ambient are not parameters.
 
     Reverse-mode AD (float64, LLVM backend) of ``Σ_λ Σ_μ w_μ R_up(μ, λ)``, the
-    coating's films visited by a loop (:func:`unpolarised.unpolarised_rt_loop`, so that
+    coating's films visited by a loop (:func:`unpolarized.unpolarized_rt_loop`, so that
     the kernel does not grow with the films) that gathers each film's parameters
     per wavelength from buffers: the gradient of a buffer entry is the partial at
     that wavelength. Wavelengths are taken in blocks of
@@ -345,8 +345,8 @@ def _partials_block(n_amb, coating, n_exit, film_n, wavelengths, mu, weight) -> 
 
         def reflectance(n_in, exit_):
             if F == 0:
-                return unpolarised_rt(n_in, cos0, [], exit_, wl, transmission=False)
-            return unpolarised_rt_loop(n_in, cos0, ADUInt32(F), film, exit_, wl,
+                return unpolarized_rt(n_in, cos0, [], exit_, wl, transmission=False)
+            return unpolarized_rt_loop(n_in, cos0, ADUInt32(F), film, exit_, wl,
                                        transmission=False, max_iterations=F)
         if film_n is None:
             R_up = reflectance(lanes(n_exit.real), Cx(n0, 0.0))

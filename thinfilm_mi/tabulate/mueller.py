@@ -22,7 +22,7 @@ The quantity provides:
   :func:`~thinfilm_mi.optics.mueller.mueller_rt_loop` (deep stacks, a loop);
 * for the band-limited build's first level, the smooth projective amplitudes
   (:meth:`MuellerQuantity.smooth_terms`, ``N, D`` of s and p at the channels where
-  the powers' :func:`~thinfilm_mi.tabulate.band_rows.amplitudes` has them, so
+  the powers' :func:`~thinfilm_mi.tabulate.band.amplitudes` has them, so
   the resonance search is the same) and the channels from them
   (:meth:`MuellerQuantity.values`).
 """
@@ -116,7 +116,7 @@ class MuellerQuantity:
     #: channels 8-9 of :meth:`smooth_terms` are amplitudes (``T``), not their squares
     squared_terms = False
     #: First v-node spacing of band-limited tables (in σ_ν; the powers' is
-    #: ``band_rows.V_SPACING`` = 0.6): the cross term ``C`` interpolates ~3.5x worse
+    #: ``band.V_SPACING`` = 0.6): the cross term ``C`` interpolates ~3.5x worse
     #: along v than ``R`` (measured at 0.6 on the 10- and 30-film benchmark stacks:
     #: 5.8e-4 and 6.7e-4 against R's 1.6e-4 and 3.2e-4), over the half of a 1e-3
     #: target at which the build makes v finer and computes every row again; at 0.5
@@ -153,7 +153,7 @@ class MuellerQuantity:
     def smooth_terms(side: SideData, cos0: np.ndarray, rows: np.ndarray, wl: np.ndarray,
                      indices) -> tuple[np.ndarray, np.ndarray]:
         """The smooth projective amplitudes at points ``(cos0[i], wl[rows[i]])``, as
-        :func:`~thinfilm_mi.tabulate.band_rows.amplitudes` gives them: ``(terms,
+        :func:`~thinfilm_mi.tabulate.band.amplitudes` gives them: ``(terms,
         exponents)``, ``terms`` with ``Re, Im`` of ``N_s, D_s, N_p, D_p`` (channels
         0-7) and, with transmission, of ``T_s, T_p`` and the power factors ``w_s,
         w_p`` (``r = N / D``, ``t = T / D``); the exponents are 0 (the smooth

@@ -4,8 +4,8 @@ A :class:`~thinfilm_mi.tabulate.base.SideData` carries its quantity; the builder
 (:mod:`thinfilm_mi.tabulate.exact`, :mod:`thinfilm_mi.tabulate.band`) and the render
 kernel (:mod:`thinfilm_mi.render.kernel`) ask it, never test which it is:
 
-* :data:`POWERS` (``"powers"``): the unpolarised ``R`` [, ``T``] of the spectral
-  variants, evaluated by :func:`~thinfilm_mi.optics.unpolarised.unpolarised_rt`
+* :data:`POWERS` (``"powers"``): the unpolarized ``R`` [, ``T``] of the spectral
+  variants, evaluated by :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt`
   (or the incoherent-aware :func:`~thinfilm_mi.optics.incoherent.incoherent_rt`);
 * :data:`~thinfilm_mi.tabulate.mueller.MUELLER` (``"mueller"``): the Mueller
   components of the polarized variants.
@@ -24,9 +24,8 @@ from __future__ import annotations
 import numpy as np
 
 from thinfilm_mi.optics.incoherent import incoherent_rt
-from thinfilm_mi.optics.unpolarised import unpolarised_rt, unpolarised_rt_loop
-from thinfilm_mi.tabulate.band_amplitudes import amplitudes, powers_of
-from thinfilm_mi.tabulate.band_rows import V_SPACING
+from thinfilm_mi.optics.unpolarized import unpolarized_rt, unpolarized_rt_loop
+from thinfilm_mi.tabulate.band import V_SPACING, amplitudes, powers_of
 from thinfilm_mi.tabulate.mueller import MUELLER
 
 __all__ = ["AUTO_MAX_TEXELS", "AUTO_MIN_FILMS", "POWERS", "QUANTITIES", "RT_AUTO_MIN_FILMS",
@@ -51,7 +50,7 @@ AUTO_MAX_TEXELS = 1 << 19
 
 
 class PowersQuantity:
-    """The unpolarised powers ``R`` [, ``T``] (see the module)."""
+    """The unpolarized powers ``R`` [, ``T``] (see the module)."""
 
     name = "powers"
     auto_max_floats = AUTO_MAX_TEXELS
@@ -60,7 +59,7 @@ class PowersQuantity:
     squared_terms = True
     smooth_terms = staticmethod(amplitudes)
     values = staticmethod(powers_of)
-    rt_loop = staticmethod(unpolarised_rt_loop)
+    rt_loop = staticmethod(unpolarized_rt_loop)
 
     @staticmethod
     def channels(transmission: bool) -> int:
@@ -79,7 +78,7 @@ class PowersQuantity:
         if any(incoherent):
             return lambda n0, cos0, films, n_exit, wl, transmission: incoherent_rt(
                 n0, cos0, films, n_exit, wl, incoherent, transmission=transmission)
-        return unpolarised_rt
+        return unpolarized_rt
 
     @staticmethod
     def grazing(transmission: bool) -> np.ndarray:

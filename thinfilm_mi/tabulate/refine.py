@@ -11,7 +11,7 @@ starts, and how it decides where to add nodes.
 * :func:`convergence_factor`: by how much to multiply an axis's nodes to reach a
   target error, at the convergence order observed between two rounds (the
   cubic tables of :mod:`~thinfilm_mi.tabulate.exact` and :mod:`~thinfilm_mi.tabulate.band`).
-* The 4-point rule of the linear tables (:mod:`~thinfilm_mi.tabulate.colour`,
+* The 4-point rule of the linear tables (:mod:`~thinfilm_mi.tabulate.integrated`,
   :mod:`~thinfilm_mi.tabulate.diffuse`): :func:`midpoints4` predicts the values
   halfway between nodes, :func:`interleave` / :func:`subdivide` double an axis,
   :func:`linear_error` measures linear interpolation against the rule; and

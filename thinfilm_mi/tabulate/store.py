@@ -15,7 +15,7 @@ found not tabulable, with its build report) in one file per key under a director
   the source of this package and the versions of Mitsuba, Dr.Jit and NumPy, so a
   table built by other code is never read;
 * **what is read back**: the float32 texture values exactly as built (with a
-  band-limited table's shear, :mod:`thinfilm_mi.tabulate.shear`), so a table
+  band-limited table's shear, :class:`thinfilm_mi.tabulate.band.Shear`), so a table
   from the store gives the same image bit for bit as the one it stands for
   (``tests/tabulate/test_store.py``);
 * **safety**: files are written under a temporary name and renamed (atomic on one
@@ -37,8 +37,8 @@ from pathlib import Path
 import numpy as np
 
 from thinfilm_mi.tabulate.axes import AXES, GHOST
+from thinfilm_mi.tabulate.band import Shear
 from thinfilm_mi.tabulate.base import BuildReport, Table
-from thinfilm_mi.tabulate.shear import Shear
 
 __all__ = ["ENVIRONMENT", "MAX_BYTES", "TableStore", "code_fingerprint", "default_store"]
 

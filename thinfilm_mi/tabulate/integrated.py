@@ -23,7 +23,7 @@ normal incidence, Y of a 30-film 2.3/1.46 stack on Al on uniform grids against a
 0.005 nm one differs by 4.1e-5 at 1 nm, 3.2e-8 at 0.2 nm and 2.0e-9 at 0.05 nm
 (one 500 nm SiO2 film on Au: 4.8e-6, 1.9e-7, 1.8e-8), so the cavity resonances
 (~0.1 nm wide) need steps of ~0.2 nm where they are and nowhere else; the
-adaptive rule spends them there. ``tests/render/test_colour.py`` checks the tables against
+adaptive rule spends them there. ``tests/render/test_colour_variants.py`` checks the tables against
 colour-science's observer and D65 on a 0.01 nm grid: ΔE2000 <= 0.1 (measured
 <= 0.03) for 1-30 films up to 89°.
 
@@ -63,7 +63,7 @@ __all__ = ["CHUNK_POINTS", "ColourTable", "FIRST_NODES", "FIRST_SCALE_NODES", "F
            "LAMBDA_RELATIVE", "LAMBDA_TOLERANCE", "LINEAR_ABS", "LINEAR_DE", "MAX_FIRST_STEP",
            "MAX_LAMBDA_LEVEL", "MAX_NODES", "MAX_NODES_2D", "MAX_TEXELS_2D", "Source",
            "TOLERANCE_ABS", "TOLERANCE_ABS_2D", "TOLERANCE_DE", "TOLERANCE_DE_2D", "build",
-           "channel_count", "close_each", "first_step", "integrate", "integrate_points",
+           "channel_count", "close_each", "first_wavelength_step", "integrate", "integrate_points",
            "settings"]
 
 #: The nodes are dense enough when the 4-point rule predicts the integrals at
@@ -71,11 +71,11 @@ __all__ = ["CHUNK_POINTS", "ColourTable", "FIRST_NODES", "FIRST_SCALE_NODES", "F
 #: channel; L* alone in mono) and :data:`TOLERANCE_ABS` in every channel. The
 #: table then keeps the exact midpoints too: its grid is twice as fine as the
 #: one checked, so its own error is ~1/16 of the check's for a smooth function
-#: (tests/render/test_colour.py: the tables are within ΔE2000 0.03 of a 0.01 nm reference).
+#: (tests/render/test_colour_variants.py: the tables are within ΔE2000 0.03 of a 0.01 nm reference).
 TOLERANCE_DE = 0.05
 #: The same for the nodes of a 2-D table (a ``thickness`` texture): the cells
 #: multiply by four at every level, and ΔE2000 0.2 is a fifth of a just noticeable
-#: difference (tests/render/test_colour.py checks such a table against the reference).
+#: difference (tests/render/test_colour_variants.py checks such a table against the reference).
 TOLERANCE_DE_2D = 0.2
 TOLERANCE_ABS_2D = 3e-3
 TOLERANCE_ABS = 1e-3
@@ -90,7 +90,7 @@ LAMBDA_TOLERANCE = 1e-5
 #: eye sees).
 LAMBDA_RELATIVE = 1e-4
 #: Largest first step (nm): 16 steps per interference fringe of the stack's whole
-#: optical thickness (:func:`first_step`) but never coarser than this. It divides
+#: optical thickness (:func:`first_wavelength_step`) but never coarser than this. It divides
 #: 470 nm and its halves reach the 1 nm knots of the colour-matching data, where the
 #: weights have kinks (D65's slope jumps at 430 nm): a 4 nm step (470/118 nm in
 #: fact) put kinks inside intervals and refined them to the finest level.
@@ -136,7 +136,7 @@ def close_each(a: np.ndarray, b: np.ndarray, channels: int, axis: int,
     return (d_abs <= abs_) & (d_col <= de)
 
 
-def first_step(optical_thickness: float) -> float:
+def first_wavelength_step(optical_thickness: float) -> float:
     """The first wavelength step (nm) for a stack of optical thickness ``Σ n_j d_j``
     (largest real index over 360-830 nm): the narrowest fringe of all the films
     together, ``Δλ = λ² / (2 Σ n_j d_j)`` at 360 nm, sampled 16 times, as a
@@ -158,7 +158,7 @@ class Source:
     the media are given per channel, e.g. ``eta``/``k`` as ``rgb``)."""
     evaluate: object
     channels: list = field(default_factory=list)
-    #: the first wavelength step (nm, :func:`first_step`)
+    #: the first wavelength step (nm, :func:`first_wavelength_step`)
     first_step: float = FIRST_STEP
 
 

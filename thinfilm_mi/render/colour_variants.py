@@ -4,7 +4,7 @@ obtained (no plugin classes here; below :mod:`kernel`, which calls it).
 
 * :func:`colour_channels` — ``"rgb"``, ``"mono"`` or ``None`` (spectral variants).
 * :func:`colour_table` — a side's ``R`` [and ``T``] integrated against colour
-  matching over the angle (:mod:`thinfilm_mi.tabulate.colour` builds it), cached by
+  matching over the angle (:mod:`thinfilm_mi.tabulate.integrated` builds it), cached by
   the side's optics.
 * :func:`channel_mean_texture` — the colour-weighted means of a dataset's index,
   the texture a plugin reads where it evaluates per channel.
@@ -30,10 +30,9 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
 from thinfilm_mi.render.tabulation import table_key
 from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar, texture_range, uniform
-from thinfilm_mi.tabulate import base as tabulate_base
-from thinfilm_mi.tabulate import colour as integrated
+from thinfilm_mi.tabulate import integrated
 from thinfilm_mi.tabulate.axes import TIR
-from thinfilm_mi.tabulate.base import grid_coordinate, linear_texture
+from thinfilm_mi.tabulate.base import SideData, TableCache, evaluate_side, grid_coordinate, linear_texture, side_indices
 from thinfilm_mi.tabulate.refine import LinearAxis, optical_thickness
 
 __all__ = ["COLOUR_CACHE", "GradientSampler", "attach_gradient", "channel_mean_texture",
@@ -43,7 +42,7 @@ __all__ = ["COLOUR_CACHE", "GradientSampler", "attach_gradient", "channel_mean_t
 
 def colour_channels() -> str | None:
     """``"rgb"`` or ``"mono"`` in the RGB and mono variants (whose plugins read
-    integrated colour tables, :mod:`thinfilm_mi.tabulate.colour`), ``None`` in the
+    integrated colour tables, :mod:`thinfilm_mi.tabulate.integrated`), ``None`` in the
     spectral ones."""
     mi = mitsuba_module()
     if mi.is_spectral:
@@ -63,17 +62,17 @@ def channel_mean_texture(wavelengths: np.ndarray, values: np.ndarray, channels: 
                       unbounded=True)
 
 
-def with_absorbing(data: tabulate_base.SideData) -> tabulate_base.SideData:
+def with_absorbing(data: SideData) -> SideData:
     """``data`` with ``absorbing`` set from the 1 nm grid (one kernel per build)."""
     return data.set_absorbing(GRID)
 
 
 #: Colour tables shared between stacks with identical optics (RGB/mono variants).
-COLOUR_CACHE = tabulate_base.TableCache()
+COLOUR_CACHE = TableCache()
 
 
 def colour_table(stack, side, side_data):
-    """The :class:`~thinfilm_mi.tabulate.colour.ColourTable` of the planned side ``side`` of the
+    """The :class:`~thinfilm_mi.tabulate.integrated.ColourTable` of the planned side ``side`` of the
     :class:`~thinfilm_mi.render.kernel.KernelStack` ``stack`` in RGB/mono variants, shared
     between stacks with identical optics; ``None`` where the plugin evaluates per
     channel (no films over an index given per channel). ``side_data(side,
@@ -135,12 +134,12 @@ def colour_table(stack, side, side_data):
                 data, films=[(f, t * scale) for f, t in data.films])
             # the points' wavelengths repeat (one per angle node): indices per unique one
             uniq, rows = np.unique(wl, return_inverse=True)
-            return tabulate_base.evaluate_side(d, cos, rows, uniq, tabulate_base.side_indices(d, uniq),
+            return evaluate_side(d, cos, rows, uniq, side_indices(d, uniq),
                                      scale if per_point else None)
         # the stack's optical thickness at its thickest (the largest scale)
         optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) \
             * optical_thickness(data.films, GRID, np.real)
-        return integrated.Source(evaluate, chans, integrated.first_step(optical))
+        return integrated.Source(evaluate, chans, integrated.first_wavelength_step(optical))
 
     C = integrated.channel_count(channels)
     if per_channel:

@@ -1,12 +1,12 @@
-"""Unpolarised powers of a stack, on any Dr.Jit array type: what every render kernel,
+"""Unpolarized powers of a stack, on any Dr.Jit array type: what every render kernel,
 table build and hemispherical integral evaluates.
 
-* :func:`unpolarised_rt`: ``R = (Rs + Rp)/2`` and ``T`` (the power entering the exit
+* :func:`unpolarized_rt`: ``R = (Rs + Rp)/2`` and ``T`` (the power entering the exit
   medium) from :func:`thinfilm_mi.optics.core.stack_amplitudes`, the films unrolled;
-* :func:`unpolarised_rt_loop`: the same with the films visited by a loop
+* :func:`unpolarized_rt_loop`: the same with the films visited by a loop
   (:func:`thinfilm_mi.optics.core.stack_rt_loop`), for stacks of
   :data:`LOOP_MIN_FILMS` films or more;
-* :func:`unpolarised_powers`: ``R`` and ``T`` from amplitudes already computed.
+* :func:`unpolarized_powers`: ``R`` and ``T`` from amplitudes already computed.
 """
 from __future__ import annotations
 
@@ -20,11 +20,11 @@ from thinfilm_mi.optics.core import (
     transmittance_factor_s,
 )
 
-__all__ = ["LOOP_MIN_FILMS", "unpolarised_rt", "unpolarised_powers", "unpolarised_rt_loop"]
+__all__ = ["LOOP_MIN_FILMS", "unpolarized_rt", "unpolarized_powers", "unpolarized_rt_loop"]
 
 #: Exact evaluation of a side with at least this many films runs the recursion
 #: as a symbolic Dr.Jit loop over buffers of the films (the render kernel's film loop,
-#: :func:`unpolarised_rt_loop` in table builds):
+#: :func:`unpolarized_rt_loop` in table builds):
 #: one loop body in the kernel whatever the depth, so the kernel compiles as fast
 #: for 30 films as for 3, and each hit is cheaper from 4 films on (measurements in
 #: benchmarks/SPEED.md). Below it the films are unrolled, which lets literal
@@ -32,18 +32,18 @@ __all__ = ["LOOP_MIN_FILMS", "unpolarised_rt", "unpolarised_powers", "unpolarise
 LOOP_MIN_FILMS = 4
 
 
-def unpolarised_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
-    """Unpolarised ``R`` (and ``T``, the power entering ``n_exit``), any array type.
+def unpolarized_rt(n0, cos0, films, n_exit, wl, transmission: bool = True):
+    """Unpolarized ``R`` (and ``T``, the power entering ``n_exit``), any array type.
 
     ``R = (Rs + Rp) / 2`` clamped to 1; ``T`` clipped to ``[0, 1 - R]``; at grazing
     incidence ``T = 0``. Shared by the kernels and the float64 hemispherical terms.
     """
     a = stack_amplitudes(n0, cos0, films, n_exit, wl, transmission=transmission)
-    return unpolarised_powers(a, transmission)
+    return unpolarized_powers(a, transmission)
 
 
-def unpolarised_powers(a, transmission: bool = True):
-    """:func:`unpolarised_rt` from the amplitudes ``a`` (:class:`optics.StackAmplitudes`)."""
+def unpolarized_powers(a, transmission: bool = True):
+    """:func:`unpolarized_rt` from the amplitudes ``a`` (:class:`optics.StackAmplitudes`)."""
     R = dr.minimum(0.5 * (a.rs.abs2() + a.rp.abs2()), 1.0)
     if not transmission:
         return R
@@ -54,8 +54,8 @@ def unpolarised_powers(a, transmission: bool = True):
     return R, T
 
 
-def unpolarised_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = True, **hints):
-    """:func:`unpolarised_rt` with the films visited by a loop
+def unpolarized_rt_loop(n0, cos0, count, film, n_exit, wl, transmission: bool = True, **hints):
+    """:func:`unpolarized_rt` with the films visited by a loop
     (:func:`optics.stack_rt_loop`, whose arguments and trace-time ``hints`` these
     are): the render kernels' deep stacks and the table builds' (float64)."""
     Rs, Rp, Ts, Tp = stack_rt_loop(n0, cos0, count, film, n_exit, wl,
