@@ -362,8 +362,14 @@ class Coating:
                 beta = dr.select(roulette, beta / dr.select(q > 0, q, 1.0), beta)
             return acc, gathered, beta, w, depth, rng, active
 
-        state = (zero, zero, mi.Spectrum(1.0), mi.Vector3f(w0), mi.UInt32(0), rng,
-                 mi.Bool(active))
+        acc0, gathered0, beta0 = mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(1.0)
+        if self.mode.polarized:
+            # Mueller matrices that start as literals (zeros, the identity) fill in one
+            # entry per product along the walk, so Dr.Jit would find the loop state still
+            # changing when it records the loop a second time (a principled base): start
+            # them as evaluated values
+            dr.make_opaque(acc0, gathered0, beta0)
+        state = (acc0, gathered0, beta0, mi.Vector3f(w0), mi.UInt32(0), rng, mi.Bool(active))
         labels = ("acc", "gathered", "beta", "w", "depth", "rng", "active")
         # max_iterations=-1: the replay is a sum of per-vertex terms (Dr.Jit's fast path
         # for reverse-mode differentiation of such loops)
