@@ -18,6 +18,7 @@ from thinfilm_mi.render.kernel import (
     KernelStack,
 )
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR, SpectralIndex, real_index
+from thinfilm_mi.render.tabulation import TABULATE_OPTIONS
 from thinfilm_mi.render.textures import check_texture_range, checked_texture, uniform
 
 __all__ = ["MAX_SPECTRAL_RESOLUTION", "optional_texture", "films_from_props", "thickness_texture_from_props",
@@ -77,11 +78,10 @@ def thickness_texture_from_props(props, plugin: str):
 def tabulate_from_props(props, plugin: str) -> bool | str:
     """``tabulate``: ``"auto"`` (default), ``true`` or ``false`` (bool or string)."""
     value = props.get("tabulate", "auto")
-    if isinstance(value, str) and value.strip().lower() in ("auto", "true", "false"):
-        value = value.strip().lower()
-        return "auto" if value == "auto" else value == "true"
-    if isinstance(value, bool):
-        return value
+    name = value.strip().lower() if isinstance(value, str) else value
+    for key, option in TABULATE_OPTIONS.items():   # a bool, or an option's name
+        if name is key or (isinstance(name, str) and name == option.name):
+            return key
     raise ThinFilmError(f"{plugin}: 'tabulate' must be \"auto\", true or false, got {value!r}")
 
 
