@@ -1,4 +1,5 @@
-"""What a design target asks for: the registries :data:`TARGET_QUANTITIES` and :data:`COLOUR_SPACES`.
+"""A design target (:class:`Target`) and what it asks for: the registries
+:data:`TARGET_QUANTITIES` and :data:`COLOUR_SPACES`.
 
 A target's ``quantity`` is one object holding everything that depends on it: the
 keys a target of it may have, the parsing of its own keys, its description, its
@@ -18,21 +19,20 @@ Colour targets of one space are evaluated together in one pass of
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
 from thinfilm_mi.colour.cie import delta_e2000
 from thinfilm_mi.colour.report import integration_wavelengths, resolve_illuminant, resolve_observer
 from thinfilm_mi.design.colourmath import Dual, colour_weights, delta_e2000_residuals, lab, xy_of
-from thinfilm_mi.design.options import KINDS
+from thinfilm_mi.design.options import FRONT, KINDS, Kind, Side
 from thinfilm_mi.design.parsing import fail, parse_choice, parse_grid, parse_number, per_point
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.optics.polarization import UNPOLARIZED, Polarization
 
-if TYPE_CHECKING:
-    from thinfilm_mi.design.targets import Target
-
-__all__ = ["TargetQuantity", "Power", "Absorptance", "Integrated", "Luminous", "Colour", "ColourSpace",
+__all__ = ["Target", "TargetQuantity", "Power", "Absorptance", "Integrated", "Luminous", "Colour", "ColourSpace",
            "TARGET_QUANTITIES", "TARGET_QUANTITY_ALIASES", "POWERS", "COLOUR_SPACES", "stats", "json_list"]
 
 _COMMON = ("quantity", "angles", "tolerance", "kind", "polarization", "side")
@@ -403,3 +403,36 @@ TARGET_QUANTITIES: dict[str, TargetQuantity] = {q.name: q for q in (POWERS["R"],
                                                                 Luminous(), Colour())}
 #: Other spellings users write.
 TARGET_QUANTITY_ALIASES = {"color": "colour"}
+
+
+@dataclass
+class Target:
+    """One parsed target. ``value``/``tolerance`` hold one number per
+    wavelength for R/T/A and one number otherwise; ``reference`` is the Lab or xy
+    of a colour target. ``quantity``, ``kind``, ``polarization``, ``side``,
+    ``of`` and ``space`` are the objects of their registries (each has a ``name``)."""
+
+    index: int
+    quantity: TargetQuantity
+    angles: np.ndarray
+    tolerance: np.ndarray
+    kind: Kind = KINDS["="]
+    polarization: Polarization = UNPOLARIZED
+    side: Side = FRONT
+    wavelengths: np.ndarray | None = None
+    value: np.ndarray | None = None
+    illuminant: str = "D65"
+    observer: int = 2
+    of: Power | None = None           # R or T: what Y and colour targets integrate
+    space: ColourSpace | None = None  # Lab or xy for colour targets
+    reference: np.ndarray | None = None
+
+    @property
+    def name(self) -> str:
+        """``targets[i] (quantity)``, as errors and tables name it."""
+        return f"targets[{self.index}] ({self.quantity.name})"
+
+    def describe(self) -> str:
+        """A short human description (the table's heading)."""
+        bits = self.quantity.describe(self) + [self.polarization.describe(), self.side.describe()]
+        return ", ".join(b for b in bits if b)

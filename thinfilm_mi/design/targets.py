@@ -66,20 +66,18 @@ from typing import Any
 import numpy as np
 
 from thinfilm_mi import materials as _materials
-from thinfilm_mi.design.options import FRONT, KIND_ALIASES, KINDS, SIDES, Kind, Side
+from thinfilm_mi.design.options import KIND_ALIASES, KINDS, SIDES
 from thinfilm_mi.design.parsing import fail, parse_choice, parse_grid, parse_number
 from thinfilm_mi.design.target_quantities import (
     TARGET_QUANTITIES,
     TARGET_QUANTITY_ALIASES,
-    ColourSpace,
-    Power,
-    TargetQuantity,
+    Target,
 )
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.sources import is_material_file
 from thinfilm_mi.materials.stack import AMBIENT_K_TOL, MAX_FILMS, parse_layers
 from thinfilm_mi.optics.choices import choose
-from thinfilm_mi.optics.polarization import ALIASES, POLARIZATIONS, UNPOLARIZED, Polarization
+from thinfilm_mi.optics.polarization import ALIASES, POLARIZATIONS
 
 __all__ = ["DesignMaterial", "Target", "Problem", "load_problem", "films_from_layers", "check_keys", "locate_file",
            "read_yaml", "resolve_material"]
@@ -103,39 +101,6 @@ class DesignMaterial:
     def n0(self) -> complex:
         """The constant index given (numeric materials only)."""
         return complex(self.material.constant)
-
-
-@dataclass
-class Target:
-    """One parsed target. ``value``/``tolerance`` hold one number per
-    wavelength for R/T/A and one number otherwise; ``reference`` is the Lab or xy
-    of a colour target. ``quantity``, ``kind``, ``polarization``, ``side``,
-    ``of`` and ``space`` are the objects of their registries (each has a ``name``)."""
-
-    index: int
-    quantity: TargetQuantity
-    angles: np.ndarray
-    tolerance: np.ndarray
-    kind: Kind = KINDS["="]
-    polarization: Polarization = UNPOLARIZED
-    side: Side = FRONT
-    wavelengths: np.ndarray | None = None
-    value: np.ndarray | None = None
-    illuminant: str = "D65"
-    observer: int = 2
-    of: Power | None = None           # R or T: what Y and colour targets integrate
-    space: ColourSpace | None = None  # Lab or xy for colour targets
-    reference: np.ndarray | None = None
-
-    @property
-    def name(self) -> str:
-        """``targets[i] (quantity)``, as errors and tables name it."""
-        return f"targets[{self.index}] ({self.quantity.name})"
-
-    def describe(self) -> str:
-        """A short human description (the table's heading)."""
-        bits = self.quantity.describe(self) + [self.polarization.describe(), self.side.describe()]
-        return ", ".join(b for b in bits if b)
 
 
 @dataclass
