@@ -68,10 +68,7 @@ from thinfilm_mi.optics.core import (
 )
 
 __all__ = ["channel_count", "components", "mueller_rt", "amplitude_loop", "loop_components",
-           "loop_amplitudes", "mueller_rt_loop", "POWER_CHANNELS"]
-
-#: Channels that hold unpolarised powers (``R``, and ``T`` with transmission).
-POWER_CHANNELS = {False: 1, True: 2}
+           "loop_amplitudes", "mueller_rt_loop"]
 
 
 def channel_count(transmission: bool) -> int:
