@@ -18,8 +18,8 @@ polarized variants, and the demo scene against its native twin.
    of Dr.Jit's threads; steadier than the wall clock on a shared machine, where a
    slow spell also hits both renders of a pair alike); the wall-clock ratio is in
    the JSON on stderr. A scene holding a thin-film plugin is loaded for each of its
-   renders and freed after it (:func:`alone`): a live Python BSDF is traced into every
-   render of the process, the native scenes' included.
+   timed renders (after one untimed render) and freed after it (:func:`alone`): a live
+   Python BSDF is traced into every render of the process, the native scenes' included.
 2. The demo (``scenes/demo.xml``) against its twin, in which each thin-film plugin is
    its Mitsuba counterpart (:func:`twin_xml`), ``llvm_ad_spectral``: steady (as
    above, --demo-repeats rounds) and the first image: a fresh process with the
