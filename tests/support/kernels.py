@@ -22,6 +22,27 @@ def compiled(history):
             and not k.get("cache_hit", False) and not k.get("cache_disk", False)]
 
 
+def assert_edits_render_from_cache(scene, params, edits: dict) -> None:
+    """Apply ``edits`` (key -> value) to ``params`` of ``scene``: the render after them runs
+    every JIT kernel from the cache (the edited values are opaque inputs, nothing
+    recompiles) and differs from the render before them (the edits took effect)."""
+    first = np.array(mi.render(scene, seed=1))
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        dr.kernel_history()  # clear
+        for key, value in edits.items():
+            params[key] = value
+        params.update()
+        second = np.array(mi.render(scene, seed=1))
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    jit = [k for k in history if k["type"] == dr.KernelType.JIT]
+    assert jit, "no kernel ran"
+    assert all(k.get("cache_hit") for k in jit), "a parameter edit recompiled the render kernel"
+    assert np.abs(first - second).mean() > 1e-3  # and the edits took effect
+
+
 def loop_rt(n0, cos, n, k, d, n_exit, wl, Arr=Float64, rt=optics.stack_rt_loop, **hints):
     """``rt`` (``optics.stack_rt_loop``, or ``unpolarized.unpolarized_rt_loop``) with the
     films gathered from buffers of type ``Arr``, as the render kernels do (padded: a
