@@ -16,6 +16,7 @@ tests/test_llvm.py, and here only through scene loading in a subprocess.
 """
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -409,22 +410,16 @@ def test_unsupported_variant_is_refused_at_load(variant):
 from tests.support import LLVM15  # the same library as the numpy-API test in tests/test_llvm.py
 
 _LLVM15_SCRIPT = r"""
+import json
 import sys
 import mitsuba as mi
 import thinfilm_mi
-from thinfilm_mi.plugins import PLUGINS
 mi.set_variant("llvm_ad_spectral")
-for plugin in PLUGINS:
+# every plugin as a dict and as XML, built by the test (load(), to_xml()): argv[1]
+for plugin, (as_dict, as_xml) in json.loads(sys.argv[1]).items():
     for how in ("dict", "xml"):
         try:
-            base = plugin == "thinfilm_coating"  # the one plugin with a nested BSDF
-            if how == "dict":
-                mi.load_dict({"type": plugin, "layers": "1.46 100",
-                              **({"bsdf": {"type": "diffuse"}} if base else {})})
-            else:
-                mi.load_string('<scene version="3.0.0"><bsdf type="%s">'
-                               '<string name="layers" value="1.46 100"/>%s</bsdf></scene>'
-                               % (plugin, '<bsdf type="diffuse"/>' if base else ''))
+            mi.load_dict(as_dict) if how == "dict" else mi.load_string(as_xml)
         except Exception as e:
             print("REFUSED", plugin, how, "LLVMVersionError" in str(e) and "15." in str(e)
                   and "libllvm19" in str(e) and "DRJIT_LIBLLVM_PATH" in str(e))
@@ -444,8 +439,10 @@ print("SCALAR OK", all(0.0 < float(w[i]) < 1.0 for i in range(4)))
 @pytest.mark.skipif(not os.path.exists(LLVM15), reason="no libLLVM-15 on this machine")
 def test_llvm15_refuses_every_plugin_at_scene_load_without_abort():
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=LLVM15)
-    proc = subprocess.run([sys.executable, "-c", _LLVM15_SCRIPT], env=env, capture_output=True,
-                          text=True, timeout=300)
+    valid = {"layers": "1.46 100"}
+    loads = {p: [plugin_dict(p, **valid), to_xml(p, valid)] for p in PLUGINS}
+    proc = subprocess.run([sys.executable, "-c", _LLVM15_SCRIPT, json.dumps(loads)], env=env,
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, (proc.returncode, proc.stderr[-3000:])  # no abort, no signal
     lines = proc.stdout.splitlines()
     refused = [l for l in lines if l.startswith("REFUSED")]
