@@ -87,6 +87,14 @@ def mode_of(scene) -> str:
     return "–"
 
 
+def timed_render(scene, seed: int) -> tuple[float, float]:
+    """``(wall, cpu)`` seconds of one render of ``scene`` (the process's CPU time: all of
+    Dr.Jit's threads)."""
+    t, c = time.perf_counter(), time.process_time()
+    render_sync(scene, seed=seed)
+    return time.perf_counter() - t, time.process_time() - c
+
+
 def alone(load, seed: int) -> tuple[float, float, str]:
     """Load a scene holding our (Python) BSDFs, render it and free it: ``(wall, cpu, mode)``
     of the render alone. While a Python BSDF is alive, Dr.Jit traces it into every render
@@ -98,9 +106,7 @@ def alone(load, seed: int) -> tuple[float, float, str]:
     scene = load()
     mode = mode_of(scene)
     render_sync(scene, seed=seed + 1000)   # untimed: what a load leaves for the first render
-    t, c = time.perf_counter(), time.process_time()
-    render_sync(scene, seed=seed)
-    wall, cpu = time.perf_counter() - t, time.process_time() - c
+    wall, cpu = timed_render(scene, seed)
     del scene
     gc.collect()
     return wall, cpu, mode
@@ -136,9 +142,7 @@ def plugins_child(variant: str, repeats: int, res: int, spp: int) -> None:
         for i in range(len(PAIRS)):
             for j in ((0, 1) if r % 2 == 0 else (1, 0)):
                 if j == 0:
-                    t, c = time.perf_counter(), time.process_time()
-                    render_sync(natives[i], seed=r + 1)
-                    wall, used = time.perf_counter() - t, time.process_time() - c
+                    wall, used = timed_render(natives[i], r + 1)
                 else:
                     wall, used, _ = alone(loaders[i], r + 1)
                 times[i][j].append(wall)
@@ -208,9 +212,7 @@ def demo_steady_child(repeats: int, size: str, spp: int) -> None:
     for r in range(repeats):
         for j in ((0, 1) if r % 2 == 0 else (1, 0)):
             if j == 0:
-                t, c = time.perf_counter(), time.process_time()
-                render_sync(twin, seed=r + 1)
-                wall, used = time.perf_counter() - t, time.process_time() - c
+                wall, used = timed_render(twin, r + 1)
             else:
                 wall, used, _ = alone(lambda: load_demo("ours", size, spp), r + 1)
             ts[j].append(wall)
