@@ -10,19 +10,24 @@ edits without recompilation.
                                        [--skip-steady] [--skip-noise] [--skip-first]
                                        [--write-docs]
 
-The scene is the sphere of ``render_bench.py`` (radius 1 on a diffuse floor under a
+The scene is the sphere of ``timing.py`` (radius 1 on a diffuse floor under a
 constant emitter, ``path``, box filter). The sphere's BSDF is one of :data:`BASES`
 (``diffuse``, ``roughconductor`` α 0.3 on Al, ``principled``), alone or under the coating
-:data:`COAT` (``int_ior`` 1.5, the films ``"SiO2 500; TiO2 80"``, default settings).
+:data:`COAT` (``int_ior`` 1.5, the films ``"SiO2 500; TiO2 80"``, default settings). The
+coating's Mitsuba counterpart is its base alone (Mitsuba has no coating of films), which
+is what part 1 times; against ``plastic`` (no films over ``diffuse``), in the polarized
+variant and at other depths: ``plugin_bench.py`` and ``render_bench.py``. This bench adds
+what only the coating has: its noise against the geometry it stands for, and its edits.
 
-1. **Steady cost** per base and variant (each variant in a process of its own, every scene
-   rendered once first: compiles): --repeats rounds in which the base alone and the coated
-   base render back to back (the base first in even rounds, the coating first in odd ones),
-   --res², --spp, max depth 8. The coated scene is loaded for its render and freed after it
-   (untimed; the kernel cache makes it cheap): while a Python BSDF lives, Dr.Jit traces its
-   code into every render, the base's too, which would bill part of the coating's cost to
-   the base (at 48×48 the base's renders took 5× longer with a coated scene alive). The
-   ratio is the median over rounds of the round's ratio of the process's CPU time (all of
+1. **Steady cost** per base and variant (each variant in a process of its own), timed by
+   ``timing.pair_rounds``: an untimed round (compiles), then --repeats rounds in which the
+   base alone and the coated base render back to back (the base first in even rounds, the
+   coating first in odd ones), --res², --spp, max depth 8. The coated scene is loaded for
+   its render, rendered once untimed and freed after it (the kernel cache and the process's
+   table store make the reload cheap): while a Python BSDF lives, Dr.Jit traces its code
+   into every render, the base's too, which would bill part of the coating's cost to the
+   base (at 48×48 the base's renders took 5× longer with a coated scene alive). The ratio
+   is the median over rounds of the round's ratio of the process's CPU time (all of
    Dr.Jit's threads; a slow spell of the shared machine hits both renders of a pair
    alike); wall-clock seconds are in the JSON on stderr.
 2. **Edits**, in the same processes: with ``dr.JitFlag.KernelHistory`` on, --edits edits of
@@ -75,8 +80,7 @@ os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
-import plugin_bench  # noqa: E402
-from render_bench import render_sync, scene_dict  # noqa: E402
+from timing import child, own_table_store, pair_rounds, render_sync, sphere_scene  # noqa: E402
 
 VARIANTS = ("llvm_ad_spectral", "llvm_ad_rgb")
 #: the coating of every measurement: a TiO2 film under SiO2 on a clear 1.5 coat
@@ -96,12 +100,6 @@ NOISE_DEPTH = 64
 
 def coated(base: dict) -> dict:
     return {"type": "thinfilm_coating", **COAT, "bsdf": base}
-
-
-def sphere_scene(bsdf: dict, res: int, spp: int, max_depth: int = 8) -> dict:
-    d = scene_dict("", res, spp, bsdf=bsdf)
-    d["integrator"]["max_depth"] = max_depth
-    return d
 
 
 def lit_scene(bsdf: dict, res: int, spp: int) -> dict:
@@ -166,40 +164,15 @@ def steady_child(variant: str, repeats: int, res: int, spp: int, n_edits: int) -
     mi.set_variant(variant)
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
+    own_table_store()
     bases = [mi.load_dict(sphere_scene(base, res, spp)) for _, base in BASES]
-
-    def coated_render(i: int, seed: int) -> tuple[float, float]:
-        """Load the coated scene (untimed), time one render, free it: while a Python BSDF
-        lives, every render traces its code (Dr.Jit traces each instance of a call's
-        domain), which would bill the coating's tracing to the base's renders too."""
-        scene = mi.load_dict(sphere_scene(coated(BASES[i][1]), res, spp))
-        wall, cpu, _ = cpu_timed(render_sync, scene, seed=seed)
-        del scene
-        gc.collect()
-        return wall, cpu
-
-    for i, (label, _) in enumerate(BASES):
-        render_sync(bases[i], seed=0)   # compiles
-        coated_render(i, 0)             # compiles (later loads hit the kernel cache)
-        print(f"  {variant}: {label} compiled", file=sys.stderr, flush=True)
-    wall = [[[], []] for _ in BASES]
-    cpu = [[[], []] for _ in BASES]
-    for r in range(repeats):
-        for i in range(len(BASES)):
-            for j in ((0, 1) if r % 2 == 0 else (1, 0)):
-                w, c = (cpu_timed(render_sync, bases[i], seed=r + 1)[:2] if j == 0
-                        else coated_render(i, r + 1))
-                wall[i][j].append(w)
-                cpu[i][j].append(c)
-    out = {"steady": [], "edits": edits(mi.load_dict(sphere_scene(coated(BASES[-1][1]), res, spp)),
-                                        n_edits)}
-    for i, (label, _) in enumerate(BASES):
-        base_w, ours_w = (np.array(x) for x in wall[i])
-        base_c, ours_c = (np.array(x) for x in cpu[i])
-        out["steady"].append({"label": label, "base": float(np.median(base_w)),
-                              "coated": float(np.median(ours_w)),
-                              "wall_ratio": float(np.median(ours_w / base_w)),
-                              "ratio": float(np.median(ours_c / base_c))})
+    coated_loaders = [lambda base=base: mi.load_dict(sphere_scene(coated(base), res, spp))
+                      for _, base in BASES]
+    rows = pair_rounds(bases, coated_loaders, repeats, progress=variant)
+    out = {"steady": [{"label": label, "base": row["native"], "coated": row["ours"],
+                       "wall_ratio": row["wall_ratio"], "ratio": row["ratio"]}
+                      for (label, _), row in zip(BASES, rows)],
+           "edits": edits(mi.load_dict(sphere_scene(coated(BASES[-1][1]), res, spp)), n_edits)}
     print(json.dumps(out))
 
 
@@ -289,21 +262,16 @@ def first_child(which: str, index: int, res: int, spp: int) -> None:
     print(json.dumps({"load": t1 - t0, "render": time.perf_counter() - t1}))
 
 
-def child(*args: str) -> dict | list:
-    """This file run with ``args`` in a fresh process (``plugin_bench.child``)."""
-    return plugin_bench.child(*args, script=__file__)
-
-
 def first_images(repeats: int, res: int, spp: int) -> list:
     out = []
     for index, (label, _) in enumerate(BASES):
         size = ["--res", str(res), "--spp", str(spp)]
         for which in ("base", "coated"):      # the kernel cache warm; tables built per process
-            child("--first-child", which, str(index), *size)
+            child(__file__, "--first-child", which, str(index), *size)
         runs = {"base": [], "coated": []}
         for r in range(repeats):
             for which in (("base", "coated") if r % 2 == 0 else ("coated", "base")):
-                runs[which].append(child("--first-child", which, str(index), *size))
+                runs[which].append(child(__file__, "--first-child", which, str(index), *size))
         total = {w: np.array([x["load"] + x["render"] for x in v]) for w, v in runs.items()}
         out.append({"label": label, "base": float(np.median(total["base"])),
                     "coated": float(np.median(total["coated"])),
@@ -322,7 +290,7 @@ def markdown(data: dict, args) -> str:
     if steady:
         variants = list(steady)
         lines += [f"**Render cost over the nested BSDF alone.** The sphere scene of "
-                  f"`render_bench.py` ({args.res}×{args.res}, {args.spp} spp, max depth 8), the "
+                  f"`benchmarks/timing.py` ({args.res}×{args.res}, {args.spp} spp, max depth 8), the "
                   f"sphere's BSDF the base alone or under {coat}; median over {args.repeats} "
                   f"rounds of the CPU-time ratio of back-to-back renders:", "",
                   "| base | " + " | ".join(f"`{v}`" for v in variants) + " |",
@@ -401,12 +369,12 @@ def main():
         return first_child(args.first_child[0], int(args.first_child[1]), args.res, args.spp)
     data = {}
     if not args.skip_steady:
-        data["steady"] = {v: child("--steady-child", v, "--repeats", str(args.repeats),
+        data["steady"] = {v: child(__file__, "--steady-child", v, "--repeats", str(args.repeats),
                                    "--res", str(args.res), "--spp", str(args.spp),
                                    "--edits", str(args.edits))
                           for v in args.variants.split(",")}
     if not args.skip_noise:
-        data["noise"] = {v: child("--noise-child", v, "--noise-res", str(args.noise_res),
+        data["noise"] = {v: child(__file__, "--noise-child", v, "--noise-res", str(args.noise_res),
                                   "--noise-spp", str(args.noise_spp), "--ref-factor",
                                   str(args.ref_factor))
                          for v in args.noise_variants.split(",")}

@@ -7,19 +7,23 @@ polarized variants, and the demo scene against its native twin.
                                       [--first-repeats 3] [--skip-plugins] [--skip-demo]
                                       [--write-docs]
 
-1. Per plugin: the sphere scene of ``render_bench.py`` (a sphere on a diffuse floor
-   under a constant emitter, ``path`` with max depth 8, --res x --res, --spp spp,
-   box filter) with the sphere's BSDF one of :data:`PAIRS`: a thin-film plugin at
-   default settings, and its Mitsuba counterpart. Each variant runs in a process of
-   its own; every scene is loaded and rendered once (warm-up: compiles, builds the
-   tables), then --repeats rounds in which each pair renders back to back (native first in even
-   rounds, the thin film first in odd ones), different seeds. The ratio of a pair is
-   the median over the rounds of the round's ratio of the process's CPU time (all
-   of Dr.Jit's threads; steadier than the wall clock on a shared machine, where a
-   slow spell also hits both renders of a pair alike); the wall-clock ratio is in
-   the JSON on stderr. A scene holding a thin-film plugin is loaded for each of its
-   timed renders (after one untimed render) and freed after it (:func:`alone`): a live
-   Python BSDF is traced into every render of the process, the native scenes' included.
+1. Per plugin: the sphere scene of ``timing.py`` (a sphere on a diffuse floor under a
+   constant emitter, ``path`` with max depth 8, --res x --res, --spp spp, box filter)
+   with the sphere's BSDF (or the sky's spectrum) one of :data:`PAIRS`: a thin-film plugin
+   at default settings, and its Mitsuba counterpart; ``thinfilm_coating`` against
+   ``plastic`` (no films over ``diffuse``) and against its rough base alone (Mitsuba has no
+   coating of films); ``thinfilm_blackbody`` against ``blackbody`` in spectral variants
+   only (Mitsuba's refuses the others). Each variant runs in a process of its own, timed
+   by ``timing.pair_rounds``: every scene of ours loaded alone for its render (after one
+   untimed render) and freed, Mitsuba's scenes loaded throughout (a live Python BSDF is
+   traced into every render of the process, the native scenes' included); an untimed
+   round (compiles, builds the tables), then --repeats rounds in which each pair renders
+   back to back (native first in even rounds, ours first in odd ones), different seeds.
+   The ratio of a pair is the median over the rounds of the round's ratio of the
+   process's CPU time (all of Dr.Jit's threads; steadier than the wall clock on a shared
+   machine, where a slow spell also hits both renders of a pair alike); the wall-clock
+   ratio is in the JSON on stderr. Stacks at other depths and ``tabulate`` settings:
+   ``render_bench.py``.
 2. The demo (``scenes/demo.xml``) against its twin, in which each thin-film plugin is
    its Mitsuba counterpart (:func:`twin_xml`), ``llvm_ad_spectral``: steady (as
    above, --demo-repeats rounds) and the first image: a fresh process with the
@@ -38,10 +42,10 @@ import argparse
 import json
 import os
 import re
-import subprocess
 import sys
 import time
 import warnings
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -51,72 +55,69 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 sys.path.insert(0, HERE)
 import docs_output  # noqa: E402
-from render_bench import render_sync, scene_dict  # noqa: E402
+from timing import child, own_table_store, pair_rounds, render_sync, sphere_scene  # noqa: E402
 
 VARIANTS = ("llvm_ad_spectral", "llvm_ad_rgb", "llvm_ad_spectral_polarized")
 STACK = "SiO2 500"
 METALS = "SiO2 500; Au 20; Al 10"
 
-#: (label, Mitsuba's BSDF, the thin-film BSDF): issue 44's scenes.
+
+@dataclass(frozen=True)
+class Pair:
+    """A scene of ours and its twin of Mitsuba's plugins: the sphere's BSDFs (``native``,
+    ``ours``), or the sky's spectra (``native_radiance``, ``ours_radiance``; the sphere
+    ``native`` in both); ``spectral_only``: Mitsuba's plugin refuses the other variants."""
+
+    label: str
+    native: dict
+    ours: dict
+    native_radiance: dict | None = None
+    ours_radiance: dict | None = None
+    spectral_only: bool = False
+
+    def applies(self) -> bool:
+        import mitsuba as mi
+        return mi.is_spectral or not self.spectral_only
+
+    @staticmethod
+    def scene(bsdf: dict, radiance: dict | None, res: int, spp: int) -> dict:
+        return sphere_scene(bsdf, res, spp, radiance=radiance)
+
+
+_ROUGH_AU = {"type": "roughconductor", "material": "Au", "alpha": 0.2}
+_WHITE = {"type": "diffuse", "reflectance": 0.5}
+
+#: issue 44's scenes, and the coating and black body of the same sphere scene.
 PAIRS = [
-    (f'`thinfilm_conductor` "{STACK}" on Au', {"type": "conductor", "material": "Au"},
-     {"type": "thinfilm_conductor", "material": "Au", "layers": STACK}),
-    (f'`thinfilm_roughconductor` "{STACK}" on Au, α 0.2',
-     {"type": "roughconductor", "material": "Au", "alpha": 0.2},
-     {"type": "thinfilm_roughconductor", "material": "Au", "alpha": 0.2, "layers": STACK}),
-    (f'`thinfilm_dielectric` "{STACK}" on 1.6', {"type": "dielectric", "int_ior": 1.6},
-     {"type": "thinfilm_dielectric", "int_ior": 1.6, "layers": STACK}),
-    (f'`thinfilm_dielectric` "{METALS}" on 1.6', {"type": "dielectric", "int_ior": 1.6},
-     {"type": "thinfilm_dielectric", "int_ior": 1.6, "layers": METALS}),
-    (f'`thinfilm_roughdielectric` "{STACK}" on 1.6, α 0.2',
-     {"type": "roughdielectric", "int_ior": 1.6, "alpha": 0.2},
-     {"type": "thinfilm_roughdielectric", "int_ior": 1.6, "alpha": 0.2, "layers": STACK}),
-    ('`thinfilm_diffuse` "SiO2 500; Au 5", model `exact`', {"type": "diffuse"},
-     {"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5"}),
-    ('`thinfilm_diffuse` "SiO2 500; Au 5", model `single`', {"type": "diffuse"},
-     {"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5", "model": "single"}),
+    Pair(f'`thinfilm_conductor` "{STACK}" on Au', {"type": "conductor", "material": "Au"},
+         {"type": "thinfilm_conductor", "material": "Au", "layers": STACK}),
+    Pair(f'`thinfilm_roughconductor` "{STACK}" on Au, α 0.2', _ROUGH_AU,
+         {"type": "thinfilm_roughconductor", "material": "Au", "alpha": 0.2, "layers": STACK}),
+    Pair(f'`thinfilm_dielectric` "{STACK}" on 1.6', {"type": "dielectric", "int_ior": 1.6},
+         {"type": "thinfilm_dielectric", "int_ior": 1.6, "layers": STACK}),
+    Pair(f'`thinfilm_dielectric` "{METALS}" on 1.6', {"type": "dielectric", "int_ior": 1.6},
+         {"type": "thinfilm_dielectric", "int_ior": 1.6, "layers": METALS}),
+    Pair(f'`thinfilm_roughdielectric` "{STACK}" on 1.6, α 0.2',
+         {"type": "roughdielectric", "int_ior": 1.6, "alpha": 0.2},
+         {"type": "thinfilm_roughdielectric", "int_ior": 1.6, "alpha": 0.2, "layers": STACK}),
+    Pair('`thinfilm_diffuse` "SiO2 500; Au 5", model `exact`', {"type": "diffuse"},
+         {"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5"}),
+    Pair('`thinfilm_diffuse` "SiO2 500; Au 5", model `single`', {"type": "diffuse"},
+         {"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5", "model": "single"}),
+    # no films, the clear coat over a Lambertian base: plastic with its nonlinear term
+    Pair("`thinfilm_coating`, no films, `int_ior` 1.5 over `diffuse` 0.5 (against `plastic`, "
+         "`nonlinear`)",
+         {"type": "plastic", "int_ior": 1.5, "nonlinear": True, "diffuse_reflectance": 0.5},
+         {"type": "thinfilm_coating", "int_ior": 1.5, "layers": "", "bsdf": _WHITE}),
+    # films over a rough base: Mitsuba has no coating of films; the base alone
+    Pair(f'`thinfilm_coating` "{STACK}", `int_ior` 1.5 over `roughconductor` Au, α 0.2 (against '
+         f"the base alone)", _ROUGH_AU,
+         {"type": "thinfilm_coating", "int_ior": 1.5, "layers": STACK, "bsdf": _ROUGH_AU}),
+    Pair("`thinfilm_blackbody` 4000 K as the sky's radiance (against `blackbody`; Mitsuba's "
+         "refuses RGB)", _WHITE, _WHITE,
+         {"type": "blackbody", "temperature": 4000.0},
+         {"type": "thinfilm_blackbody", "temperature": 4000.0}, spectral_only=True),
 ]
-
-
-def mode_of(scene) -> str:
-    for shape in scene.shapes():
-        b = shape.bsdf()
-        stack = getattr(b, "stack", None) or getattr(b, "coating", None)
-        if stack is not None:
-            return stack.mode()
-    return "–"
-
-
-def timed_render(scene, seed: int) -> tuple[float, float]:
-    """``(wall, cpu)`` seconds of one render of ``scene`` (the process's CPU time: all of
-    Dr.Jit's threads)."""
-    t, c = time.perf_counter(), time.process_time()
-    render_sync(scene, seed=seed)
-    return time.perf_counter() - t, time.process_time() - c
-
-
-def alone(load, seed: int) -> tuple[float, float, str]:
-    """Load a scene holding our (Python) BSDFs, render it and free it: ``(wall, cpu, mode)``
-    of the render alone. While a Python BSDF is alive, Dr.Jit traces it into every render
-    of its variant (a symbolic call records every registered instance), that of a scene
-    which does not use it included: with every scene alive at once, each render paid for
-    tracing every other plugin, and the ratios were pulled towards 1. Loads after the
-    first find their tables in the process's own store and their kernels cached."""
-    import gc
-    scene = load()
-    mode = mode_of(scene)
-    render_sync(scene, seed=seed + 1000)   # untimed: what a load leaves for the first render
-    wall, cpu = timed_render(scene, seed)
-    del scene
-    gc.collect()
-    return wall, cpu, mode
-
-
-def own_table_store() -> None:
-    """A fresh table store for this process, so that a scene loaded again (:func:`alone`)
-    reads its tables instead of building them (the builds are not what is timed)."""
-    import tempfile
-    os.environ["THINFILM_MI_TABLE_CACHE"] = tempfile.mkdtemp(prefix="plugin_bench_tables_")
 
 
 def plugins_child(variant: str, repeats: int, res: int, spp: int) -> None:
@@ -125,37 +126,11 @@ def plugins_child(variant: str, repeats: int, res: int, spp: int) -> None:
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
     own_table_store()
-    # Mitsuba's scenes stay loaded; the instances alive during each render are then the
-    # same in the untimed first round (which compiles every kernel and builds the tables)
-    # as in the timed ones
-    natives = [mi.load_dict(scene_dict("", res, spp, bsdf=native)) for _, native, _ in PAIRS]
-    loaders = [lambda ours=ours: mi.load_dict(scene_dict("", res, spp, bsdf=ours))
-               for _, _, ours in PAIRS]
-    modes = []
-    for i, (label, _, _) in enumerate(PAIRS):
-        render_sync(natives[i], seed=0)
-        modes.append(alone(loaders[i], 0)[2])
-        print(f"  {variant}: {label} loaded, mode {modes[-1]}", file=sys.stderr, flush=True)
-    times = [[[], []] for _ in PAIRS]
-    cpu = [[[], []] for _ in PAIRS]
-    for r in range(repeats):
-        for i in range(len(PAIRS)):
-            for j in ((0, 1) if r % 2 == 0 else (1, 0)):
-                if j == 0:
-                    wall, used = timed_render(natives[i], r + 1)
-                else:
-                    wall, used, _ = alone(loaders[i], r + 1)
-                times[i][j].append(wall)
-                cpu[i][j].append(used)
-    out = []
-    for i, (label, _, _) in enumerate(PAIRS):
-        native, ours = (np.array(x) for x in times[i])
-        native_cpu, ours_cpu = (np.array(x) for x in cpu[i])
-        out.append({"label": label, "mode": modes[i],
-                    "native": float(np.median(native)), "ours": float(np.median(ours)),
-                    "wall_ratio": float(np.median(ours / native)),
-                    "ratio": float(np.median(ours_cpu / native_cpu))})
-    print(json.dumps(out))
+    pairs = [p for p in PAIRS if p.applies()]
+    natives = [mi.load_dict(p.scene(p.native, p.native_radiance, res, spp)) for p in pairs]
+    loaders = [lambda p=p: mi.load_dict(p.scene(p.ours, p.ours_radiance, res, spp)) for p in pairs]
+    rows = pair_rounds(natives, loaders, repeats, progress=variant)
+    print(json.dumps([dict(row, label=p.label) for p, row in zip(pairs, rows)]))
 
 
 def twin_xml(xml: str) -> str:
@@ -206,43 +181,18 @@ def demo_steady_child(repeats: int, size: str, spp: int) -> None:
     warnings.simplefilter("ignore")
     own_table_store()
     twin = load_demo("twin", size, spp)          # Mitsuba's plugins only: stays loaded
-    render_sync(twin, seed=0)
-    alone(lambda: load_demo("ours", size, spp), 0)
-    ts, cpu = [[], []], [[], []]
-    for r in range(repeats):
-        for j in ((0, 1) if r % 2 == 0 else (1, 0)):
-            if j == 0:
-                wall, used = timed_render(twin, r + 1)
-            else:
-                wall, used, _ = alone(lambda: load_demo("ours", size, spp), r + 1)
-            ts[j].append(wall)
-            cpu[j].append(used)
-    twin, ours = (np.array(x) for x in ts)
-    twin_cpu, ours_cpu = (np.array(x) for x in cpu)
-    print(json.dumps({"twin": float(np.median(twin)), "ours": float(np.median(ours)),
-                      "wall_ratio": float(np.median(ours / twin)),
-                      "ratio": float(np.median(ours_cpu / twin_cpu))}))
-
-
-def child(*args: str, script: str = __file__) -> dict | list:
-    """``script`` (this file) run with ``args`` in a fresh process, the table store off: the
-    JSON of its last line of output (its stderr passed on)."""
-    env = dict(os.environ, THINFILM_MI_TABLE_CACHE="off")
-    res = subprocess.run([sys.executable, os.path.abspath(script), *args], env=env,
-                         capture_output=True, text=True)
-    if res.returncode != 0:
-        raise RuntimeError(res.stderr[-3000:])
-    sys.stderr.write(res.stderr)
-    return json.loads(res.stdout.strip().splitlines()[-1])
+    row = pair_rounds([twin], [lambda: load_demo("ours", size, spp)], repeats)[0]
+    print(json.dumps({"twin": row["native"], "ours": row["ours"],
+                      "wall_ratio": row["wall_ratio"], "ratio": row["ratio"]}))
 
 
 def demo_first(repeats: int, size: str, spp: int) -> dict:
     for which in ("twin", "ours"):   # the kernel cache warm; tables are rebuilt per process
-        child("--demo-first-child", which, "--demo-size", size, "--demo-spp", str(spp))
+        child(__file__, "--demo-first-child", which, "--demo-size", size, "--demo-spp", str(spp))
     runs = {"twin": [], "ours": []}
     for r in range(repeats):
         for which in (("twin", "ours") if r % 2 == 0 else ("ours", "twin")):
-            runs[which].append(child("--demo-first-child", which, "--demo-size", size,
+            runs[which].append(child(__file__, "--demo-first-child", which, "--demo-size", size,
                                      "--demo-spp", str(spp)))
     total = {w: [x["load"] + x["render"] for x in v] for w, v in runs.items()}
     return {"twin": float(np.median(total["twin"])), "ours": float(np.median(total["ours"])),
@@ -257,17 +207,21 @@ def markdown(plugins: dict, demo: dict | None, args) -> str:
     if plugins:
         variants = list(plugins)
         lines += [f"Steady render time of each plugin against its Mitsuba counterpart "
-                  f"(`benchmarks/plugin_bench.py`: the sphere scene of `render_bench.py`, "
+                  f"(`benchmarks/plugin_bench.py`: the sphere scene of `benchmarks/timing.py`, "
                   f"{args.res}×{args.res}, {args.spp} spp, default settings; median over "
                   f"{args.repeats} rounds of the CPU-time ratio of back-to-back renders; Mitsuba "
                   f"{mi.__version__}, Dr.Jit {dr.__version__}, {dr.thread_count()} threads, a "
                   f"shared machine):", "",
                   "| plugin and stack | " + " | ".join(f"`{v}`" for v in variants)
-                  + " | mode (spectral) |",
+                  + " | mode (first variant) |",
                   "|---|" + "---:|" * len(variants) + "---|"]
-        for i, (label, _, _) in enumerate(PAIRS):
-            cells = [f"{plugins[v][i]['ratio']:.2f}×" for v in variants]
-            lines.append(f"| {label} | " + " | ".join(cells) + f" | {plugins[variants[0]][i]['mode']} |")
+        rows = {v: {row["label"]: row for row in plugins[v]} for v in variants}
+        for pair in PAIRS:
+            cells = [f"{rows[v][pair.label]['ratio']:.2f}×" if pair.label in rows[v] else "–"
+                     for v in variants]
+            first = next((rows[v][pair.label] for v in variants if pair.label in rows[v]), None)
+            if first is not None:
+                lines.append(f"| {pair.label} | " + " | ".join(cells) + f" | {first['mode']} |")
         lines.append("")
     if demo:
         s, f = demo.get("steady"), demo.get("first")
@@ -322,10 +276,10 @@ def main():
         args.skip_plugins = args.skip_demo = True
     if not args.skip_plugins:
         for v in args.variants.split(","):
-            plugins[v] = child("--plugins-child", v, "--repeats", str(args.repeats),
+            plugins[v] = child(__file__, "--plugins-child", v, "--repeats", str(args.repeats),
                                "--res", str(args.res), "--spp", str(args.spp))
     if not args.skip_demo:
-        demo["steady"] = child("--demo-steady-child", "--demo-repeats", str(args.demo_repeats),
+        demo["steady"] = child(__file__, "--demo-steady-child", "--demo-repeats", str(args.demo_repeats),
                                "--demo-size", args.demo_size, "--demo-spp", str(args.demo_spp))
         if not args.skip_first:
             demo["first"] = demo_first(args.first_repeats, args.demo_size, args.demo_spp)
