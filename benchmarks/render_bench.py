@@ -1,27 +1,38 @@
-"""Render-time cost of the thin-film BSDFs (exact and table modes), image error of
-the tables, and kernel compilations in a thickness sweep.
+"""Render time against the number of films: every thin-film plugin against its Mitsuba
+counterpart in every variant, steady and first image; the image error of the tables, and
+the kernels compiled by a thickness sweep.
 
-    python benchmarks/render_bench.py [--repeats 5] [--first-repeats 3] [--skip-first]
-                                      [--skip-de] [--skip-sweep]
+    python benchmarks/render_bench.py [--repeats 5] [--films 1,3,10,30] [--modes exact,table,default]
+                                      [--variants llvm_ad_spectral,llvm_ad_rgb,llvm_ad_mono,llvm_ad_spectral_polarized]
+                                      [--res 256] [--spp 16]
+                                      [--first-repeats 3] [--first-films 1,30]
+                                      [--first-variants llvm_ad_spectral,llvm_ad_spectral_polarized]
+                                      [--skip-steady] [--skip-first] [--skip-de] [--skip-sweep]
 
-Variant llvm_ad_spectral, one process (first-image runs in subprocesses):
+The stacks: 1, 3, 10, 30 films alternating n = 2.3 / 1.46, thicknesses 50-200 nm from
+``numpy.random.default_rng(6)`` (:func:`thicknesses`; the benchmark stacks that
+``speed_vs_error.py``, ``band_bench.py``, ``deep_bench.py`` and ``rgb_bench.py`` share). Each
+plugin of ``timing.COUNTERPARTS`` carries them against its counterpart: ``thinfilm_conductor``
+on Al against ``conductor`` (Al), the rough conductor (α 0.2) against ``roughconductor``, the
+dielectrics on 1.6 against ``dielectric`` / ``roughdielectric``, ``thinfilm_diffuse`` on 0.5
+against ``diffuse`` 0.5, and ``thinfilm_coating`` (``int_ior`` 1.5) over the rough Al base
+against that base alone. The plugins at default settings, with one stack each, in spectral,
+RGB and polarized variants: ``plugin_bench.py``.
 
-1. Steady render time: a sphere (radius 1) on a diffuse floor under a constant
-   emitter, path integrator (max_depth 8), 256x256, 16 spp. The sphere is
-   Mitsuba's ``conductor`` (Al) or ``thinfilm_conductor`` on Al with 1, 3, 10, 30
-   films (alternating n = 2.3 / 1.46, thicknesses 50-200 nm from
-   ``numpy.random.default_rng(6)``, as in speed_vs_error.py), with ``tabulate``
-   false (exact) and true (table; the mode actually obtained is printed: a stack
-   that cannot be tabulated within ``table_error`` is rendered exactly). One
-   warm-up render each, then --repeats rounds in which every configuration
-   renders once (round-robin, so a slow spell of the shared machine hits all
-   alike); the median per configuration (``dr.eval`` + ``dr.sync_thread``),
-   different seeds.
-2. First image with an empty kernel cache: for each configuration a subprocess
-   with ``DRJIT_CACHE_DIR`` set to a fresh temporary folder times ``mi.load_dict``
-   + the first ``mi.render`` (imports not timed); --first-repeats rounds,
-   round-robin, the run with the median total is reported; ratio to
-   ``conductor`` measured the same way.
+1. Steady render time, each of --variants in a process of its own, the sphere scene of
+   ``timing.py`` (--res², --spp, ``path`` max depth 8): each plugin with each stack, with
+   ``tabulate`` at each of --modes in spectral variants (``exact``: false, ``table``: true,
+   ``default``: unset; the mode obtained is printed: a stack that cannot be tabulated within
+   ``table_error`` is rendered exactly), at default settings in RGB and mono variants (a stack
+   of any depth is there a colour table over the angle). ``timing.pair_rounds``: our scene
+   loaded alone for each render and freed, Mitsuba's loaded throughout, an untimed round, then
+   --repeats rounds of back-to-back pairs; the ratio is the median of the rounds' CPU-time
+   ratios.
+2. First image with an empty kernel cache (``timing.first_images``: a fresh process and
+   ``DRJIT_CACHE_DIR`` per run timing ``mi.load_dict`` + the first ``mi.render``, imports not
+   timed, every table built) in each of --first-variants: each plugin at --first-films with
+   ``tabulate`` unset and false, and its counterpart; --first-repeats rounds, round-robin, the
+   run with the median total is reported, and its ratio to the counterpart's.
 3. Image error of table mode against exact mode on the paper's Fig. 8 scenes
    (scenes/fig8*.xml, which do not expose ``tabulate`` as a $parameter: the
    BSDF gets ``<string name="tabulate" value="..."/>`` in a modified copy of the
@@ -29,19 +40,20 @@ Variant llvm_ad_spectral, one process (first-image runs in subprocesses):
    rendered with the same seed (so the sample paths match) at --de-res and
    --de-spp. CIE ΔE2000 per pixel (colour-science, linear sRGB clipped to [0, 1]
    -> XYZ -> Lab, D65), mean and 99th percentile. The noise floor is the ΔE
-   between two exact renders with different seeds.
+   between two exact renders with different seeds. An accuracy figure: nothing timed.
 4. A 20-frame sweep of the SiO2 thickness (400 -> 600 nm) on fig8a (one film;
    ``tabulate`` true and false) at 128x85, 4 spp, counting JIT kernel
    compilations (``dr.JitFlag.KernelHistory``: entries of type
    ``dr.KernelType.JIT`` that are neither an in-memory nor a disk cache hit)
-   separately in ``params.update()`` (table builds) and in ``mi.render``.
+   separately in ``params.update()`` (table builds) and in ``mi.render``. It counts
+   kernels of our plugin's edits, which Mitsuba's plugins have no counterpart of.
 """
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
-import subprocess
 import sys
 import tempfile
 import time
@@ -57,174 +69,139 @@ os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(HERE)
 SCENES = os.path.join(REPO, "scenes")
+sys.path.insert(0, HERE)
+from timing import (  # noqa: E402
+    COUNTERPARTS,
+    MODES,
+    child,
+    first_images,
+    mode_of,
+    own_table_store,
+    pair_rounds,
+    render_sync,
+    sphere_scene,
+)
+
 FILMS = (1, 3, 10, 30)
 VARIANT = "llvm_ad_spectral"
+VARIANTS = ("llvm_ad_spectral", "llvm_ad_rgb", "llvm_ad_mono", "llvm_ad_spectral_polarized")
+FIRST_VARIANTS = ("llvm_ad_spectral", "llvm_ad_spectral_polarized")
 
 
 def thicknesses(seed=6, n=max(FILMS)):
     return np.random.default_rng(seed).uniform(50.0, 200.0, n)
 
 
-def bsdf_dict(config: str) -> dict:
-    """``"conductor"`` or ``"L:exact"`` / ``"L:table"``."""
-    if config == "conductor":
-        return {"type": "conductor", "material": "Al"}
-    L, mode = config.split(":")
+def layers(n: int) -> str:
+    """The benchmark stack of ``n`` films (:func:`thicknesses`)."""
     d = thicknesses()
-    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(int(L)))
-    return {"type": "thinfilm_conductor", "material": "Al", "layers": layers,
-            "tabulate": mode == "table"}
+    return "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(n))
+
+
+def bsdf_dict(config: str) -> dict:
+    """``"conductor"`` or ``"L:exact"`` / ``"L:table"``: ``thinfilm_conductor`` on Al."""
+    conductor = COUNTERPARTS["thinfilm_conductor"]
+    if config == "conductor":
+        return conductor.native
+    L, mode = config.split(":")
+    return conductor.ours(layers(int(L)), **MODES[mode])
 
 
 def scene_dict(config: str, res=256, spp=16, bsdf: dict | None = None) -> dict:
     """The sphere scene with the BSDF of ``config`` (:func:`bsdf_dict`), or ``bsdf``."""
-    import mitsuba as mi
-    return {
-        "type": "scene",
-        "integrator": {"type": "path", "max_depth": 8},
-        "sensor": {"type": "perspective", "fov": 35,
-                   "to_world": mi.ScalarTransform4f().look_at(
-                       origin=[0, 1.5, 5], target=[0, 0.2, 0], up=[0, 1, 0]),
-                   "sampler": {"type": "independent", "sample_count": spp},
-                   "film": {"type": "hdrfilm", "width": res, "height": res,
-                            "rfilter": {"type": "box"}}},
-        "emitter": {"type": "constant", "radiance": {"type": "rgb", "value": [0.8, 0.85, 1.0]}},
-        "sphere": {"type": "sphere", "center": [0, 0.2, 0], "radius": 1.0,
-                   "bsdf": bsdf if bsdf is not None else bsdf_dict(config)},
-        "floor": {"type": "rectangle",
-                  "to_world": mi.ScalarTransform4f().translate([0, -0.8, 0])
-                  .rotate([1, 0, 0], -90).scale(6),
-                  "bsdf": {"type": "diffuse",
-                           "reflectance": {"type": "rgb", "value": [0.5, 0.5, 0.45]}}},
-    }
+    return sphere_scene(bsdf if bsdf is not None else bsdf_dict(config), res, spp)
 
 
-def render_sync(scene, **kw):
-    import drjit as dr
-    import mitsuba as mi
-    img = mi.render(scene, **kw)
-    dr.eval(img)
-    dr.sync_thread()
-    return img
+def config_bsdf(config: str) -> dict:
+    """``"PLUGIN"``: the counterpart of ``PLUGIN``; ``"PLUGIN:L:MODE"``: ``PLUGIN`` with the
+    stack of ``L`` films at the ``tabulate`` setting ``MODE`` (:data:`timing.MODES`)."""
+    plugin, *rest = config.split(":")
+    if not rest:
+        return COUNTERPARTS[plugin].native
+    L, mode = rest
+    return COUNTERPARTS[plugin].ours(layers(int(L)), **MODES[mode])
 
 
-def mode_of(scene) -> str:
-    for shape in scene.shapes():
-        stack = getattr(shape.bsdf(), "stack", None)
-        if stack is not None:
-            return stack.mode()
-    return "–"
+def label(config: str) -> tuple[str, str, str]:
+    """(plugin, films, ``tabulate`` setting) of a configuration, for a table row."""
+    plugin, *rest = config.split(":")
+    if not rest:
+        return f"`{COUNTERPARTS[plugin].native['type']}` (`{plugin}`'s counterpart)", "–", "–"
+    return f"`{plugin}`", rest[0], rest[1]
 
 
 # -- 1. steady render time ------------------------------------------------------
-def steady(repeats: int):
+def steady_child(variant: str, films, modes, repeats: int, res: int, spp: int) -> None:
     import mitsuba as mi
-    configs = ["conductor"] + [f"{L}:{m}" for L in FILMS for m in ("exact", "table")]
-    scenes, loads = {}, {}
-    for c in configs:
-        t0 = time.perf_counter()
-        scenes[c] = mi.load_dict(scene_dict(c))
-        loads[c] = time.perf_counter() - t0
-        render_sync(scenes[c], seed=0)   # warm-up: compiles
-    # Round-robin: every configuration once per round, so that a slow spell of the
-    # (shared) machine hits all of them alike instead of one configuration.
-    ts = {c: [] for c in configs}
-    for i in range(repeats):
-        for c in configs:
-            t = time.perf_counter()
-            render_sync(scenes[c], seed=i + 1)
-            ts[c].append(time.perf_counter() - t)
+    mi.set_variant(variant)
+    import thinfilm_mi  # noqa: F401
+    warnings.simplefilter("ignore")
+    own_table_store()
+    modes = modes if mi.is_spectral else ["default"]   # colour variants: one table per stack
+    configs = [f"{p}:{L}:{m}" for p in COUNTERPARTS for L in films for m in modes]
+    natives = {p: mi.load_dict(sphere_scene(c.native, res, spp)) for p, c in COUNTERPARTS.items()}
+    loaders = [lambda c=c: mi.load_dict(sphere_scene(config_bsdf(c), res, spp)) for c in configs]
+    rows = pair_rounds([natives[c.split(":")[0]] for c in configs], loaders, repeats,
+                       progress=variant)
+    print(json.dumps([dict(row, config=c) for c, row in zip(configs, rows)]))
+
+
+def steady(variants, films, modes, args) -> dict:
     out = {}
-    for c in configs:
-        out[c] = (float(np.median(ts[c])), float(np.min(ts[c])), mode_of(scenes[c]), loads[c])
-        print(f"  {c}: median {out[c][0]:.3f} s, mode {out[c][2]}, load {loads[c]:.2f} s",
-              file=sys.stderr, flush=True)
-    base = out["conductor"][0]
-    print("\n### Steady render time (256x256, 16 spp, median of "
-          f"{repeats}; load time includes any table build)\n")
-    print("| BSDF | films | mode asked | mode obtained | load (s) | render median (s) "
-          "| min (s) | ratio to conductor |")
-    print("|---|---:|---|---|---:|---:|---:|---:|")
-    print(f"| conductor (Al) | – | – | – | {out['conductor'][3]:.2f} | {base:.3f} | "
-          f"{out['conductor'][1]:.3f} | 1.00 |")
-    for c in configs[1:]:
-        L, m = c.split(":")
-        med, mn, mode, tl = out[c]
-        print(f"| thinfilm_conductor | {L} | {m} | {mode} | {tl:.2f} | {med:.3f} | {mn:.3f} | "
-              f"{med / base:.2f} |")
+    for v in variants:
+        out[v] = child(__file__, "--steady-child", v, "--films", ",".join(map(str, films)),
+                       "--modes", ",".join(modes), "--repeats", str(args.repeats),
+                       "--res", str(args.res), "--spp", str(args.spp))
+        print(f"\n### `{v}`: steady render time against each plugin's counterpart ({args.res}x"
+              f"{args.res}, {args.spp} spp; median over {args.repeats} rounds of the CPU-time "
+              "ratio of back-to-back renders, our scene loaded alone)\n")
+        print("| plugin | films | tabulate | mode obtained | ours (s) | counterpart (s) "
+              "| wall-clock ratio | CPU-time ratio |")
+        print("|---|---:|---|---|---:|---:|---:|---:|")
+        for row in out[v]:
+            name, L, m = label(row["config"])
+            print(f"| {name} | {L} | {m} | {row['mode']} | {row['ours']:.3f} | "
+                  f"{row['native']:.3f} | {row['wall_ratio']:.2f} | {row['ratio']:.2f} |",
+                  flush=True)
     return out
 
 
 # -- 2. first image, empty kernel cache ------------------------------------------
-def first_image_child(config: str):
+def first_image_child(config: str, variant: str, res: int, spp: int):
     """Runs in the subprocess: time mi.load_dict + first mi.render."""
     import mitsuba as mi
-    mi.set_variant(VARIANT)
+    mi.set_variant(variant)
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
     t0 = time.perf_counter()
-    scene = mi.load_dict(scene_dict(config))
+    scene = mi.load_dict(sphere_scene(config_bsdf(config), res, spp))
     t1 = time.perf_counter()
     render_sync(scene, seed=0)
     t2 = time.perf_counter()
     print(json.dumps({"load": t1 - t0, "render": t2 - t1, "mode": mode_of(scene)}))
 
 
-def first_images(script: str, configs, repeats: int, store: str = "off") -> dict:
-    """Per configuration, the run (``{"load", "render", "mode"}``) with the median
-    total of ``repeats``: each a new process running ``script
-    --first-image-child CONFIG`` with a fresh ``DRJIT_CACHE_DIR``, the
-    configurations round-robin (as in steady()). ``store``: the table store on
-    disk is ``"off"`` (every process builds its tables), or ``"warm"``: a store
-    filled by one untimed run per configuration (a script run again)."""
-    runs = {c: [] for c in configs}
-    with tempfile.TemporaryDirectory(prefix="tables_") as tables:
-        setting = tables if store == "warm" else "off"
-
-        def child(c: str) -> dict:
-            with tempfile.TemporaryDirectory(prefix="drjit_cache_") as cache:
-                env = dict(os.environ, DRJIT_CACHE_DIR=cache, THINFILM_MI_TABLE_CACHE=setting)
-                res = subprocess.run([sys.executable, os.path.abspath(script),
-                                      "--first-image-child", c], env=env, capture_output=True,
-                                     text=True, check=True)
-                return json.loads(res.stdout.strip().splitlines()[-1])
-
-        if store == "warm":
-            for c in configs:
-                child(c)
-        for _ in range(repeats):
-            for c in configs:
-                runs[c].append(child(c))
-                print(f"  first image {c} (table store {store}): {runs[c][-1]}", file=sys.stderr,
-                      flush=True)
-    return {c: sorted(runs[c], key=lambda r: r["load"] + r["render"])[len(runs[c]) // 2]
-            for c in configs}
-
-
-def first_image_table(out: dict, configs, asked: str = "mode asked") -> None:
-    """Print :func:`first_images`' runs (``configs``: ``"conductor"`` first, then
-    ``"L:mode"``) as a table with their ratios to ``conductor``'s total."""
-    r = out["conductor"]
-    base = r["load"] + r["render"]
-    print(f"| BSDF | films | {asked} | mode obtained | mi.load (s) | first mi.render (s) "
-          "| total (s) | ratio to conductor |")
-    print("|---|---:|---|---|---:|---:|---:|---:|")
-    print(f"| conductor (Al) | – | – | – | {r['load']:.2f} | {r['render']:.2f} | {base:.2f} "
-          f"| 1.00 |")
-    for c in configs[1:]:
-        L, m = c.split(":")
-        r = out[c]
-        tot = r["load"] + r["render"]
-        print(f"| thinfilm_conductor | {L} | {m} | {r['mode']} | {r['load']:.2f} | "
-              f"{r['render']:.2f} | {tot:.2f} | {tot / base:.2f} |")
-
-
-def first_image(repeats: int):
-    configs = ["conductor"] + [f"{L}:{m}" for L in FILMS for m in ("exact", "table")]
-    out = first_images(__file__, configs, repeats)
-    print("\n### First image, empty kernel cache (fresh DRJIT_CACHE_DIR per "
-          f"configuration and run; the run with the median total of {repeats})\n")
-    first_image_table(out, configs)
+def first_image(variants, films, repeats: int, res: int, spp: int) -> dict:
+    configs = [c for p in COUNTERPARTS
+               for c in [p] + [f"{p}:{L}:{m}" for L in films for m in ("default", "exact")]]
+    out = {}
+    for v in variants:
+        out[v] = runs = first_images(__file__, configs, repeats,
+                                     child_args=("--variants", v, "--res", str(res),
+                                                 "--spp", str(spp)))
+        print(f"\n### `{v}`: first image, empty kernel cache ({res}x{res}, {spp} spp; fresh "
+              f"process and DRJIT_CACHE_DIR per run; the run with the median total of "
+              f"{repeats})\n")
+        print("| plugin | films | tabulate | mode obtained | mi.load (s) | first mi.render (s) "
+              "| total (s) | ratio to the counterpart |")
+        print("|---|---:|---|---|---:|---:|---:|---:|")
+        for c in configs:
+            r = runs[c]
+            tot = r["load"] + r["render"]
+            base = runs[c.split(":")[0]]
+            name, L, m = label(c)
+            print(f"| {name} | {L} | {m} | {r['mode']} | {r['load']:.2f} | {r['render']:.2f} | "
+                  f"{tot:.2f} | {tot / (base['load'] + base['render']):.2f} |", flush=True)
     return out
 
 
@@ -286,6 +263,8 @@ def image_error(res: int, spp: int):
         out[name] = float(de.mean())
         print(f"| {name} | {stack.mode()} | {tabs} | {de.mean():.3f} | "
               f"{np.percentile(de, 99):.3f} | {de.max():.2f} | {noise.mean():.3f} |", flush=True)
+        del exact, table, stack   # our BSDFs alive would be traced into the next renders
+        gc.collect()
     return out
 
 
@@ -335,35 +314,57 @@ def sweep(frames: int = 20):
               f"{sum(b_new)} ({b_new[0]} / {sum(b_new[1:])}) | {b_launch} | "
               f"{', '.join(f'{s[0]}x{s[1]}' if s != '–' else s for s in uniq)} | {dt:.1f} |",
               flush=True)
+        del scene, params, stack   # alive, our BSDF would be traced into the next sweep's renders
+        gc.collect()
+
+
+def names(s: str) -> list[str]:
+    return [x for x in s.split(",") if x]
 
 
 def main():
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--films", default=",".join(map(str, FILMS)))
+    ap.add_argument("--modes", default="exact,table,default",
+                    help=f"tabulate settings in spectral variants, of {list(MODES)}")
+    ap.add_argument("--variants", default=",".join(VARIANTS))
+    ap.add_argument("--res", type=int, default=256)
+    ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--first-repeats", type=int, default=3)
+    ap.add_argument("--first-films", default="1,30")
+    ap.add_argument("--first-variants", default=",".join(FIRST_VARIANTS))
     ap.add_argument("--de-res", type=int, default=200)
     ap.add_argument("--de-spp", type=int, default=64)
     ap.add_argument("--skip-steady", action="store_true")
     ap.add_argument("--skip-first", action="store_true")
     ap.add_argument("--skip-de", action="store_true")
     ap.add_argument("--skip-sweep", action="store_true")
-    ap.add_argument("--first-image-child")
+    ap.add_argument("--steady-child", help=argparse.SUPPRESS)
+    ap.add_argument("--first-image-child", help=argparse.SUPPRESS)
     args = ap.parse_args()
+    films = [int(x) for x in names(args.films)]
+    if args.steady_child:
+        return steady_child(args.steady_child, films, names(args.modes), args.repeats, args.res,
+                            args.spp)
     if args.first_image_child:
-        first_image_child(args.first_image_child)
-        return
+        return first_image_child(args.first_image_child, args.variants, args.res, args.spp)
+    unknown = [m for m in names(args.modes) if m not in MODES]
+    if unknown:
+        ap.error(f"--modes: {unknown} not in {list(MODES)}")
     import drjit as dr
     import mitsuba as mi
-    mi.set_variant(VARIANT)
-    import thinfilm_mi  # noqa: F401
-    warnings.simplefilter("ignore")
     t0 = time.perf_counter()
-    print(f"mitsuba {mi.__version__}, drjit {dr.__version__}, {VARIANT}, "
-          f"{dr.thread_count()} threads")
+    print(f"Mitsuba {mi.__version__}, Dr.Jit {dr.__version__}, {os.cpu_count()} CPUs")
     if not args.skip_steady:
-        steady(args.repeats)
+        steady(names(args.variants), films, names(args.modes), args)
     if not args.skip_first:
-        first_image(args.first_repeats)
+        first_image(names(args.first_variants), [int(x) for x in names(args.first_films)],
+                    args.first_repeats, args.res, args.spp)
+    if not (args.skip_de and args.skip_sweep):
+        mi.set_variant(VARIANT)
+        import thinfilm_mi  # noqa: F401
+        warnings.simplefilter("ignore")
     if not args.skip_de:
         image_error(args.de_res, args.de_spp)
     if not args.skip_sweep:

@@ -30,10 +30,9 @@ HERE = Path(__file__).resolve().parent
 BENCHMARKS = {
     "optics_throughput": [],
     "speed_vs_error": [],
-    "render_bench": [],
+    "render_bench": ["--films", "1,10,30", "--repeats", "3", "--first-repeats", "1"],
     "plugin_bench": ["--repeats", "3", "--demo-repeats", "3", "--first-repeats", "1"],
-    "rgb_bench": ["--repeats", "5", "--build-repeats", "3"],
-    "polarized_bench": ["--films", "3,10,30", "--repeats", "3", "--first-repeats", "1"],
+    "rgb_bench": ["--build-repeats", "3"],
     "band_bench": ["--repeats", "3", "--first-repeats", "1", "--de-spp", "256"],
     "deep_bench": ["--rounds", "1"],
     "stability": ["--worst"],
