@@ -11,11 +11,14 @@ Stacks: the Al stacks of render_bench.py (2.3/1.46 films, 50-200 nm from
 1. Loads: ``mi.load_dict`` of the BSDF in a fresh process per load (empty table
    cache; the build kernels compiled by a first load of a 2-film stack), --rounds
    round-robin rounds over 10, 30, 100, 300, 1000 films, medians; what the build did.
-2. Steady: the sphere scene of render_bench.py, 128x128, 16 spp; ``conductor`` and
-   100, 300, 1000 films, and 100 films with ``tabulate=true`` (its load printed);
-   one warm-up render each, then --rounds round-robin rounds,
-   medians; the exact evaluation's cost per film from the slope between 100 and
-   1000 films.
+2. Steady: the sphere scene of render_bench.py, 128x128, 16 spp; ``conductor`` against
+   100, 300, 1000 films, and 100 films with ``tabulate=true`` (its load printed), timed by
+   ``timing.pair_rounds`` (each scene of ours loaded alone for its render and freed:
+   a live Python BSDF is traced into every render; an untimed round, then --rounds
+   rounds of back-to-back pairs), medians; the exact evaluation's cost per film from the
+   slope between 100 and 1000 films. ``thinfilm_conductor`` only: what a deep stack costs
+   is its evaluation (the per-film loop or its table), which this bench measures; every
+   plugin against its counterpart, up to 30 films, is ``render_bench.py``'s.
 3. Descent: 50 steps of gradient descent on the first film's thickness of the
    30-film stack (32x32, 1 spp, ``prb``-free ``path`` integrator, a fixed target
    image); total time and time spent in ``KernelStack._plan_tables``.
@@ -31,6 +34,7 @@ names one.
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import os
 import statistics
@@ -88,35 +92,26 @@ def steady(rounds: int) -> None:
     import mitsuba as mi
     mi.set_variant("llvm_ad_spectral")
     import render_bench as rb
+    from timing import own_table_store, pair_rounds
 
     import thinfilm_mi  # noqa: F401
-    configs = ["conductor", 100, 300, 1000, "100 tabulate=true"]
-    scenes = {}
-    for c in configs:
-        s = rb.scene_dict("conductor", 128, 16)
-        if c == "100 tabulate=true":
-            s["sphere"]["bsdf"] = dict(bsdf(100), tabulate=True)
-        elif c != "conductor":
-            s["sphere"]["bsdf"] = bsdf(c)
-        t = time.perf_counter()
-        scenes[c] = mi.load_dict(s)
-        if c == "100 tabulate=true":
-            print(f"100 films with tabulate=true: load {time.perf_counter() - t:.2f} s")
-        mi.render(scenes[c], seed=0).numpy()
-    times = {c: [] for c in configs}
-    for r in range(rounds):
-        for c in configs:
-            t = time.perf_counter()
-            mi.render(scenes[c], seed=r + 1).numpy()
-            times[c].append(time.perf_counter() - t)
-    med = {c: statistics.median(v) for c, v in times.items()}
-    print("\n### Steady render, 128x128, 16 spp (medians)\n")
-    print("| config | mode | time (s) | / conductor |")
-    print("|---|---|---:|---:|")
-    for c in configs:
-        mode = "-" if c == "conductor" else scenes[c].shapes()[0].bsdf().stack.mode()
-        print(f"| {c} | {mode} | {med[c]:.3f} | {med[c] / med['conductor']:.2f} |")
-    per_film = (med[1000] - med[100]) / 900
+    own_table_store()
+    configs = {100: bsdf(100), 300: bsdf(300), 1000: bsdf(1000),
+               "100 tabulate=true": dict(bsdf(100), tabulate=True)}
+    t = time.perf_counter()
+    mi.load_dict(configs["100 tabulate=true"])   # its build (into the store), then dropped
+    print(f"100 films with tabulate=true: load {time.perf_counter() - t:.2f} s")
+    conductor = mi.load_dict(rb.scene_dict("conductor", 128, 16))
+    loaders = [lambda d=d: mi.load_dict(rb.scene_dict("", 128, 16, bsdf=d)) for d in configs.values()]
+    rows = dict(zip(configs, pair_rounds([conductor] * len(configs), loaders, rounds)))
+    print(f"\n### Steady render, 128x128, 16 spp (medians of {rounds} rounds of back-to-back "
+          "pairs, our scene loaded alone)\n")
+    print("| config | mode | time (s) | conductor (s) | CPU-time ratio to conductor |")
+    print("|---|---|---:|---:|---:|")
+    for c, row in rows.items():
+        print(f"| {c} | {row['mode']} | {row['ours']:.3f} | {row['native']:.3f} | "
+              f"{row['ratio']:.2f} |")
+    per_film = (rows[1000]["ours"] - rows[100]["ours"]) / 900
     print(f"\nExact evaluation: {1e3 * per_film:.2f} ms per film per render "
           f"({1e9 * per_film / (128 * 128 * 16):.2f} ns per film per sample).")
 
@@ -197,6 +192,8 @@ def edits(rounds: int) -> None:
             a, b = statistics.median(plain), statistics.median(edit)
             print(f"| {L} | {stack.mode()} | {a:.3f} | {b:.3f} | {b / a:.2f} | "
                   f"{report.get('result', '-')} |", flush=True)
+            del scene, params, stack   # alive, it would be traced into the next scenes' renders
+            gc.collect()
 
 
 def main() -> None:

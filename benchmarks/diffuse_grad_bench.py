@@ -27,10 +27,17 @@ One process, per variant:
    or Dr.Jit's disk cache).
 
 Markdown tables on stdout, progress on stderr.
+
+What a gradient costs over the primal render of the same scene object (both sides ours, the
+same instances alive) is this bench's question: Mitsuba's ``diffuse`` has no films whose
+derivatives it could carry, so there is no counterpart to time; the primal render against
+``diffuse`` is ``plugin_bench.py``'s and ``render_bench.py``'s. The scene is freed
+(``gc.collect``) before the next variant renders.
 """
 from __future__ import annotations
 
 import argparse
+import gc
 import os
 import sys
 import time
@@ -163,6 +170,7 @@ def main() -> None:
         mi.set_variant(variant)
         import thinfilm_mi  # noqa: F401  (registers the plugins in this variant)
         rows_r += render(variant, args.res, args.spp, args.repeats)
+        gc.collect()   # the scene of render(): none of it alive in the next renders
         rows_l += [load_and_edit(variant, int(f), args.edit_repeats)
                    for f in args.films.split(",")]
     print(f"\n### Render with a tracked thickness ({args.res}x{args.res}, {args.spp} spp, "

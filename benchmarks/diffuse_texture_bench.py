@@ -6,10 +6,15 @@ Per variant: a sphere under ``SiO2 500; Au 4`` (model "exact") with no texture, 
 constant scale 1.2 and the soap-film bitmap (``scenes/textures/soap_film.exr``, scale
 0-1.47; RGB/mono variants build a table over (θ_i, θ_o, s), ``tabulate/diffuse.py``).
 Load: ``mi.load_dict`` wall time (the tables over the scale are built there). Render: 96x96 at 16 spp, the best of 3
-after a warm-up render, relative to the same scene without a texture.
+after a warm-up render, relative to the same scene without a texture. Each scene is freed (``gc.collect``) before the
+next loads: a live Python BSDF is traced into every render of its variant (``benchmarks/timing.py``).
+
+The counterpart here is the plugin without a texture: Mitsuba has no film-thickness texture, and what the untextured
+plugin costs against Mitsuba's ``diffuse`` is measured by ``plugin_bench.py`` and ``render_bench.py``.
 """
 from __future__ import annotations
 
+import gc
 import sys
 import time
 
@@ -52,6 +57,8 @@ def main():
             base = base or best
             print(f"{variant:28s} {name:17s} load {load:6.2f} s   render {best:6.3f} s "
                   f"({best / base:4.2f}x)", flush=True)
+            del s
+            gc.collect()
 
 
 if __name__ == "__main__":

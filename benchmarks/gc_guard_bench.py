@@ -21,6 +21,11 @@
    full collections it ran per render. Also the hook's own cost per collection pass
    outside a trace (a young pass with and without it), and what the owed full collection
    costs with this process's heap (plus 2e5 lists, as a notebook holds).
+
+Not a comparison with Mitsuba's plugins: part 1 is a crash test, and part 2 times the same
+loaded scene with the guard's hook and without it (the same instances alive in both renders),
+so the ratio is the hook's own cost. The plugins against their counterparts:
+``plugin_bench.py`` and ``render_bench.py``.
 """
 from __future__ import annotations
 
