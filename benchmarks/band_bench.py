@@ -15,8 +15,10 @@ and default settings: ``tabulate="auto"``, ``spectral_resolution`` 1 nm) and
 1. Builds: ``mi.load_dict`` of the 10- and 30-film BSDFs with default settings,
    empty table cache (the build kernels compiled by a first load of another
    stack): load time and what the build obtained (the side's ``build_report``).
-2. Steady render, 256x256, 16 spp: one warm-up render each, then --repeats
-   round-robin rounds (every configuration once per round), medians.
+2. Steady render, 256x256, 16 spp, each configuration against ``conductor``
+   (``timing.pair_rounds``: each scene of ours loaded alone for its render and freed,
+   as a live Python BSDF is traced into every render; an untimed round, then
+   --repeats rounds of back-to-back pairs), medians of the CPU-time ratios.
 3. First image with an empty kernel cache (subprocess, fresh DRJIT_CACHE_DIR):
    ``mi.load_dict`` + first ``mi.render``, --first-repeats round-robin rounds,
    the run with the median total; with the table store off (every process
@@ -50,20 +52,12 @@ DEPTHS = (1, 3, 10, 30)
 
 
 def bsdf(L: int, mode: str) -> dict:
-    d = rb.thicknesses()
-    layers = "; ".join(f"{2.3 if i % 2 == 0 else 1.46} {float(d[i])!r}" for i in range(L))
-    out = {"type": "thinfilm_conductor", "material": "Al", "layers": layers}
-    if mode == "exact":
-        out["tabulate"] = False
-    return out
+    """``thinfilm_conductor`` on Al with the benchmark stack of ``L`` films at ``mode``."""
+    return rb.bsdf_dict(f"{L}:{mode}")
 
 
 def scene(config: str, res=256, spp=16) -> dict:
-    s = rb.scene_dict("conductor", res, spp)
-    if config != "conductor":
-        L, mode = config.split(":")
-        s["sphere"]["bsdf"] = bsdf(int(L), mode)
-    return s
+    return rb.scene_dict(config, res, spp)
 
 
 def build() -> None:
@@ -94,25 +88,23 @@ def build() -> None:
 
 def steady(repeats: int) -> None:
     import mitsuba as mi
-    configs = (["conductor"] + [f"{L}:default" for L in DEPTHS]
-               + [f"{L}:exact" for L in (10, 30)])
-    scenes = {}
-    for c in configs:
-        scenes[c] = mi.load_dict(scene(c))
-        rb.render_sync(scenes[c], seed=0)
-    ts = {c: [] for c in configs}
-    for i in range(repeats):
-        for c in configs:
-            t = time.perf_counter()
-            rb.render_sync(scenes[c], seed=i + 1)
-            ts[c].append(time.perf_counter() - t)
-    base = float(np.median(ts["conductor"]))
-    print(f"\n### Steady render (256x256, 16 spp, median of {repeats} round-robin rounds)\n")
-    print("| configuration | mode obtained | median (s) | ratio to conductor |")
-    print("|---|---|---:|---:|")
-    for c in configs:
-        m = float(np.median(ts[c]))
-        print(f"| {c} | {rb.mode_of(scenes[c])} | {m:.3f} | {m / base:.2f} |", flush=True)
+    from timing import own_table_store, pair_rounds
+    configs = [f"{L}:default" for L in DEPTHS] + [f"{L}:exact" for L in (10, 30)]
+    store = os.environ["THINFILM_MI_TABLE_CACHE"]
+    own_table_store()   # a reload of our scene reads the tables its first load built
+    try:
+        conductor = mi.load_dict(scene("conductor"))
+        rows = pair_rounds([conductor] * len(configs),
+                           [lambda c=c: mi.load_dict(scene(c)) for c in configs], repeats)
+    finally:
+        os.environ["THINFILM_MI_TABLE_CACHE"] = store
+    print(f"\n### Steady render (256x256, 16 spp; median of {repeats} rounds of back-to-back "
+          "pairs with `conductor`, our scene loaded alone)\n")
+    print("| configuration | mode obtained | median (s) | conductor (s) | CPU-time ratio to conductor |")
+    print("|---|---|---:|---:|---:|")
+    for c, row in zip(configs, rows):
+        print(f"| {c} | {row['mode']} | {row['ours']:.3f} | {row['native']:.3f} | "
+              f"{row['ratio']:.2f} |", flush=True)
 
 
 def first_image_child(config: str) -> None:

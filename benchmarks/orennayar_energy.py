@@ -14,8 +14,8 @@ stacks, for both ``roughness_model`` values.
 from __future__ import annotations
 
 import math
+import os
 import sys
-import time
 
 import drjit as dr
 import mitsuba as mi
@@ -83,14 +83,21 @@ def main() -> None:
 
 
 def render_cost(repeats: int = 5) -> None:
-    """Steady render time (median of ``repeats``, after a warm-up) of a coated sphere
-    (SiO2 300 nm; Au 4 nm) at 128 x 128, 16 spp, Lambertian against the rough bases."""
+    """Steady render time (median of ``repeats`` rounds, after an untimed one) of a coated
+    sphere (SiO2 300 nm; Au 4 nm) at 128 x 128, 16 spp, Lambertian against the rough bases.
+    Each scene is loaded alone for its render and freed (``timing.alone``: a live Python BSDF
+    is traced into every render). Ours against ours: Mitsuba 3 has no Oren-Nayar BSDF; the
+    Lambertian plugin against ``diffuse`` is ``plugin_bench.py``'s."""
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from timing import alone, own_table_store
+    own_table_store()
     for variant in ("llvm_ad_spectral", "llvm_ad_rgb"):
         mi.set_variant(variant)
-        times = {}
-        for label, extra in (("lambert", {}), ("qualitative", {"roughness": 0.6}),
-                             ("eon", {"roughness": 0.6, "roughness_model": "eon"})):
-            scene = mi.load_dict({
+        bases = {"lambert": {}, "qualitative": {"roughness": 0.6},
+                 "eon": {"roughness": 0.6, "roughness_model": "eon"}}
+
+        def load(extra):
+            return mi.load_dict({
                 "type": "scene", "integrator": {"type": "path", "max_depth": 4},
                 "sensor": {"type": "perspective", "fov": 30,
                            "to_world": mi.ScalarTransform4f().look_at([0, 0, 5], [0, 0, 0], [0, 1, 0]),
@@ -99,13 +106,14 @@ def render_cost(repeats: int = 5) -> None:
                 "emitter": {"type": "constant"},
                 "ball": {"type": "sphere", "bsdf": {"type": "thinfilm_diffuse",
                                                     "layers": "SiO2 300; Au 4", **extra}}})
-            dr.eval(mi.render(scene, seed=0))
-            runs = []
-            for k in range(repeats):
-                t0 = time.perf_counter()
-                dr.eval(mi.render(scene, seed=k + 1))
-                runs.append(time.perf_counter() - t0)
-            times[label] = float(np.median(runs))
+
+        runs = {label: [] for label in bases}
+        for k in range(repeats + 1):
+            for label, extra in (bases.items() if k % 2 == 0 else reversed(bases.items())):
+                wall = alone(lambda extra=extra: load(extra), k)[0]
+                if k:                                   # round 0 compiles
+                    runs[label].append(wall)
+        times = {label: float(np.median(v)) for label, v in runs.items()}
         base = times["lambert"]
         print(variant, ", ".join(f"{k} {v * 1e3:.0f} ms ({v / base:.2f}x)" for k, v in times.items()))
 
