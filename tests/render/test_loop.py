@@ -52,14 +52,14 @@ def test_conductor_reads_the_loop_and_matches_float64(llvm, layers, uniform, rea
 
 
 def test_loop_and_unrolled_kernels_agree(llvm, monkeypatch):
-    """The same BSDF evaluated through the loop and through the unrolled films
-    (the loops' thresholds raised): both float32, different operation order."""
+    """The same BSDF evaluated through the loop and through the unrolled films read
+    from their index textures (the buffers' threshold raised): both float32, different
+    operation order."""
     spec = {"type": "thinfilm_conductor", "layers": DISPERSIVE, "material": "Au",
             "tabulate": False}
     cos, wls = points(3000, seed=4)
     looped = mi.load_dict(spec)
-    monkeypatch.setattr(K, "LOOP_MIN_FILMS", 1000)
-    monkeypatch.setattr(K, "REAL_LOOP_MIN_FILMS", 1000)
+    monkeypatch.setattr(K, "BUFFERED_MIN_FILMS", 1000)
     unrolled = mi.load_dict(spec)
     assert looped.stack.plan[False].loop is not None
     assert unrolled.stack.plan[False].loop is None
@@ -171,9 +171,9 @@ def test_tabulated_sides_build_no_loop_buffers(llvm):
 
 
 def test_real_films_run_the_real_loop_at_any_depth(llvm, layers, constant, real_path_calls):
-    """Real films above the ambient use the loop from one film on
-    (REAL_LOOP_MIN_FILMS); constant ones gather one index per lane, shared by the
-    four wavelengths. Float32 kernel against float64."""
+    """Real films above the ambient run the real-amplitude steps from one film on
+    (BUFFERED_MIN_FILMS; unrolled below LOOP_MIN_FILMS films); constant ones gather one
+    index per lane, shared by the four wavelengths. Float32 kernel against float64."""
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                          "tabulate": False})
     loop = bsdf.stack.plan[False].loop
@@ -197,3 +197,72 @@ def test_films_below_the_ambient_index_keep_the_complex_loop(llvm, real_path_cal
     cos, wls = points(100)
     bsdf.stack.reflectance(interaction(wls), mi.Float(cos))
     assert real_path_calls == []
+
+
+# The demo's metal-coated glass: Au's and Al's knots off the 1 nm grid, two of them
+# inside one nanometre (the cell lookup's bins then hold two inner knots).
+METALS = "SiO2 500; Au 20; Al 10"
+
+
+def test_few_films_unrolled_match_float64_and_the_loop(llvm, monkeypatch):
+    """A side of fewer than LOOP_MIN_FILMS films reads the buffers unrolled (power form
+    of the recursion): R and T of the metal-coated glass from both sides against
+    float64, and against the same BSDF through the symbolic loop (threshold lowered)."""
+    from thinfilm_mi.render import loop as loop_mod
+    spec = {"type": "thinfilm_dielectric", "layers": METALS, "int_ior": 1.6, "tabulate": False}
+    unrolled = mi.load_dict(spec)
+    cos, wls = points(4000, seed=21)
+    si, c = interaction(wls), mi.Float(cos)
+    films = tf.materials.stack.parse_layers(METALS)
+    refs = {False: tf.Stack(films, substrate=1.6, ambient=media_mod.DEFAULT_EXT_IOR),
+            True: tf.Stack(list(reversed(films)), substrate=media_mod.DEFAULT_EXT_IOR,
+                           ambient=1.6)}
+    ours = {}
+    for inside, ref in refs.items():
+        assert unrolled.stack.plan[inside].loop is not None
+        R, T = (np.array(x) for x in unrolled.stack.reflectance(si, c, inside=inside,
+                                                                  transmission=True))
+        ours[inside] = R, T
+        for i in range(4):
+            r = ref.rt(wls[i], np.arccos(cos))
+            assert np.max(np.abs(R[i] - r.R)) < F32_DEEP
+            assert np.max(np.abs(T[i] - r.T)) < F32_DEEP
+    monkeypatch.setattr(loop_mod, "LOOP_MIN_FILMS", 1)
+    looped = mi.load_dict(spec)
+    for inside in (False, True):
+        R, T = (np.array(x) for x in looped.stack.reflectance(si, c, inside=inside,
+                                                                transmission=True))
+        # both float32, another order of operations (and rescaling) only
+        assert np.max(np.abs(R - ours[inside][0])) < F32_DEEP
+        assert np.max(np.abs(T - ours[inside][1])) < F32_DEEP
+
+
+@pytest.mark.parametrize("layers", [METALS, "TiO2 61; SiO2 95; Cr 4", "Au 20"])
+
+
+def test_binned_cell_lookup_matches_the_search(llvm, layers):
+    """The cell lookup of a non-uniform grid by bins (one packet gather per wavelength)
+    finds the cell and weight the binary search over the knots finds, at random
+    wavelengths, at every knot and just below it."""
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": layers, "int_ior": 1.6,
+                         "tabulate": False})
+    loop = bsdf.stack.plan[False].loop
+    assert not loop.uniform and loop.bins is not None
+    grid = np.array(loop.grid, np.float32)
+    rng = np.random.default_rng(5)
+    w = np.concatenate([rng.uniform(355.0, 835.0, 20000), grid,
+                        np.nextafter(grid, np.float32(0.0)), [grid[0] - 3, grid[-1] + 3]])
+    w = mi.Float(w.astype(np.float32))
+    i, t = (np.array(x) for x in loop._cell(w))
+    bins = loop.bins
+    loop.bins = None
+    try:
+        i_ref, t_ref = (np.array(x) for x in loop._cell(w))
+    finally:
+        loop.bins = bins
+    # the same cell, or the neighbouring one where w is a knot (weight 1 of one = 0 of
+    # the other); the weights agree to the rounding of a product against a quotient
+    same = i == i_ref
+    assert np.all(same | ((np.abs(i.astype(int) - i_ref) == 1)
+                          & np.isin(np.array(w), grid)))
+    assert np.max(np.abs(t[same] - t_ref[same])) < 1e-6

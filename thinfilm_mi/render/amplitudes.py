@@ -5,9 +5,10 @@ planned with a table (:mod:`thinfilm_mi.tabulate.mueller`: ``tabulate`` true, or
 ``"auto"`` from :data:`~thinfilm_mi.tabulate.mueller.AUTO_MIN_FILMS` films) reads its
 Mueller components from it (:func:`table_response`); otherwise it is evaluated
 exactly from the complex amplitudes ``r_s, r_p, t_s, t_p`` at ``si.wavelengths``
-(:func:`optics.stack_amplitudes`, films unrolled; from
-:data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films a loop over the films'
-buffers, :func:`optics.mueller.loop_amplitudes`, so that the kernel does not grow
+(:func:`optics.stack_amplitudes`, films unrolled, their indices gathered from the
+films' buffers of :class:`~thinfilm_mi.render.loop.LoopFilms`; from
+:data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films a loop over those buffers,
+:func:`optics.mueller.loop_amplitudes`, so that the kernel does not grow
 with the depth), after the same skips as the unpolarized path (films of zero
 thickness dropped, nothing below an optically opaque film).
 
@@ -162,6 +163,10 @@ def table_response(side, si, cos_theta, active, transmission: bool) -> Polarized
     return Polarized(R, T, r_shape, table_shape(T, *trans))
 
 
+def _unrolled_amplitudes(n0, cos_theta, films, exit_, wl, transmission: bool):
+    return stack_amplitudes(n0, cos_theta, films, exit_, wl, transmission=transmission)
+
+
 def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission: bool,
           thickness_scale) -> Polarized:
     mi = mitsuba_module()
@@ -173,9 +178,9 @@ def _side(stack: KernelStack, inside: bool, si, cos_theta, active, transmission:
     exit_ = Cx(side.exit.eval_real(si, active), 0.0) if side.exit_real \
         else side.exit.eval(si, active)
     want_t = transmission and not side.opaque
-    if side.loop is not None:   # deep stacks: a loop over the films' buffers
+    if side.loop is not None:   # the films' buffers: unrolled, or a loop for deep stacks
         a = side.loop.rt(n0, cos_theta, exit_, si.wavelengths, want_t, thickness_scale,
-                         evaluator=loop_amplitudes)
+                         evaluator=loop_amplitudes, unrolled=_unrolled_amplitudes)
     else:
         films = [(ix.eval(si, active), d if thickness_scale is None else d * thickness_scale)
                  for ix, d, _ in side.films]

@@ -2,11 +2,11 @@
 :class:`KernelStack`, films (index and opaque thickness) between an ambient index
 and a substrate index (:class:`~thinfilm_mi.render.media.SpectralIndex`), evaluated
 with the optics core on ``mi.Spectrum`` (all wavelengths of a path at once) in
-float32 inside the render kernel: from a table, unrolled film by film (fewer than
-:data:`LOOP_MIN_FILMS`), or as a loop over buffers of the films (:class:`LoopFilms`;
-at any depth when every film has a real index above the ambient's,
-:data:`REAL_LOOP_MIN_FILMS`); both sides of a lossless stack through one side
-(:mod:`thinfilm_mi.render.mirror`).
+float32 inside the render kernel: from a table, or from buffers of the films
+(:class:`LoopFilms`, from :data:`BUFFERED_MIN_FILMS` films: unrolled below
+:data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films, a loop from it), or
+unrolled film by film from the films' index textures (gradients, incoherent films);
+both sides of a lossless stack through one side (:mod:`thinfilm_mi.render.mirror`).
 """
 from __future__ import annotations
 
@@ -18,7 +18,7 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.optics.core import Cx
-from thinfilm_mi.optics.unpolarized import LOOP_MIN_FILMS, unpolarized_rt
+from thinfilm_mi.optics.unpolarized import unpolarized_rt
 from thinfilm_mi.render import mirror
 from thinfilm_mi.render.colour_variants import (
     GradientSampler,
@@ -39,7 +39,7 @@ from thinfilm_mi.tabulate.quantities import POWERS
 from thinfilm_mi.tabulate.store import default_store
 
 __all__ = ["DEFAULT_COHERENCE_THICKNESS", "DEFAULT_SPECTRAL_RESOLUTION", "DEFAULT_TABLE_ERROR",
-           "KernelStack", "OPAQUE_AMPLITUDE", "REAL_LOOP_MIN_FILMS", "STORE_MIN_POINTS",
+           "BUFFERED_MIN_FILMS", "KernelStack", "OPAQUE_AMPLITUDE", "STORE_MIN_POINTS",
            "SidePlan", "TABLE_CACHE", "side_data"]
 
 #: Default coherence thickness (nm): thicker films are averaged incoherently.
@@ -59,13 +59,12 @@ DEFAULT_SPECTRAL_RESOLUTION = 1.0
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
 #: is below this: what lies beneath then changes r by less than ~1e-9.
 OPAQUE_AMPLITUDE = 1e-9
-#: Exact sides of this many films run as the film loop (:class:`LoopFilms`): real
-#: films above the ambient's index (real amplitudes, benchmarks/SPEED.md), and any in
-#: spectral variants (one index search per wavelength for all films, issue 44: "SiO2
-#: 500; Au 20; Al 10" on glass 3.67x -> 2.36x ``dielectric``). Polarized variants and
-#: complex films under a ``thickness`` texture (whose gradients the loop does not carry
-#: backwards) loop from :data:`LOOP_MIN_FILMS` films.
-REAL_LOOP_MIN_FILMS = 1
+#: Exact sides of this many films read their films from buffers (:class:`LoopFilms`: one
+#: index search per wavelength for all films, a gather per film), unrolled below
+#: :data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films and as a loop from it;
+#: in every variant that evaluates films in kernels (issue 44: "SiO2 500; Au 20; Al 10"
+#: on glass, spectral, 3.67x ``dielectric`` from the index textures, 2.36x as a loop).
+BUFFERED_MIN_FILMS = 1
 
 
 class SidePlan:
@@ -117,7 +116,7 @@ class KernelStack:
     needed sides are read from a verified table (:mod:`thinfilm_mi.tabulate.exact`)
     within ``table_error``; identical stacks share one table. Sides evaluated
     exactly run the recursion as a loop over the films in JIT variants
-    (:class:`LoopFilms`; from how many films: :data:`REAL_LOOP_MIN_FILMS`)."""
+    (:class:`LoopFilms`; from how many films: :data:`BUFFERED_MIN_FILMS`)."""
 
     def __init__(self, films: Sequence[tuple[SpectralIndex, float]], ambient: SpectralIndex,
                  substrate: SpectralIndex, thickness_texture=None, *,
@@ -214,13 +213,10 @@ class KernelStack:
                                                       or side.opaque or not side.transmission
                                                       or side.lossless)
                           ) or self.mirror_table(side) is not None
-                if (not served and len(side.films) >= min(LOOP_MIN_FILMS, REAL_LOOP_MIN_FILMS)
+                if (not served and len(side.films) >= BUFFERED_MIN_FILMS
                         and not any(side.incoherent)
                         and all(ix.knots is not None for ix, _, _ in side.films)):
-                    loop = LoopFilms(side.films, side.n0)
-                    complex_ = polarized or not loop.real_steps and self.thickness_texture is not None
-                    if len(side.films) >= (LOOP_MIN_FILMS if complex_ else REAL_LOOP_MIN_FILMS):
-                        side.loop = loop
+                    side.loop = LoopFilms(side.films, side.n0)
 
     def _plan_tables(self, quantity=POWERS) -> None:
         # "auto" tabulates in vectorised variants only: in scalar variants every

@@ -1,15 +1,20 @@
-"""The films of a deep stack as a loop in the render kernel: :class:`LoopFilms` packs
+"""The films of a stack as buffers in the render kernel: :class:`LoopFilms` packs
 each film's index (on the union of the films' knots) and thickness into buffers that
 one symbolic Dr.Jit loop visits, so the kernel and its compile time do not grow with
-the number of films.
+the number of films. A side of fewer than
+:data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films reads the same buffers
+film by film, unrolled (no loop state to carry, each film's code scheduled with its
+neighbours'; issue 44).
 """
 from __future__ import annotations
+
+import sys
 
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.optics.core import Cx, real_loop_applies
-from thinfilm_mi.optics.unpolarized import unpolarized_rt_loop
+from thinfilm_mi.optics.core import Cx, clip_transmittance, real_loop_applies, stack_rt
+from thinfilm_mi.optics.unpolarized import LOOP_MIN_FILMS, unpolarized_rt_loop
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 
@@ -31,9 +36,11 @@ class LoopFilms:
     the grid size and whether the films absorb are baked in.
     """
 
-    #: Knots a wavelength may lie beyond its whole nanometre's first cell (the cell
-    #: search's steps, in place of a binary search over the union of the knots)
-    SKIP = 2
+    #: Knots a bin of the cell lookup may hold strictly inside it (see :meth:`_bins`)
+    BIN_KNOTS = 2
+    #: Finest bins of the cell lookup, per nanometre (a power of two: bin edges exact in
+    #: float32); a grid with more knots in a bin this narrow is searched (binary search)
+    MAX_BINS_PER_NM = 4
 
     def __init__(self, films: list, n0: SpectralIndex):
         mi = mitsuba_module()
@@ -66,22 +73,53 @@ class LoopFilms:
             cols = [eta[:, :-1], k[:, :-1], eta[:, 1:], k[:, 1:]]
         self.buffer = aligned_array(np.stack(cols, axis=-1), np.float32, mi.Float)
         self.grid = aligned_array(grid, np.float32, mi.Float)
-        # A non-uniform grid (the 1 nm grid and the datasets' knots): the first cell of
-        # each whole nanometre, from which a wavelength is at most SKIP knots further
-        # (checked here; else a binary search).
-        g32 = grid.astype(np.float32)
-        whole = np.floor(g32[0]) + np.arange(int(np.ceil(g32[-1] - np.floor(g32[0]))) + 1)
-        first = np.clip(np.searchsorted(g32, whole, side="right") - 1, 0, self.cells - 1)
-        ahead = np.searchsorted(g32, whole + 1.0, side="left") - 1 - first
-        self.start = None
-        if not self.uniform and ahead.max(initial=0) <= self.SKIP:
-            self.w0 = float(whole[0])
-            self.start = aligned_array(first, np.uint32, mi.UInt32)
+        # A non-uniform grid (the 1 nm grid and the datasets' knots): per bin of a
+        # uniform grid, its first cell and the knots inside it (else a binary search).
+        self.bins = None if self.uniform else self._bins(grid.astype(np.float32))
         self.thickness = aligned_array([scalar(d) for _, d, _ in films], np.float32, mi.Float)
         self.n_films = len(films)
         self.count = mi.UInt32(len(films))
-        for v in (self.buffer, self.grid, self.thickness, self.count):
-            dr.make_opaque(v)
+        for v in (self.buffer, self.grid, self.thickness, self.count, self.bins):
+            if v is not None:
+                dr.make_opaque(v)
+
+    def _bins(self, g32: np.ndarray):
+        """The cell lookup of a non-uniform grid (knots ``g32``, float32): bins of
+        ``1/p`` nm from ``floor(g32[0])`` (the fewest per nanometre, ``p`` a power of two
+        up to :attr:`MAX_BINS_PER_NM`, such that no bin holds more than
+        :attr:`BIN_KNOTS` knots strictly inside it), each a packet of 8 floats: its
+        first cell (as a float, exact below 2^24), the knots inside it (``inf`` where
+        fewer), the first cell's lower knot and the inverse widths of the cells it
+        touches. One gather per wavelength then finds the cell and its weight, where
+        a search walked the knots gather by gather. ``None`` where no such bins exist."""
+        mi = mitsuba_module()
+        from thinfilm_mi.optics.backend import aligned_array
+        w0 = float(np.floor(g32[0]))
+        inv_width = (1.0 / np.diff(g32.astype(np.float64))).astype(np.float32)
+        per_nm = 1
+        while per_nm <= self.MAX_BINS_PER_NM:
+            n = int(np.ceil((float(g32[-1]) - w0) * per_nm))
+            edges = (w0 + np.arange(n + 1, dtype=np.float64) / per_nm).astype(np.float32)
+            first = np.clip(np.searchsorted(g32, edges[:-1], side="right") - 1, 0, self.cells - 1)
+            inside = np.searchsorted(g32, edges[1:], side="left") - 1 - first
+            if inside.max(initial=0) <= self.BIN_KNOTS:
+                break
+            per_nm *= 2
+        else:
+            return None
+        packet = np.zeros((n, 8), np.float32)
+        packet[:, 0] = first
+        packet[:, 3] = g32[first]
+        for k in range(self.BIN_KNOTS + 1):
+            cell = np.minimum(first + k, self.cells - 1)
+            if k:
+                packet[:, k] = np.where(inside >= k, g32[np.minimum(first + k, g32.size - 1)],
+                                        np.inf)
+            packet[:, 4 + k] = inv_width[cell]
+        self.w0, self.per_nm, self.last_bin = w0, float(per_nm), float(n - 1)
+        #: the dynamic array type of Mitsuba's backend (one packet gather of 8 floats)
+        self.packet_type = sys.modules[mi.Float.__module__].ArrayXf
+        return aligned_array(packet, np.float32, mi.Float)
 
     def _cell(self, w):
         """The grid cell holding wavelength ``w`` (an ``mi.Float``) and the weight of its
@@ -90,23 +128,30 @@ class LoopFilms:
         if self.uniform:   # knots 1 nm apart from an integer start: exact arithmetic
             i = mi.UInt32(dr.clip(dr.floor(w - self.g0), 0.0, float(self.cells - 1)))
             return i, dr.clip(w - (self.g0 + mi.Float(i)), 0.0, 1.0)
-        if self.start is not None:
-            last = float(dr.width(self.start) - 1)
-            i = dr.gather(mi.UInt32, self.start, mi.UInt32(dr.clip(dr.floor(w - self.w0), 0.0, last)))
-            for _ in range(self.SKIP):
-                i += mi.UInt32((i < self.cells - 1) & (dr.gather(mi.Float, self.grid, i + 1) <= w))
-        else:
-            i = dr.binary_search(0, self.cells - 1,
-                                 lambda c: dr.gather(mi.Float, self.grid, c + 1) <= w)
+        if self.bins is not None:
+            b = mi.UInt32(dr.clip(dr.floor((w - self.w0) * self.per_nm), 0.0, self.last_bin))
+            p = dr.gather(self.packet_type, self.bins, b, shape=(8, dr.width(b)))
+            lo, inv, i = p[3], p[4], mi.UInt32(p[0])
+            for k in range(1, self.BIN_KNOTS + 1):   # past the bin's k-th inner knot
+                past = w >= p[k]
+                lo, inv = dr.select(past, p[k], lo), dr.select(past, p[4 + k], inv)
+                i += mi.UInt32(past)
+            return i, dr.clip((w - lo) * inv, 0.0, 1.0)
+        i = dr.binary_search(0, self.cells - 1,
+                             lambda c: dr.gather(mi.Float, self.grid, c + 1) <= w)
         lo = dr.gather(mi.Float, self.grid, i)
         hi = dr.gather(mi.Float, self.grid, i + 1)
         return i, dr.clip((w - lo) / (hi - lo), 0.0, 1.0)
 
     def rt(self, n0, cos_theta, exit_: Cx, wl, transmission: bool, thickness_scale,
-           evaluator=unpolarized_rt_loop):
+           evaluator=unpolarized_rt_loop, unrolled=None):
         """``evaluator(n0, cos, count, film, n_exit, wl, transmission, **hints)`` over
         these films: the powers (:func:`unpolarized.unpolarized_rt_loop`) or, in
-        polarized variants, the amplitudes (:func:`optics.mueller.loop_amplitudes`)."""
+        polarized variants, the amplitudes (:func:`optics.mueller.loop_amplitudes`).
+        Fewer than :data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films are
+        unrolled: ``unrolled(n0, cos, films, n_exit, wl, transmission)`` over the
+        gathered films (the amplitudes: :func:`optics.stack_amplitudes`), or by
+        default the powers (:meth:`_unrolled_powers`)."""
         mi = mitsuba_module()
         if self.constant:
             if self.n0_constant:
@@ -116,7 +161,7 @@ class LoopFilms:
                 d = dr.gather(mi.Float, self.thickness, j)
                 return (Cx(dr.gather(mi.Float, self.buffer, j), 0.0),
                         d if thickness_scale is None else d * thickness_scale)
-            return self._rt(film, n0, cos_theta, exit_, wl, transmission, evaluator)
+            return self._rt(film, n0, cos_theta, exit_, wl, transmission, evaluator, unrolled)
 
         cells = [self._cell(wl[c]) for c in range(len(wl))]
         vec = mi.Vector2f if self.real else mi.Vector4f
@@ -126,7 +171,7 @@ class LoopFilms:
             return (self._index(cells, vec, j),
                     d if thickness_scale is None else d * thickness_scale)
 
-        return self._rt(film, n0, cos_theta, exit_, wl, transmission, evaluator)
+        return self._rt(film, n0, cos_theta, exit_, wl, transmission, evaluator, unrolled)
 
     def _index(self, cells, vec, j):
         mi = mitsuba_module()
@@ -152,7 +197,38 @@ class LoopFilms:
         return self._index([self._cell(wl[c]) for c in range(len(wl))],
                            mi.Vector2f if self.real else mi.Vector4f, j)
 
-    def _rt(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool, evaluator):
-        return evaluator(n0, cos_theta, self.count, film, exit_, wl, transmission,
-                         n0_max=self.n0_max, film_n_min=self.film_n_min,
-                         film_n_max=self.film_n_max, films_max=self.n_films)
+    def _rt(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool, evaluator, unrolled):
+        if self.n_films >= LOOP_MIN_FILMS:
+            return evaluator(n0, cos_theta, self.count, film, exit_, wl, transmission,
+                             n0_max=self.n0_max, film_n_min=self.film_n_min,
+                             film_n_max=self.film_n_max, films_max=self.n_films)
+        if unrolled is not None:
+            mi = mitsuba_module()
+            films = [film(mi.UInt32(j)) for j in range(self.n_films)]
+            return unrolled(n0, cos_theta, films, exit_, wl, transmission)
+        return self._unrolled_powers(film, n0, cos_theta, exit_, wl, transmission)
+
+    def _unrolled_powers(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool):
+        """The unpolarized ``R`` [, ``T``] of these few films, unrolled: film ``j``
+        gathered at a literal ``j`` (the buffers stay kernel inputs: an edit of an
+        index or a thickness does not recompile). Real films above the ambient run
+        the real-amplitude steps (:func:`optics.stack_rt_loop_real`, a Python
+        ``count`` unrolls its loop); others the power form of the recursion
+        (:func:`optics.stack_rt`: ``|T|^2`` carried as a power, no transmission
+        amplitude), as :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt_loop`
+        forms ``R`` and ``T`` from it."""
+        mi = mitsuba_module()
+
+        def at(j):
+            return film(mi.UInt32(j) if isinstance(j, int) else j)
+
+        if self.real_steps:
+            return unpolarized_rt_loop(n0, cos_theta, self.n_films, at, exit_, wl, transmission,
+                                       n0_max=self.n0_max, film_n_min=self.film_n_min,
+                                       film_n_max=self.film_n_max, films_max=self.n_films)
+        films = [at(j) for j in range(self.n_films)]
+        Rs, Rp, Ts, Tp = stack_rt(n0, cos_theta, films, exit_, wl, transmission=transmission)
+        R = 0.5 * (Rs + Rp)
+        if not transmission:
+            return R
+        return R, clip_transmittance(0.5 * (Ts + Tp), R)
