@@ -23,7 +23,12 @@ BASES = {
     "roughconductor": {"type": "roughconductor", "alpha": 0.3},
     "principled": {"type": "principled", "roughness": 0.4, "metallic": 0.2,
                    "base_color": {"type": "rgb", "value": [0.7, 0.3, 0.2]}},
+    # a delta reflection over a Lambertian (its exterior is the coat medium)
+    "plastic": {"type": "plastic", "ext_ior": 1.5, "int_ior": 2.5, "nonlinear": True,
+                "diffuse_reflectance": {"type": "rgb", "value": [0.2, 0.5, 0.7]}},
 }
+#: bases with delta lobes only: the coating is then a pure delta BSDF (one component)
+PURE_DELTA = {"conductor": {"type": "conductor", "material": "Au"}}
 FILMS = "TiO2 120; SiO2 200"
 
 
@@ -33,7 +38,8 @@ def _variant():
 
 
 def coating(base, **extra):
-    return mi.load_dict({"type": "thinfilm_coating", "bsdf": BASES[base], **extra})
+    return mi.load_dict({"type": "thinfilm_coating", "bsdf": {**BASES, **PURE_DELTA}[base],
+                         **extra})
 
 
 def directions(rng, n):
@@ -143,9 +149,18 @@ def test_delta_reflection_is_the_stack():
     assert int(np.array(bs.sampled_type)[0]) == int(mi.BSDFFlags.DeltaReflection)
 
 
-@pytest.mark.parametrize("key,bounces", [("layers.0.thickness", 3), ("coat_sigma_a.value", 3),
-                                         ("bsdf.roughness.value", 1)])
-def test_gradient_matches_finite_differences(key, bounces):
+#: a base whose delta lobe is chosen with a fixed probability (its eta moves no sampling
+#: decision): the walk's delta vertices and its exit tail carry the conductor's gradient
+BLEND = {"type": "blendbsdf", "weight": 0.5, "bsdf_0": {"type": "conductor", "eta": 2.0, "k": 3.0},
+         "bsdf_1": {"type": "diffuse", "reflectance": 0.6}}
+
+
+@pytest.mark.parametrize("key,bounces,base", [("layers.0.thickness", 3, BASES["diffuse"]),
+                                              ("coat_sigma_a.value", 3, BASES["diffuse"]),
+                                              ("bsdf.roughness.value", 1, BASES["principled"]),
+                                              ("bsdf.bsdf_0.eta.value", 3, BLEND)],
+                         ids=["thickness", "sigma_a", "roughness", "delta-eta"])
+def test_gradient_matches_finite_differences(key, bounces, base):
     """Check 6: reverse-mode (and, for the thickness, forward-mode) derivatives of
     ``eval`` (``max_bounces`` 3, no Russian roulette: a smooth function of the parameters
     for its fixed seed) against
@@ -156,13 +171,17 @@ def test_gradient_matches_finite_differences(key, bounces):
     below 1e-6 absolute. The nested BSDF's own parameter (``principled``'s roughness)
     keeps its gradient: with one bounce (the walk's later directions are sampled from
     the base, so their finite differences are not those of the detached-sampling
-    estimate) its ``eval`` is a smooth function, h = 0.004 as for σ_a."""
+    estimate) its ``eval`` is a smooth function, h = 0.004 as for σ_a. A conductor's
+    ``eta`` inside a ``blendbsdf`` (its delta vertices in the walk, whose ``eval`` is 0,
+    and the delta round trips of the exit): 3 bounces, h = 0.004 (the Fresnel factor is
+    smooth in eta; (h/eta)² < 1e-5)."""
     # tabulate false: the finite differences of a table (within table_error) are not
     # the derivative the exact recursion has
     # (constant film indices and a diffuse base where the base is not differentiated:
     # smaller kernels to compile)
-    b = coating("principled" if key.startswith("bsdf.") else "diffuse", layers="2.3 120; 1.46 200",
-                int_ior=1.5, coat_sigma_a=0.2, max_bounces=bounces, tabulate=False)
+    b = mi.load_dict({"type": "thinfilm_coating", "bsdf": base, "layers": "2.3 120; 1.46 200",
+                      "int_ior": 1.5, "coat_sigma_a": 0.2, "max_bounces": bounces,
+                      "tabulate": False})
     params = mi.traverse(b)
     x0 = float(np.array(params[key]).ravel()[0])
     h = 1.0 if "thickness" in key else 0.004
@@ -263,8 +282,6 @@ def test_bad_edits_are_refused_and_undone(key, value, message):
     ({"coat_thickness": "thick"}, "coat_thickness"),
     ({"max_bounces": 0}, "max_bounces"),
     ({"int_ior": -1.5}, "int_ior"),
-    ({"bsdf": {"type": "conductor"}}, "delta lobes"),
-    ({"bsdf": {"type": "dielectric"}}, "delta lobes"),
     ({"bsdf": 1.0}, "nested BSDF"),
     ({"bsdf_misspelt": 1.0}, "bsdf_misspelt"),
 ])
@@ -332,6 +349,60 @@ def test_polarized_single_bounce_is_the_chain_of_the_plugins_matrices(polarized)
     assert np.abs(want[0, 1]).max() > 1e-3 * np.abs(want[0, 0]).max()   # it does polarize
 
 
+def test_polarized_delta_chain_is_the_chain_of_the_plugins_matrices(polarized):
+    """Polarized, over a smooth ``conductor``: the delta lobe (component 0) is
+    ``thinfilm_dielectric``'s reflection plus the all-delta chain ``leave · B · (I -
+    U B)^-1 · enter``, each factor a Mueller matrix of a plugin in its own frames:
+    ``thinfilm_dielectric``'s transmission out and in (their radiance factors η² and
+    1/η² cancel), its reflection from inside (``U``) and the conductor's (``B``), the
+    round trips summed by the matrix inverse (computed here in float64 by numpy). At
+    normal incidence ``M00`` is the spectral variant's scalar chain (no frame rotates).
+    Exact amplitudes (``tabulate`` false); float32: 1e-5 of the largest entry."""
+    eta = 1.5
+    props = {"type": "thinfilm_coating", "layers": FILMS, "int_ior": eta, "ext_ior": 1.0,
+             "bsdf": PURE_DELTA["conductor"], "tabulate": False}
+    b = mi.load_dict(props)
+    d = mi.load_dict({"type": "thinfilm_dielectric", "layers": FILMS, "int_ior": eta,
+                      "ext_ior": 1.0, "tabulate": False})
+    base = mi.load_dict(PURE_DELTA["conductor"])
+    reflect, through = mi.BSDFContext(), mi.BSDFContext()
+    reflect.component, through.component = 0, 1
+
+    def sample(bsdf, ctx, w):
+        return bsdf.sample(ctx, _pol_interaction(w, 1), 0.5, mi.Point2f(0.5, 0.5))
+
+    def m(x):
+        return _mueller(x)[..., 0].transpose(2, 0, 1)   # (wavelength, row, column)
+
+    for cos in (1.0, 0.6):
+        wi = mi.Vector3f(float(np.sqrt(1 - cos * cos) * 0.8), float(np.sqrt(1 - cos * cos) * 0.6),
+                         cos)
+        wi_in = mi.Vector3f(wi.x / eta, wi.y / eta, dr.sqrt(1 - (wi.x ** 2 + wi.y ** 2) / eta ** 2))
+        wo_in = mi.Vector3f(-wi_in.x, -wi_in.y, wi_in.z)
+        wo = mi.reflect(wi)
+        bs, got = sample(b, reflect, wi)
+        assert int(np.array(bs.sampled_type)[0]) == int(mi.BSDFFlags.DeltaReflection)
+        np.testing.assert_allclose(np.array(bs.wo)[:, 0], np.array(wo)[:, 0], atol=1e-7)
+        _, top = sample(d, reflect, wi)
+        _, leave = sample(d, through, wi)                 # along wi_in up, out along wi
+        _, enter = sample(d, through, -wo_in)             # in along -wo, on along -wo_in
+        bs, under = sample(d, reflect, -wo_in)            # up along wi_in, down along -wo_in
+        np.testing.assert_allclose(np.array(bs.wo)[:, 0], -np.array(wi_in)[:, 0], atol=1e-6)
+        bs, mirror = sample(base, mi.BSDFContext(), wi_in)  # down along -wo_in, up along wi_in
+        np.testing.assert_allclose(np.array(bs.wo)[:, 0], np.array(wo_in)[:, 0], atol=1e-6)
+        B, U = m(mirror), m(under)
+        D = np.linalg.inv(np.eye(4) - U @ B)
+        want = m(top) + m(leave) @ B @ D @ m(enter)
+        np.testing.assert_allclose(m(got), want, atol=1e-5 * np.abs(want).max())
+        if cos == 1.0:
+            scalar = want[:, 0, 0]
+    assert np.abs(want[:, 0, 1]).max() > 1e-3 * np.abs(want[:, 0, 0]).max()  # it polarizes
+    mi.set_variant("llvm_ad_spectral")
+    _, w = mi.load_dict(props).sample(reflect, interaction(mi.Vector3f(0, 0, 1), 1), 0.5,
+                                      mi.Point2f(0.5, 0.5))
+    np.testing.assert_allclose(np.array(w, np.float64)[:, 0], scalar, rtol=1e-5)
+
+
 def test_polarized_intensity_over_a_depolarizing_base_is_the_unpolarized_walk(polarized):
     """Over a ``diffuse`` base (a depolarizer at every vertex) the walk's ``M00`` is the
     unpolarised walk's value for the same seeds: ``eval`` and ``sample`` of the polarized
@@ -360,12 +431,13 @@ def test_polarized_intensity_over_a_depolarizing_base_is_the_unpolarized_walk(po
         np.testing.assert_allclose(a, b, atol=1e-5 * np.abs(b).max())
 
 
-@pytest.mark.parametrize("base", list(BASES))
+@pytest.mark.parametrize("base", list(BASES) + list(PURE_DELTA))
 def test_polarized_outputs_are_physical(polarized, base):
     """Stokes vectors of degree of polarization <= 1 stay physical through ``eval`` and
     ``sample`` over every base (products of Jones-Mueller matrices, depolarizers and the
-    base's): S0 >= 0 and |S1..3| <= S0 (1e-5 relative, float32)."""
-    b = mi.load_dict({"type": "thinfilm_coating", "layers": FILMS, "bsdf": BASES[base]})
+    base's; over a delta base the inverse ``(I - M)^-1`` of its round trips): S0 >= 0 and
+    |S1..3| <= S0 (1e-5 relative, float32)."""
+    b = coating(base, layers=FILMS)
     rng = np.random.default_rng(13)
     n = 512
     si = _pol_interaction(directions(rng, n), n)
@@ -381,11 +453,13 @@ def test_polarized_outputs_are_physical(polarized, base):
         assert np.all(np.linalg.norm(out[1:], axis=0) <= out[0] * (1 + 1e-5) + 1e-6)
 
 
-def test_polarized_render_over_principled(polarized):
+@pytest.mark.parametrize("base", ["principled", "conductor"])
+def test_polarized_render(polarized, base):
     """A render (the walk recorded inside Mitsuba's symbolic call) over ``principled``:
     the walk's Mueller state, if started from literals, fills in one entry per product and
-    Dr.Jit refuses to record the loop ("presumed to be constant, but it changed"). The
-    image is finite and positive (a white constant light on a red paint)."""
+    Dr.Jit refuses to record the loop ("presumed to be constant, but it changed"); over a
+    smooth ``conductor`` (the delta chain's inverse Mueller matrix in the kernel). The
+    image is finite and positive (a white constant light on a red paint, on gold)."""
     scene = mi.load_dict({
         "type": "scene", "integrator": {"type": "path", "max_depth": 3},
         "sensor": {"type": "perspective", "fov": 30,
@@ -394,7 +468,7 @@ def test_polarized_render_over_principled(polarized):
                    "film": {"type": "hdrfilm", "width": 6, "height": 6}},
         "light": {"type": "constant"},
         "obj": {"type": "sphere", "bsdf": {"type": "thinfilm_coating", "layers": FILMS,
-                                           "bsdf": BASES["principled"]}}})
+                                           "bsdf": {**BASES, **PURE_DELTA}[base]}}})
     img = np.array(mi.render(scene, spp=2))
     assert np.all(np.isfinite(img)) and img[..., :3].mean() > 0.05
 

@@ -10,11 +10,11 @@ Thin-film coating over any BSDF (:monosp:`thinfilm_coating`)
 
  * - bsdf
    - BSDF (nested)
-   - The base: any Mitsuba BSDF without delta lobes (``diffuse``, ``roughconductor``,
-     ``principled``, ``measured``, ``roughplastic``, ``thinfilm_roughconductor``...),
-     nested by this name or as the one unnamed child. It is evaluated in the coat medium:
-     give it ``int_ior`` as its own ``ext_ior`` where it has one. |differentiable| (its
-     own parameters).
+   - The base: any Mitsuba BSDF, ours included (``diffuse``, ``roughconductor``,
+     ``principled``, ``measured``, ``roughplastic``, a smooth ``conductor``,
+     ``dielectric``, ``plastic``, ``thinfilm_diffuse``...), nested by this name or as the
+     one unnamed child. It is evaluated in the coat medium: give it ``int_ior`` as its own
+     ``ext_ior`` where it has one. |differentiable| (its own parameters).
  * - layers
    - |string|
    - The film stack from the outside in, ``"MATERIAL THICKNESS_NM; ..."`` (default:
@@ -91,11 +91,14 @@ Thin-film coating over any BSDF (:monosp:`thinfilm_coating`)
 A smooth thin-film stack between ``ext_ior`` and a clear (or absorbing) coat medium of
 index ``int_ior``, over any nested BSDF: an interference clear coat over a ``principled``
 paint, a dichroic film over a printed ``diffuse`` label, an AR-coated cover glass, an
-oxide over a ``roughconductor`` under a lacquer. Component 0 is the stack's delta
-reflection (its exact ``R(θ_i)``, from a table or the recursion as the other plugins),
-component 1 the light that crosses the stack, scatters at the base and bounces between
-the base and the stack's underside (whose reflectance ``R_in`` includes total internal
-reflection) before it leaves::
+oxide over a ``roughconductor`` under a lacquer, a lacquered smooth metal. Component 0 is
+the delta reflection: the stack's exact ``R(θ_i)`` (from a table or the recursion as the
+other plugins), plus, over a base with a delta reflection, the light that bounces between
+it and the stack's underside by delta reflections only, ``T² B_δ/(1 - R_in B_δ)`` (summed
+in closed form). Component 1 (absent over a pure-delta base such as ``conductor`` or
+``dielectric``: the coating is then a pure delta BSDF) is the light that crosses the
+stack, scatters at the base and bounces between the base and the stack's underside (whose
+reflectance ``R_in`` includes total internal reflection) before it leaves::
 
     f = T(θ_i) T(θ_o) (η_e/η_c)² A(θ_i') A(θ_o') [f_b(ω_i', ω_o') + interreflections]
 
@@ -106,8 +109,9 @@ interreflections are estimated, unbiased for any base, by a position-free random
 top at every base vertex, the base sampled between them, Russian roulette after 3
 vertices, at most ``max_bounces`` vertices. ``eval`` seeds its random numbers from a
 hash of the directions and ``sample`` from its sample, so both are deterministic.
-``sample`` picks the reflection with probability ``R̄/(R̄ + T̄)``; otherwise it draws from
-a fixed mixture of the base's own lobe refracted out and a cosine lobe, and weighs the
+``sample`` picks the delta lobe with probability ``(R̄ + T̄ b̄)/(R̄ + T̄)`` (``b̄``: the base's
+mean delta reflectance, 0 without one); otherwise it draws from a fixed mixture of the
+base's own non-delta lobes refracted out and a cosine lobe, and weighs the
 direction by the walk's ``f cos θ_o`` over the mixture's density, which is what ``pdf``
 returns (so ``sample``, ``eval`` and ``pdf`` agree, and MIS weights sum to one). With no
 films and ``int_ior`` equal to ``ext_ior`` the plugin returns the nested BSDF itself
@@ -128,9 +132,15 @@ depolarized). AD: film thicknesses and indices, ``coat_sigma_a`` and
 ``coat_thickness`` carry gradients (not in polarized variants); the nested BSDF's own
 parameters keep theirs (they appear under ``bsdf.`` in ``mi.traverse``).
 
-**Not covered.** A base with delta lobes (smooth ``conductor``, ``dielectric``,
-``plastic``) is refused at load: each base vertex is connected to the exit direction
-through the base's ``eval``. Light the base transmits is lost (no layer below it).
+**Bases with delta lobes.** A path's last non-delta base vertex is connected to the exit
+direction through the base's ``eval``; the delta round trips after it (light entering,
+reflected by the base's delta lobe and the underside, again and again) are summed in closed
+form at the exit direction, ``(1 - R_in B_δ)^-1`` (a Mueller inverse in polarized variants).
+Exact for bases whose delta reflection is a deterministic function of the directions (every
+Mitsuba BSDF with one, ours included); a base that picks its delta lobe at random (a
+``blendbsdf`` of a delta and another BSDF) is biased by at most 1e-4 relative in the tested
+case (``thinfilm_mi/render/coating.py``). **Not covered.** Light the base transmits (a
+``dielectric``'s refraction) is lost (no layer below it).
 
 .. tabs::
     .. code-tab:: xml
@@ -193,9 +203,16 @@ class ThinFilmCoating(mi.BSDF):
         base_flags = mi.BSDFFlags.Empty
         for lobe in self.base_lobes:
             base_flags = base_flags | lobe
-        self.m_components = [mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide,
-                             base_flags | mi.BSDFFlags.FrontSide]
-        self.m_flags = self.m_components[0] | self.m_components[1]
+        # component 0: the stack's reflection and the base's all-delta chains; component
+        # 1 absent over a pure-delta base (conductor, dielectric): a pure delta BSDF
+        components = [mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide]
+        if self.base_lobes:
+            components.append(base_flags | mi.BSDFFlags.FrontSide)
+        flags = mi.BSDFFlags.Empty
+        for component in components:
+            flags = flags | component
+        # (m_components is a copy when read back: assigned whole)
+        self.m_components, self.m_flags = components, flags
         self.guard = ParameterGuard(self, NAME)
 
     def _enabled(self, ctx):

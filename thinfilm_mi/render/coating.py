@@ -12,7 +12,7 @@ light arriving along ``-w'`` and its ``wi`` is ``w'``.
 
 **The BSDF.** For light between ``ω_i`` and ``ω_o`` outside::
 
-    f(ω_i, ω_o) = δ-reflection R(θ_i)
+    f(ω_i, ω_o) = δ-reflection R(θ_i) (+ the base's all-delta chains, below)
                 + T(θ_i) T(θ_o) (η_e/η_c)² A(ω_i') A(ω_o') Σ_paths f_b-chain(ω_i' → … → ω_o')
 
 ``T`` is the stack's transmittance from outside (the same from inside along the same
@@ -46,16 +46,25 @@ there and may lose more (``tests/render/test_coating.py`` measures the truncatio
 from a TEA hash of the two directions in ``eval`` (as pbrt-v4's ``LayeredBxDF``), so
 every call is deterministic.
 
-**Sampling** (:meth:`Coating.sample`): the delta reflection with probability ``P_R = R̄ /
-(R̄ + T̄)`` (spectral means at ``θ_i``), weight ``R/P_R``. Otherwise a direction is drawn
-from a deterministic mixture (:meth:`Coating.base_pdf`, its exact density)::
+**Bases with delta lobes** (a smooth ``conductor``, ``dielectric``, ``plastic``,
+``thinfilm_diffuse``): the all-delta paths join the delta lobe, every exit carries the
+delta round trips, and the walk samples delta vertices as any other
+(:mod:`thinfilm_mi.render.coating_delta`).
+
+**Sampling** (:meth:`Coating.sample`): the delta lobe with probability ``P_R = (R̄ + T̄ b̄)
+/ (R̄ + T̄)`` (spectral means at ``θ_i``; ``b̄``: the mean of ``B_δ(ω_i')`` sampled with
+fixed numbers, 0 for a base without delta lobes: deterministic, so ``pdf`` repeats it),
+weight the delta lobe over ``P_R``; 1 over a pure-delta base (no component 1). Otherwise a
+direction is drawn from a deterministic mixture (:meth:`Coating.base_pdf`, its exact
+density)::
 
     p(ω_o) = (1 - P_R) [ (1 - c) p_b(ω_i', ω_o') (η_e/η_c)² cos θ_o / cos θ_o' + c cos θ_o / π ]
 
-the base sampled at ``ω_i'`` and refracted out (a base direction beyond the critical angle
-is a failed sample: ``p`` then integrates to less than one, as the sampler's mass does),
-or a cosine lobe for the light the interreflections spread (``c``: :func:`mixture`). The weight is
-the walk's estimate of ``f cos θ_o`` divided by ``p``: ``sample``, ``eval`` and ``pdf`` are
+the base sampled at ``ω_i'`` (its non-delta lobes only, :meth:`Coating.smooth_context`, in
+both) and refracted out (a base direction beyond the critical angle is a failed sample:
+``p`` then integrates to less than one, as the sampler's mass does), or a cosine lobe for
+the light the interreflections spread (``c``: :func:`mixture`). The weight is the walk's
+estimate of ``f cos θ_o`` divided by ``p``: ``sample``, ``eval`` and ``pdf`` are
 consistent by construction, ``pdf`` is the true density of ``sample`` (Mitsuba's chi2 test
 passes), and MIS weights built from it sum to one in both strategies. (Were ``p`` only an
 approximation of the sampler's density, as pbrt's layered pdf is, the sum would still be
@@ -68,10 +77,8 @@ amplitudes rotated as ``thinfilm_dielectric`` rotates them; the base's own matri
 the products ``T_out · B_0 · U_1 · B_1 ⋯ E_k · T_in`` chain; Russian roulette reads
 ``M00``. Importance transport gets the chain's ``M00``, depolarized.
 
-**Not covered**: bases with delta lobes (a smooth ``conductor``, ``dielectric``,
-``plastic``'s reflection) are refused at load: the estimate connects every base vertex
-to ``ω_o'`` through the base's ``eval``, which has no delta part. Light the base
-transmits (``principled``'s ``spec_trans``) leaves the layer downwards and is lost.
+**Not covered**: light the base transmits (``principled``'s ``spec_trans``, a
+``dielectric``'s refraction) leaves the layer downwards and is lost (no layer below).
 """
 from __future__ import annotations
 
@@ -81,48 +88,37 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render.coating_delta import DeltaBase, base_context, base_interaction, intensity
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_range
 from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.base import opaque_float
 
-__all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "MIXTURE", "Coating", "nested_bsdf",
-           "inward", "outward", "mixture", "check_coat_medium"]
+__all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "MIXTURE", "Coating", "nested_bsdf", "inward",
+           "outward", "mixture", "check_coat_medium"]
 
 #: Default cap on the base vertices of a walk (``max_bounces``); its bias is stated in
 #: the module docstring.
 DEFAULT_MAX_BOUNCES = 64
 #: Russian roulette starts after this many base vertices.
 RR_DEPTH = 3
-#: The cosine lobe's share ``c`` of the sampling mixture (:func:`mixture`): every
-#: direction a bounce can reach keeps a density (a narrow glossy base would otherwise
-#: leave the interreflected light to rare, heavy samples), and the base's own lobe
-#: keeps half. Any fixed value in (0, 1) keeps the estimate unbiased and ``pdf``
-#: exact; it only moves the noise between glossy and diffuse-looking light.
 MIXTURE = 0.5
 
 
 def nested_bsdf(props, plugin: str):
     """The one nested BSDF of a coating's properties: named ``bsdf``, or the one
-    nested BSDF of another name (XML's unnamed child). Refused where there is none,
-    more than one, or one with delta lobes (see the module docstring)."""
+    nested BSDF of another name (XML's unnamed child). Refused where there is none or
+    more than one."""
     mi = mitsuba_module()
     if "bsdf" in props:
         base = props.get("bsdf")
         if not isinstance(base, mi.BSDF):
             raise ThinFilmError(f"{plugin}: 'bsdf' must be a nested BSDF, got {base!r}")
-    else:
-        found = [obj for _, obj in props.objects() if isinstance(obj, mi.BSDF)]
-        if len(found) != 1:
-            raise ThinFilmError(f"{plugin}: needs exactly one nested BSDF (the base under the "
-                                f"coat), got {len(found)}")
-        base = found[0]
-    if base.flags() & mi.BSDFFlags.Delta:
-        raise ThinFilmError(
-            f"{plugin}: the nested BSDF {base.class_name()} has delta lobes "
-            f"(flags {int(base.flags()):#x}); the coating connects every base vertex to the "
-            "exit direction through the base's eval, which has no delta part: use a rough "
-            "base (e.g. roughconductor with a small alpha)")
-    return base
+        return base
+    found = [obj for _, obj in props.objects() if isinstance(obj, mi.BSDF)]
+    if len(found) != 1:
+        raise ThinFilmError(f"{plugin}: needs exactly one nested BSDF (the base under the "
+                            f"coat), got {len(found)}")
+    return found[0]
 
 
 def check_coat_medium(sigma_a, thickness: float, plugin: str) -> None:
@@ -180,12 +176,6 @@ def _shl(x, k: int):
     return (x << k) & 0xFFFFFFFF if isinstance(x, int) else x << k
 
 
-def _intensity(x, polarized: bool):
-    """The unpolarised part of a value: ``M00`` of a Mueller matrix, else the spectrum."""
-    mi = mitsuba_module()
-    return mi.UnpolarizedSpectrum(x[0][0] if polarized else x)
-
-
 def _bits(x):
     """The bits of a float32 as a ``UInt32`` (an int in scalar variants)."""
     mi = mitsuba_module()
@@ -208,6 +198,10 @@ class Coating:
         self.thickness = opaque_float(thickness)
         self.max_bounces = int(max_bounces)
         self.plugin = plugin
+        mi = mitsuba_module()
+        #: the base's delta reflection (:class:`~thinfilm_mi.render.coating_delta.DeltaBase`),
+        #: or ``None`` where it has none
+        self.delta = DeltaBase(self) if base.flags() & mi.BSDFFlags.DeltaReflection else None
         check_coat_medium(sigma_a, thickness, plugin)
         self.refresh()
 
@@ -260,12 +254,6 @@ class Coating:
         # a spectrum (diagonal Mueller matrix in polarized variants)
         return mi.Spectrum(dr.exp(-sigma * self.thickness / dr.maximum(cos, 1e-6)))
 
-    def _base_si(self, si, w):
-        mi = mitsuba_module()
-        si_b = mi.SurfaceInteraction3f(si)
-        si_b.wi = w
-        return si_b
-
     def underside(self, si, arrive, active):
         """``R_in(θ') A(θ')²``: what one reflection at the stack's underside, of light
         travelling up along ``arrive``, and the two crossings of the coat around it leave
@@ -276,6 +264,14 @@ class Coating:
         r = self.crossing(resp.R, resp.reflection, arrive, leave)
         a = self.attenuation(si, arrive.z, active)
         return r if a is None else r * a * a
+
+    def smooth_context(self, mode):
+        """The context of the mixture's base strategy and of :meth:`base_pdf` (the same in
+        both, so ``pdf`` is the density of ``sample``): the base's non-delta lobes where it
+        has delta ones, else Mitsuba's default context."""
+        mi = mitsuba_module()
+        return base_context(mode, mi.BSDFFlags.Smooth) if self.delta is not None \
+            else mi.BSDFContext(mode)
 
     def tracks_gradients(self, si, active) -> bool:
         """Whether a parameter of the coating or of the nested BSDF carries gradients
@@ -298,7 +294,8 @@ class Coating:
         Mitsuba's ``prb`` replays a path: ``dW = Σ_j β_j de_j + Σ_j dlog(g_j r_j) (W -
         W_{≤j})`` with ``e_j`` the base's ``eval`` towards ``ω_o'``, ``g_j r_j`` the step's
         base weight (the base's ``eval`` over its detached pdf at the sampled
-        direction: sampling decisions are detached) and underside, and ``W - W_{≤j}``
+        direction: sampling decisions are detached; at a delta vertex, whose ``eval`` is
+        0, the replayed sample's weight times its pdf) and underside, and ``W - W_{≤j}``
         what the walk gathered after vertex ``j``. Every term depends on the parameters
         through its own vertex only, the sum-style loop Dr.Jit differentiates in reverse
         mode without storing the trajectory."""
@@ -328,7 +325,7 @@ class Coating:
 
         def body(acc, gathered, beta, w, depth, rng, active):
             alive = active
-            si_b = self._base_si(si, w)
+            si_b = base_interaction(si, w)
             e = base.eval(ctx, si_b, wo_in, active)
             with dr.suspend_grad(when=replay):
                 gathered = dr.select(active, gathered + beta * e, gathered)
@@ -344,8 +341,16 @@ class Coating:
                 step = g * self.underside(si, w_next, active)
             if replay:
                 # this vertex's terms (their values do not matter: only their gradients)
-                g_r = base.eval(ctx, si_b, bs.wo, active) / dr.detach(
-                    dr.select(bs.pdf > 0, bs.pdf, 1.0)) * self.underside(si, w_next, active)
+                e_r = base.eval(ctx, si_b, bs.wo, active)
+                if self.delta is not None:
+                    # eval has no delta part: a delta vertex's value is the replayed
+                    # sample's weight times its pdf (the lobe's probability), so that the
+                    # base's delta parameters (a conductor's eta, k) keep their gradients
+                    bs_a, g_a = base.sample(ctx, si_b, s1, s2, active)
+                    e_r = dr.select(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta),
+                                    g_a * bs_a.pdf, e_r)
+                g_r = e_r / dr.detach(dr.select(bs.pdf > 0, bs.pdf, 1.0)) \
+                    * self.underside(si, w_next, active)
                 live = dr.detach(g_r) != 0
                 ratio = dr.select(live, g_r / dr.select(live, dr.detach(g_r), 1.0), 0.0)
                 acc = mi.Spectrum(acc + dr.select(active, ratio * (total - gathered), zero)
@@ -355,7 +360,7 @@ class Coating:
             with dr.suspend_grad(when=replay):
                 beta = dr.select(active, beta * step, zero)
                 w = w_next
-                q = dr.minimum(dr.max(_intensity(beta, self.mode.polarized)), 0.95)
+                q = dr.minimum(dr.max(intensity(beta, self.mode.polarized)), 0.95)
                 roulette = active & (depth >= RR_DEPTH)
                 u = rng.next_float32()
                 active = active & (_not(roulette) | (u < q)) & (q > 0)
@@ -387,6 +392,12 @@ class Coating:
             top_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
         top_o = self.top(si, wo.z, active, inside=False, transmission=True)
         acc = self.walk(ctx_mode, si, wi_in, wo_in, seed, active)
+        if self.delta is not None:
+            # the light entering along -wo' may make delta round trips (base, underside)
+            # before its last non-delta vertex: D at w̄ = (-wo'_x, -wo'_y, wo'_z)
+            d = self.delta.round_trips(ctx_mode, si, mi.Vector3f(-wo_in.x, -wo_in.y, wo_in.z),
+                                       self.delta.rng(seed), active)
+            acc = acc * d
         # light enters along -wo, is refracted along -wo', ..., leaves the base along wi'
         # and the coat along wi (Mueller products right to left)
         leave = self.crossing(top_i.T, top_i.transmission, wi_in, si.wi)
@@ -400,22 +411,29 @@ class Coating:
                 value = value * a
         return dr.select(active, value, dr.zeros(mi.Spectrum))
 
-    def prob_reflect(self, r, t):
-        """``P_R``: the spectral mean of ``R`` against that of ``T`` (detached: a sampling
-        decision divides the weight as a constant)."""
-        pr, pt = spectral_mean(mitsuba_module().UnpolarizedSpectrum(r)), \
-            spectral_mean(mitsuba_module().UnpolarizedSpectrum(t))
+    def prob_reflect(self, ctx_mode, si, top_i, active):
+        """``P_R``: the spectral mean of the delta lobe against that of ``R + T``, the delta
+        lobe's mean estimated as ``R̄ + T̄ b̄`` with ``b̄`` the mean of the base's delta
+        reflectance at ``ω_i'`` sampled with fixed numbers (0 for a base without delta
+        lobes): a deterministic function of the directions, the same in ``sample`` and
+        ``pdf``; detached (a sampling decision divides the weight as a constant)."""
+        mi = mitsuba_module()
+        pr = spectral_mean(mi.UnpolarizedSpectrum(top_i.R))
+        pt = spectral_mean(mi.UnpolarizedSpectrum(top_i.T))
+        delta = pr
+        if self.delta is not None:
+            wi_in, ok = inward(si.wi, self.eta_f)
+            delta = pr + pt * self.delta.mean(ctx_mode, si, wi_in, active & ok)
         total = pr + pt
-        return dr.detach(dr.select(total > 0, pr / dr.select(total > 0, total, 1.0), 1.0))
+        return dr.detach(dr.select(total > 0, delta / dr.select(total > 0, total, 1.0), 1.0))
 
     def base_pdf(self, ctx_mode, si, wo, active):
         """The non-delta density at ``wo`` without the factor ``1 - P_R``."""
-        mi = mitsuba_module()
-        ctx = mi.BSDFContext(ctx_mode)
+        ctx = self.smooth_context(ctx_mode)
         wi_in, ok_i = inward(si.wi, self.eta_f)
         wo_in, ok_o = inward(wo, self.eta_f)
         ok = active & ok_i & ok_o & (wo.z > 0)
-        p_b = self.base.pdf(ctx, self._base_si(si, wi_in), wo_in, ok)
+        p_b = self.base.pdf(ctx, base_interaction(si, wi_in), wo_in, ok)
         jac = self.inv_eta2 * wo.z / dr.maximum(wo_in.z, 1e-12)
         p = (1.0 - self.mix) * p_b * jac + self.mix * wo.z * dr.inv_pi
         return dr.select(ok, p, 0.0)
@@ -437,10 +455,10 @@ class Coating:
         if not (has_delta or has_base):
             return bs, mi.Spectrum(0.0)
         if self.invisible:
-            return self._sample_invisible(ctx, si, sample1, sample2, active, has_base)
+            return self._sample_invisible(ctx, si, sample1, sample2, active, has_delta, has_base)
         top_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
         if has_delta and has_base:
-            p_r = self.prob_reflect(top_i.R, top_i.T)
+            p_r = self.prob_reflect(ctx.mode, si, top_i, active)
         else:
             p_r = mi.Float(1.0 if has_delta else 0.0)
         sel_r = active & (sample1 < p_r)
@@ -448,24 +466,29 @@ class Coating:
         bs.eta = 1.0
         weight = mi.Spectrum(0.0)
         wo = mi.reflect(si.wi)
+        seed = (_bits(sample1) ^ _shl(_bits(sample2.y), 16), _bits(sample2.x))
+        seed = mi.sample_tea_32(seed[0], seed[1], 4)
         if has_delta:
-            weight = dr.select(sel_r, self.mode.value(top_i.R / dr.select(p_r > 0, p_r, 1.0),
-                                                      top_i.reflection, ctx, si.wi, wo), weight)
+            inv_p = dr.rcp(dr.select(p_r > 0, p_r, 1.0))
+            delta = self.mode.value(top_i.R * inv_p, top_i.reflection, ctx, si.wi, wo)
+            if self.delta is not None:
+                wi_in, ok = inward(si.wi, self.eta_f)
+                delta = delta + self.delta.chain(ctx.mode, si, top_i, wi_in,
+                                                 self.delta.rng(seed), sel_r & ok) * inv_p
+            weight = dr.select(sel_r, delta, weight)
         if has_base:
             s = (sample1 - p_r) / dr.select(p_r < 1, 1.0 - p_r, 1.0)
             cosine = sel_b & (s < self.mix)
             s_b = (s - self.mix) / dr.select(self.mix < 1, 1.0 - self.mix, 1.0)
             wi_in, _ = inward(si.wi, self.eta_f)
-            ctx_b = mi.BSDFContext(ctx.mode)
-            bs_b, _ = self.base.sample(ctx_b, self._base_si(si, wi_in), dr.clip(s_b, 0.0, 1.0),
+            ctx_b = self.smooth_context(ctx.mode)
+            bs_b, _ = self.base.sample(ctx_b, base_interaction(si, wi_in), dr.clip(s_b, 0.0, 1.0),
                                        sample2, sel_b & _not(cosine))
             out, leaves = outward(bs_b.wo, self.eta_f)
             wo_b = dr.select(cosine, mi.warp.square_to_cosine_hemisphere(sample2), out)
             ok = sel_b & (cosine | (leaves & (bs_b.wo.z > 0) & (bs_b.pdf > 0)))
             wo = dr.select(sel_b, wo_b, wo)
             pdf = (1.0 - p_r) * self.base_pdf(ctx.mode, si, wo, ok)
-            seed = (_bits(sample1) ^ _shl(_bits(sample2.y), 16), _bits(sample2.x))
-            seed = mi.sample_tea_32(seed[0], seed[1], 4)
             f = self.transmitted(ctx.mode, si, wo, seed, ok & (pdf > 0), top_i)
             weight = dr.select(ok & (pdf > 0), f / dr.select(pdf > 0, pdf, 1.0), weight)
             sel_b = ok & (pdf > 0)
@@ -482,16 +505,24 @@ class Coating:
         valid = sel_r | sel_b
         return bs, dr.select(valid, weight, 0.0)
 
-    def _sample_invisible(self, ctx, si, sample1, sample2, active, has_base):
-        """The nested BSDF's own sample (times the coat's absorption) where the top is
-        invisible (no films between equal indices)."""
+    def _invisible_context(self, mode, has_delta: bool, has_base: bool):
+        """The base's context where the top is invisible: the lobes the caller enabled
+        (Mitsuba's default context where both are)."""
         mi = mitsuba_module()
-        if not has_base:
-            return dr.zeros(mi.BSDFSample3f), mi.Spectrum(0.0)
-        ctx_b = mi.BSDFContext(ctx.mode)
+        if has_delta and has_base:
+            return mi.BSDFContext(mode)
+        return self.smooth_context(mode) if has_base \
+            else base_context(mode, mi.BSDFFlags.DeltaReflection)
+
+    def _sample_invisible(self, ctx, si, sample1, sample2, active, has_delta, has_base):
+        """The nested BSDF's own sample (times the coat's absorption) where the top is
+        invisible (no films between equal indices); its delta samples are component 0."""
+        mi = mitsuba_module()
+        ctx_b = self._invisible_context(ctx.mode, has_delta, has_base)
         bs, w = self.base.sample(ctx_b, si, sample1, sample2, active)
         ok = active & (bs.wo.z > 0)
-        bs.sampled_component = mi.UInt32(1)
+        bs.sampled_component = dr.select(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta),
+                                         mi.UInt32(0), mi.UInt32(1))
         bs.sampled_type = bs.sampled_type & mi.UInt32(+mi.BSDFFlags.Reflection)
         a = self.attenuation(si, si.wi.z, active)
         if a is not None:
@@ -509,8 +540,8 @@ class Coating:
             return value, pdf
         if self.invisible:
             # the nested BSDF's own calls, bit for bit (times the coat's absorption)
-            ctx_b = mi.BSDFContext(ctx.mode)
-            si_b = self._base_si(si, si.wi)
+            ctx_b = self._invisible_context(ctx.mode, has_delta, has_base)
+            si_b = base_interaction(si, si.wi)
             if want_value and want_pdf:
                 value, pdf = self.base.eval_pdf(ctx_b, si_b, wo, active)
             elif want_value:
@@ -528,5 +559,5 @@ class Coating:
         if want_pdf:
             pdf = self.base_pdf(ctx.mode, si, wo, active)
             if has_delta:
-                pdf = pdf * (1.0 - self.prob_reflect(top_i.R, top_i.T))
+                pdf = pdf * (1.0 - self.prob_reflect(ctx.mode, si, top_i, active))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
