@@ -48,7 +48,8 @@ __all__ = ["MUELLER", "MuellerQuantity", "AUTO_MIN_FILMS", "AUTO_MAX_FLOATS"]
 #: ``tabulate="auto"`` gives a polarized stack a table from this many films on
 #: (after the skips). A lookup of 4 channels at 4 wavelengths (64 texels each)
 #: costs about what the exact amplitudes of ~25 films cost: measured with
-#: benchmarks/polarized_bench.py's scene (process CPU time, medians of 9-15
+#: the sphere scene of the former benchmarks/polarized_bench.py (since folded into
+#: render_bench.py's ``llvm_ad_spectral_polarized`` table; process CPU time, medians of 9-15
 #: round-robin rounds in 4-6 processes, ratio to Mitsuba's polarized
 #: ``conductor``), exact 1.11x / 1.25x / 1.58-1.75x and tables 1.01-1.36x /
 #: 1.14-1.84x / 1.27-1.75x for 3 / 10 / 30 films (a lookup's cost varies from
