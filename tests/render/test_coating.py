@@ -186,6 +186,35 @@ def test_eval_is_plastic_nonlinear_in_expectation():
     np.testing.assert_allclose(est.mean(axis=0), want, atol=4 * est.std(axis=0).max() / np.sqrt(n))
 
 
+@pytest.mark.parametrize("layers", ["", LOSSLESS], ids=["bare", "lossless"])
+def test_lambertian_closed_form_is_the_walks_expectation(layers):
+    """Over ``diffuse`` the base part is the closed form ``ρ/π cos θ_o' / (1 - ρ R_dh)``
+    (``thinfilm_mi/render/coating_forms.py``); a blend of two ``diffuse`` (the same
+    Lambertian, unknown to the registry) is walked. Over 2^14 random direction pairs at
+    cos θ_i 0.7 the walk minus the closed form has mean 0 within 4σ of its spread, and the
+    closed form returns the same value for other random numbers (no noise)."""
+    base = {"type": "diffuse", "reflectance": 0.5}
+    closed = coating(layers=layers, bsdf=base)
+    walked = coating(layers=layers, bsdf={"type": "blendbsdf", "weight": 0.5,
+                                          "bsdf_0": base, "bsdf_1": base})
+    assert closed.coating.form is not None and walked.coating.form is None
+    n = 1 << 14
+    rng = np.random.default_rng(5)
+    mu, phi = rng.uniform(0.02, 1, n), rng.uniform(0, 2 * np.pi, n)
+    s = np.sqrt(1 - mu ** 2)
+    wo = mi.Vector3f(mi.Float(s * np.cos(phi)), mi.Float(s * np.sin(phi)), mi.Float(mu))
+    si = interaction(0.7, n)
+    a = np.array(closed.eval(mi.BSDFContext(), si, wo), np.float64)
+    d = np.array(walked.eval(mi.BSDFContext(), si, wo), np.float64) - a
+    assert np.all(np.abs(d.mean(axis=1)) <= 4 * d.std(axis=1) / np.sqrt(n)), d.mean(axis=1)
+    seeds = [(mi.UInt32(np.arange(n, dtype=np.uint32) + k), mi.UInt32(np.full(n, 7 * k + 1, np.uint32)))
+             for k in (1, 2)]
+    runs = [np.array(b.coating.transmitted(mi.TransportMode.Radiance, si, wo, seed, mi.Bool(True)),
+                     np.float64) for b in (closed, walked) for seed in seeds]
+    np.testing.assert_array_equal(runs[0], runs[1])   # other random numbers, the same value
+    assert np.any(runs[2] != runs[3])                 # (the walk's change)
+
+
 def test_truncation_bias_is_the_dropped_series():
     """``max_bounces`` N keeps the first N terms of ``ρ^k F_dr^k``: the albedo's diffuse
     part at N = 1 is the series' first term (measured bias: the rest)."""

@@ -41,10 +41,10 @@ Thin-film coating over any BSDF (:monosp:`thinfilm_coating`)
      (default: 1). |differentiable|.
  * - max_bounces
    - |int|
-   - Most base vertices of a walk, >= 1 (default: 64). Longer paths are dropped: for a
-     Lambertian base of albedo ``ρ`` under an underside of hemispherical reflectance
-     ``R̄`` their energy is at most ``(ρ R̄)^N/(1 - ρ R̄)`` (1e-14 for white under a bare
-     1.5 coat).
+   - Most base vertices of a path, >= 1 (default: 64), in the walk and in the closed
+     form alike. Longer paths are dropped: for a Lambertian base of albedo ``ρ`` under an
+     underside of hemispherical reflectance ``R̄`` their energy is at most ``(ρ R̄)^N/(1 -
+     ρ R̄)`` (1e-14 for white under a bare 1.5 coat).
  * - thickness
    - |float| or |texture|
    - Optional scale on every film's thickness at the hit, e.g. a ``bitmap`` with
@@ -108,11 +108,15 @@ interreflections are estimated, unbiased for any base, by a position-free random
 (Guo et al. 2018, pbrt-v4's ``LayeredBxDF``): next-event estimation through the smooth
 top at every base vertex, the base sampled between them, Russian roulette after 3
 vertices, at most ``max_bounces`` vertices. ``eval`` seeds its random numbers from a
-hash of the directions and ``sample`` from its sample, so both are deterministic.
-``sample`` picks the delta lobe with probability ``(R̄ + T̄ b̄)/(R̄ + T̄)`` (``b̄``: the base's
-mean delta reflectance, 0 without one); otherwise it draws from a fixed mixture of the
-base's own non-delta lobes refracted out and a cosine lobe, and weighs the
-direction by the walk's ``f cos θ_o`` over the mixture's density, which is what ``pdf``
+hash of the directions and ``sample`` from its sample, so both are deterministic. Over
+Mitsuba's ``diffuse`` without ``coat_sigma_a``, in spectral and polarized variants, the
+walk is replaced by its closed form, ``ρ/π cos θ_o' / (1 - ρ R_dh)`` with the underside's
+hemispherical reflectance ``R_dh`` (``thinfilm_diffuse``'s model ``"exact"``): no walk
+noise (``thinfilm_mi/render/coating_forms.py``). ``sample`` picks the delta lobe with
+probability ``(R̄ + T̄ b̄)/(R̄ + T̄)`` (``b̄``: the base's mean delta reflectance, 0 without
+one); otherwise it draws from a fixed mixture of the base's own non-delta lobes refracted
+out and a cosine lobe, and weighs the direction by the walk's ``f cos θ_o`` over the
+mixture's density, which is what ``pdf``
 returns (so ``sample``, ``eval`` and ``pdf`` agree, and MIS weights sum to one). With no
 films and ``int_ior`` equal to ``ext_ior`` the plugin returns the nested BSDF itself
 (times the coat's absorption). Details: ``thinfilm_mi/render/coating.py`` and the guide

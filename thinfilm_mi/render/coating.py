@@ -46,6 +46,10 @@ there and may lose more (``tests/render/test_coating.py`` measures the truncatio
 from a TEA hash of the two directions in ``eval`` (as pbrt-v4's ``LayeredBxDF``), so
 every call is deterministic.
 
+**Closed forms**: where the base has one (Mitsuba's ``diffuse`` without coat absorption,
+in spectral and polarized variants: :mod:`thinfilm_mi.render.coating_forms`), the walk's
+sum is replaced by its expectation, with no noise.
+
 **Bases with delta lobes** (a smooth ``conductor``, ``dielectric``, ``plastic``,
 ``thinfilm_diffuse``): the all-delta paths join the delta lobe, every exit carries the
 delta round trips, and the walk samples delta vertices as any other
@@ -89,6 +93,7 @@ import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.coating_delta import DeltaBase, base_context, base_interaction, intensity
+from thinfilm_mi.render.coating_forms import closed_form
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_range
 from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.base import opaque_float
@@ -202,8 +207,12 @@ class Coating:
         #: the base's delta reflection (:class:`~thinfilm_mi.render.coating_delta.DeltaBase`),
         #: or ``None`` where it has none
         self.delta = DeltaBase(self) if base.flags() & mi.BSDFFlags.DeltaReflection else None
+        #: the closed form of the base part where the base has one
+        #: (:mod:`~thinfilm_mi.render.coating_forms`), else ``None``: the walk
+        self.form = None
         check_coat_medium(sigma_a, thickness, plugin)
         self.refresh()
+        self.form = closed_form(self)
 
     def refresh(self) -> None:
         """Re-derive the load-time quantities after an edit (indices, films)."""
@@ -218,6 +227,8 @@ class Coating:
         self.mix = opaque_float(c)
         self.inv_eta2 = opaque_float(1.0 / self.eta ** 2)
         self.eta_f = opaque_float(self.eta)
+        if self.form is not None:
+            self.form.refresh()
 
     # -- pieces ----------------------------------------------------------------
     def top(self, si, cos, active, inside: bool, transmission: bool):
@@ -382,7 +393,8 @@ class Coating:
                              max_iterations=-1 if replay else None)[0]
 
     def transmitted(self, ctx_mode, si, wo, seed, active, top_i=None):
-        """The walk's estimate of the base part of ``f cos θ_o`` (outer ``si.wi``, ``wo``);
+        """The walk's estimate of the base part of ``f cos θ_o`` (outer ``si.wi``, ``wo``),
+        or its closed form (:attr:`form`);
         ``top_i``: the stack's response at ``si.wi`` where the caller has it."""
         mi = mitsuba_module()
         wi_in, ok_i = inward(si.wi, self.eta_f)
@@ -391,7 +403,10 @@ class Coating:
         if top_i is None:
             top_i = self.top(si, si.wi.z, active, inside=False, transmission=True)
         top_o = self.top(si, wo.z, active, inside=False, transmission=True)
-        acc = self.walk(ctx_mode, si, wi_in, wo_in, seed, active)
+        if self.form is not None:
+            acc = self.form.sum(ctx_mode, si, wo_in, seed, active)
+        else:
+            acc = self.walk(ctx_mode, si, wi_in, wo_in, seed, active)
         if self.delta is not None:
             # the light entering along -wo' may make delta round trips (base, underside)
             # before its last non-delta vertex: D at w̄ = (-wo'_x, -wo'_y, wo'_z)
