@@ -133,7 +133,8 @@ reflection (exact amplitudes or their tables, as ``thinfilm_dielectric``) times 
 base's, each in Mitsuba's implicit Stokes bases of the directions the light travels, so
 the products chain (radiance transport; light tracing gets the chain's intensity,
 depolarized). AD: film thicknesses and indices, ``coat_sigma_a`` and
-``coat_thickness`` carry gradients (not in polarized variants); the nested BSDF's own
+``coat_thickness`` carry gradients (in polarized variants only where no walk runs: over
+a pure-delta base and the closed form over ``diffuse``); the nested BSDF's own
 parameters keep theirs (they appear under ``bsdf.`` in ``mi.traverse``).
 
 **Bases with delta lobes.** A path's last non-delta base vertex is connected to the exit

@@ -313,9 +313,14 @@ class Coating:
         if not self.tracks_gradients(si, active):
             return self._walk(ctx_mode, si, w0, wo_in, seed, active, None)
         if self.mode.polarized:
-            raise ThinFilmError(f"{self.plugin}: gradients in polarized variants are not "
-                                "supported (the replay's per-vertex ratios are per "
-                                "wavelength, not per Mueller matrix)")
+            # the walk's sum after vertex j is a matrix product β_j s_j R_j: its derivative
+            # needs the suffix R_j, which a forward loop does not have (the scalar replay
+            # divides by β_j s_j instead; a Mueller product of depolarizers is singular)
+            raise ThinFilmError(f"{self.plugin}: gradients in polarized variants over a walked "
+                                f"base ({self.base.class_name()}) are not supported (the "
+                                "replay's per-vertex ratios are per wavelength, not per "
+                                "Mueller matrix); they are over a pure-delta base and over "
+                                "Mitsuba's diffuse without coat_sigma_a (no walk)")
         with dr.suspend_grad():
             total = self._walk(ctx_mode, si, w0, wo_in, seed, active, None)
         surrogate = self._walk(ctx_mode, si, w0, wo_in, seed, active, total)
