@@ -52,6 +52,8 @@ class LoopFilms:
         eta = np.stack([texture_on_grid(ix.eta, grid) for ix, _, _ in films])
         k = np.stack([texture_on_grid(ix.k, grid) for ix, _, _ in films])
         self.real = bool(np.all(k == 0))
+        #: per film: no absorption on the grid
+        self.lossless = [bool(np.all(kj == 0)) for kj in k]
         #: Trace-time bounds (see optics.stack_rt_loop): films' smallest real
         #: index (where none absorbs) and the ambient's largest index.
         self.film_n_min = float(eta.min()) if self.real else None
@@ -158,6 +160,7 @@ class LoopFilms:
                 n0 = n0[0]
 
             def film(j):
+                j = mi.UInt32(j) if isinstance(j, int) else j
                 d = dr.gather(mi.Float, self.thickness, j)
                 return (Cx(dr.gather(mi.Float, self.buffer, j), 0.0),
                         d if thickness_scale is None else d * thickness_scale)
@@ -167,15 +170,19 @@ class LoopFilms:
         vec = mi.Vector2f if self.real else mi.Vector4f
 
         def film(j):
-            d = dr.gather(mi.Float, self.thickness, j)
+            d = dr.gather(mi.Float, self.thickness, mi.UInt32(j) if isinstance(j, int) else j)
             return (self._index(cells, vec, j),
                     d if thickness_scale is None else d * thickness_scale)
 
         return self._rt(film, n0, cos_theta, exit_, wl, transmission, evaluator, unrolled)
 
     def _index(self, cells, vec, j):
+        """Film ``j``'s index at the wavelengths of ``cells``; ``j`` an index array, or
+        a Python int (unrolled: a film without absorption then has a literal zero
+        imaginary part, which the recursion specialises on)."""
         mi = mitsuba_module()
-        base = j * self.cells
+        real = self.real or (isinstance(j, int) and self.lossless[j])
+        base = (mi.UInt32(j) if isinstance(j, int) else j) * self.cells
         eta, k = [], []
         for i, t in cells:
             v = dr.gather(vec, self.buffer, base + i)
@@ -185,7 +192,7 @@ class LoopFilms:
                 eta.append(dr.lerp(v[0], v[2], t))
                 k.append(dr.lerp(v[1], v[3], t))
         U = mi.UnpolarizedSpectrum
-        return Cx(U(*eta), 0.0 if self.real else U(*k))
+        return Cx(U(*eta), 0.0 if real else U(*k))
 
     def index(self, wl, j=0) -> Cx:
         """Film ``j``'s index at the wavelengths ``wl`` (one search per wavelength, one
@@ -195,7 +202,8 @@ class LoopFilms:
         if self.constant:
             return Cx(mi.UnpolarizedSpectrum(dr.gather(mi.Float, self.buffer, mi.UInt32(j))), 0.0)
         return self._index([self._cell(wl[c]) for c in range(len(wl))],
-                           mi.Vector2f if self.real else mi.Vector4f, j)
+                           mi.Vector2f if self.real else mi.Vector4f,
+                           mi.UInt32(j) if isinstance(j, int) else j)
 
     def _rt(self, film, n0, cos_theta, exit_: Cx, wl, transmission: bool, evaluator, unrolled):
         if self.n_films >= LOOP_MIN_FILMS:
@@ -203,8 +211,7 @@ class LoopFilms:
                              n0_max=self.n0_max, film_n_min=self.film_n_min,
                              film_n_max=self.film_n_max, films_max=self.n_films)
         if unrolled is not None:
-            mi = mitsuba_module()
-            films = [film(mi.UInt32(j)) for j in range(self.n_films)]
+            films = [film(j) for j in range(self.n_films)]
             return unrolled(n0, cos_theta, films, exit_, wl, transmission)
         return self._unrolled_powers(film, n0, cos_theta, exit_, wl, transmission)
 
@@ -217,16 +224,11 @@ class LoopFilms:
         (:func:`optics.stack_rt`: ``|T|^2`` carried as a power, no transmission
         amplitude), as :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt_loop`
         forms ``R`` and ``T`` from it."""
-        mi = mitsuba_module()
-
-        def at(j):
-            return film(mi.UInt32(j) if isinstance(j, int) else j)
-
         if self.real_steps:
-            return unpolarized_rt_loop(n0, cos_theta, self.n_films, at, exit_, wl, transmission,
+            return unpolarized_rt_loop(n0, cos_theta, self.n_films, film, exit_, wl, transmission,
                                        n0_max=self.n0_max, film_n_min=self.film_n_min,
                                        film_n_max=self.film_n_max, films_max=self.n_films)
-        films = [at(j) for j in range(self.n_films)]
+        films = [film(j) for j in range(self.n_films)]
         Rs, Rp, Ts, Tp = stack_rt(n0, cos_theta, films, exit_, wl, transmission=transmission)
         R = 0.5 * (Rs + Rp)
         if not transmission:
