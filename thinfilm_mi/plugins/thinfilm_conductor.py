@@ -104,10 +104,9 @@ The layer thicknesses (``layers.N.thickness``, nm) and numeric indices
 (``layers.N.eta.value``, ``layers.N.k.value``) are exposed to ``mi.traverse``
 as differentiable, opaque parameters: changing them does not recompile the
 render kernel (a table is rebuilt, ~10-30 ms, and its shape is a kernel input
-too). In exact mode the films are evaluated by a loop inside the kernel (from
-one film on when every film has a real index above ``ext_ior``'s, from 4 films
-otherwise and in polarized variants), so the kernel and its compile time do not
-grow with the number of films.
+too). In exact mode the kernel reads the films' indices and thicknesses from
+buffers, film by film below 4 films and by a loop from 4 films on, so the kernel
+and its compile time do not grow with the number of films.
 
 .. tabs::
     .. code-tab:: xml
