@@ -12,7 +12,10 @@ wavelengths drawn uniformly over 360-830 nm per lane. While the kernel is traced
 calls are counted (per lane: every traced call runs for every lane):
 
 * ``lookups``: cubic lookups of a table of ``R`` [, ``T``] (one per wavelength;
-  ``x channels`` is what each lookup interpolates);
+  ``x channels`` is what each lookup interpolates), and bilinear reads of
+  ``thinfilm_diffuse``'s factor table (one per wavelength: 4 channels, ``k_r``, ``t``,
+  ``R_dh``, ``T_hemi``, at ``θ_i``; 1, ``t``, at ``θ_o``; ``tabulate/factors.py``), as
+  traced: the kernel reads once what several calls read alike (Dr.Jit merges them);
 * ``recursions``: exact evaluations of a side's films (the unrolled recursion or
   the film loop), each over all the wavelengths of the lane.
 
@@ -76,11 +79,17 @@ class Counter:
     @contextlib.contextmanager
     def patched(self):
         from thinfilm_mi.render import kernel
-        from thinfilm_mi.tabulate import base
+        from thinfilm_mi.tabulate import base, factors
 
         orig_lookup, orig_rt = base.Table.lookup_channels, kernel._rt
         orig_loop = kernel.LoopFilms.rt
+        orig_factors = factors.FactorTable.lookup
         counter = self
+
+        def factor_lookup(table, cos_theta, cells, active=True, reflectance=True):
+            counter.lookups += len(cells)
+            counter.texels += len(cells) * (4 if reflectance else 1)
+            return orig_factors(table, cos_theta, cells, active, reflectance)
 
         def lookup_channels(table, cos_i, n0, n_exit, wavelengths, *a, **k):
             counter.lookups += len(wavelengths)
@@ -96,11 +105,13 @@ class Counter:
             return orig_loop(loop, *a, **k)
 
         base.Table.lookup_channels, kernel._rt, kernel.LoopFilms.rt = lookup_channels, rt, loop_rt
+        factors.FactorTable.lookup = factor_lookup
         try:
             yield self
         finally:
             base.Table.lookup_channels, kernel._rt = orig_lookup, orig_rt
             kernel.LoopFilms.rt = orig_loop
+            factors.FactorTable.lookup = orig_factors
 
 
 def inputs(n: int, seed: int, two_sided: bool):
@@ -180,6 +191,8 @@ def main():
             with c.patched():
                 run(bsdf, 1024, 0, smooth, two_sided)   # traced here: counted once
             mode = bsdf.stack.mode() if hasattr(bsdf, "stack") else bsdf.coating.mode()
+            if getattr(getattr(bsdf, "coated", None), "table", None) is not None:
+                mode = "factor table"   # thinfilm_diffuse reads its model's table instead
             rows.append((group, f"`{d['type']}` {label} [{mode}]", bsdf, smooth, two_sided, c))
     for r in rows:
         run(r[2], args.n, 0, r[3], r[4])   # warm-up: compiles

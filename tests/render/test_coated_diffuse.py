@@ -379,3 +379,73 @@ def test_model_and_base_ior_lookups_name_the_value_and_the_choices():
         # the house's one lookup (optics.choices.choose) ignores case, as colour-science's
         # validate_method does
         assert mi.load_dict({"type": "thinfilm_diffuse", "model": name.upper()}).model is model
+
+
+# -- the factor table (tabulate/diffuse.py FactorTable) against the exact path ---------
+def _factors_both_ways(coated, si, cos):
+    """``(k_r, t)`` at ``cos`` from the table and from the path without it (the stack's
+    recursion, or its own table of ``R``, and ``k_a``)."""
+    table = coated.table
+    k_r, t, _ = coated.factors_at(si, cos, True, True)
+    coated.table = None
+    try:
+        k_r0, t0, _ = coated.factors_at(si, cos, True, True)
+    finally:
+        coated.table = table
+    return [np.array(x) for x in (k_r, t, k_r0, t0)]
+
+
+@pytest.mark.parametrize("model", list(DIFFUSE_MODELS))
+def test_factor_table_matches_the_exact_path(model):
+    """The kernel's ``k_r``, ``t`` read from the factor table against the path it
+    replaces, at random angles outside the grazing sliver and random wavelengths: within
+    ``table_error`` where that path is the exact float32 recursion (model "exact"; float32
+    adds ~1e-5 near grazing) and 2 ``table_error`` where it reads the stack's own table
+    of ``R`` (the paper's models: each within ``table_error`` of the exact values)."""
+    b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5", "model": model})
+    coated = b.coated
+    assert coated.table is not None
+    rng = np.random.default_rng(11)
+    n = 4000
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wavelengths = mi.Spectrum(*(mi.Float(rng.uniform(360.0, 830.0, n)) for _ in range(4)))
+    cos = mi.Float(rng.uniform(0.02, 1.0, n))
+    k_r, t, k_r0, t0 = _factors_both_ways(coated, si, cos)
+    exact_path = coated.coating.mode() != "table"
+    tol = coated.coating.table_error * (1.0 if exact_path else 2.0) + 2e-5
+    assert np.abs(k_r - k_r0).max() <= tol
+    assert np.abs(t - t0).max() <= tol
+
+
+def test_factor_table_eval_is_the_model_with_its_factors():
+    """``eval`` with the table: the diffuse term ``k_d t_i t_o S cos/π`` of the table's
+    factors (S = 1/(1 - k_d R_dh), the table's ``R_dh``)
+    weight: the table's factors reach the BSDF's values."""
+    kd = 0.7
+    b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5",
+                      "model": "multiple", "reflectance": kd})
+    table = b.coated.table
+    wi, wo = direction(35.0), direction(60.0, 63.0)
+    si = make_si(1, wi)
+    cells = table.cells(si.wavelengths)
+    _, t_i, r_dh, _ = table.lookup(mi.Frame3f.cos_theta(wi), cells)
+    _, t_o, _, _ = table.lookup(mi.Frame3f.cos_theta(wo), cells)
+    want = kd * t_i * t_o / (1.0 - kd * r_dh) * mi.Frame3f.cos_theta(wo) / math.pi
+    got = b.eval(DIFFUSE_ONLY, si, wo)
+    assert np.allclose(np.array(got), np.array(want), rtol=1e-5, atol=1e-7)
+
+
+def test_factor_table_skipped_while_a_film_carries_gradients():
+    """Where a film's thickness carries gradients, the kernel evaluates every film
+    exactly (the table holds numbers, not derivatives), and reads the table again once
+    they are disabled."""
+    b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5"})
+    params = mi.traverse(b)
+    si = make_si(1, direction(30.0))
+    assert b.coated.table_at(si, True) is not None
+    dr.enable_grad(params["layers.0.thickness"])
+    params.update()
+    assert b.coated.table_at(si, True) is None
+    dr.disable_grad(params["layers.0.thickness"])
+    params.update()
+    assert b.coated.table_at(si, True) is not None

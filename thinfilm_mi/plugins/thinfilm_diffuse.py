@@ -156,7 +156,8 @@ base medium; with film ``N``, ``R_up = k_a^2 k_r`` (down and up through film
 ``N``, the coating reflecting alike from both sides: exact for a lossless
 coating, and ``R_up + t <= k_r + k_t <= 1`` in any case). ``R_dh`` is computed
 per wavelength at load time (and when a film is edited) with the float64 core over a
-Gauss-Legendre rule and stored as a ``regular`` spectrum; in AD variants its derivatives
+Gauss-Legendre rule and stored as a ``regular`` spectrum (and in the model's table, see
+below); in AD variants its derivatives
 too (see **Gradients**). The internal light is Lambertian (the base re-diffuses all it
 receives), so the exit factor is the same ``t(θ)`` and the radiance scaling ``1/η^2`` of
 ``plastic`` is 1 (matched base medium). The albedo for light from ``θ_i`` is
@@ -234,6 +235,19 @@ stack work is skipped. Thicknesses (``layers.N.thickness``) are opaque and
 exposed to ``mi.traverse``; ``R_dh`` and ``T_hemi`` are recomputed when they change.
 The selection probability is a detached sampling decision (the weight's gradient
 is that of ``k_r``, resp. the diffuse term), so ``T_hemi`` needs no derivatives.
+
+**The model's table** (spectral vectorised variants, ``tabulate`` ``auto`` or ``true``).
+The kernel reads ``k_r`` and ``t`` at every angle and wavelength, with ``R_dh`` and
+``T_hemi``, from one table of the model instead of the stack's recursion or tables:
+bilinear over (``sqrt(cos θ)``, wavelength), verified within ``table_error`` as the
+stack's tables are (outside the grazing sliver; a finer wavelength step towards grazing
+incidence where a cavity of the films needs it; ``thinfilm_mi/tabulate/factors.py``). One
+read at ``θ_i`` serves ``eval_pdf`` and ``sample`` (Mitsuba calls them back to back), one
+read of ``t`` each ``θ_o``. Where no such table fits in 2^21 floats (e.g. a free-standing
+"SiO2 500" in model ``"exact"``, or films of ~5 µm) the stack is read as ``tabulate``
+says; where a film parameter carries gradients, or under a ``thickness`` texture, every
+film is evaluated exactly. Polarized variants read ``k_r`` and ``t`` from it, and the
+shape of the delta lobe's Mueller matrix (its entries over ``M00``) from the stack.
 
 **RGB and mono variants** (``*_rgb``, ``*_mono``; polarized ones are refused).
 ``k_r`` is the spectral reflectance integrated against colour matching (CIE 1931 2°

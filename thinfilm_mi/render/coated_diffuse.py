@@ -38,10 +38,12 @@ from thinfilm_mi.render.colour_variants import (
 from thinfilm_mi.render.diffuse import (
     DiffuseFactors,
     ExactFactors,
+    IndexGradients,
     SpectralTerms,
     absorbs,
     colour_diffuse,
     constant_albedo,
+    factor_table,
     texture_gradients_refused,
     with_derivatives,
 )
@@ -235,6 +237,10 @@ class CoatedDiffuse:
         self.colour = None
         #: R_dh's derivative table, while a film parameter carries gradients
         self.r_dh_grad = None
+        #: spectral JIT variants: k_r, t, R_dh and T_hemi as one bilinear table
+        #: (:func:`~thinfilm_mi.render.diffuse.factor_table`), or None (exact)
+        self.table = None
+        self.index_gradients = IndexGradients()   #: whether an index carries gradients
         self.update()
 
     # -- load-time terms -------------------------------------------------------
@@ -249,6 +255,7 @@ class CoatedDiffuse:
         RGB/mono variants the integrated diffuse tables instead. In AD variants also
         ``R_dh``'s derivatives (:attr:`r_dh_grad`)."""
         factors = self.factors()
+        self.index_gradients.collect(self.media())
         self.r_dh_grad = None
         self.update_derivatives()
         if self.mode.integrated:
@@ -260,6 +267,27 @@ class CoatedDiffuse:
                     prepare_gradients([self.film_n])
             return
         self.terms = SpectralTerms(factors, self.texture, self.plugin, self.terms)
+        self.table = factor_table(factors, self.coating, self.texture, self.media())
+
+    def media(self):
+        """The indices of the ambient, the base medium, the films and film ``N``."""
+        coating = self.coating
+        media = [coating.ambient, coating.substrate] + list(coating.indices)
+        return media if self.film_n is None else media + [self.film_n]
+
+    def table_at(self, si, active):
+        """``(table, the hit's wavelength cells)`` where the kernel reads the :attr:`table`;
+        ``None`` without one or where a film parameter carries gradients (then every film
+        is evaluated exactly; :attr:`index_gradients`: without evaluating a texture, so
+        that Dr.Jit merges the reads at ``θ_i`` of ``eval_pdf`` and ``sample``)."""
+        coating = self.coating
+        if self.table is None or coating.current_plan(False, True) is not coating.plan.get(False):
+            return None
+        if self.film_n is not None and dr.grad_enabled(self.film_n_thickness):
+            return None
+        if any(self.index_gradients(ix, si, active) for ix in self.media()):
+            return None
+        return self.table, self.table.cells(si.wavelengths)
 
     def film_gradients(self) -> bool:
         """Whether a film parameter (a ``layers.*`` value) carries gradients."""
@@ -306,15 +334,36 @@ class CoatedDiffuse:
         # (the polarized amplitudes of a scaled stack come back as plain Array4f)
         return mi.UnpolarizedSpectrum(k_t)
 
-    def factors_at(self, si, cos_theta, active, transmission: bool):
+    def factors_at(self, si, cos_theta, active, transmission: bool, lobe: bool = False,
+                   reflectance: bool = True):
         """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
-        and the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`."""
+        and (if ``lobe``) the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`
+        (``None`` otherwise). From the :attr:`table` where it applies (:meth:`table_at`;
+        ``k_r`` ``None`` there unless ``reflectance``); the polarized lobe's shape from the
+        stack's amplitudes."""
         mi = mitsuba_module()
+        table = self.table_at(si, active)
+        if table is not None:
+            k_r, t, _, _ = table[0].lookup(cos_theta, table[1], active,
+                                           reflectance or not transmission)
+            shape = None
+            if lobe and self.mode.polarized:   # (k_r is the table's: as eval_pdf's)
+                shape = self.mode.response(self.coating, si, cos_theta, active).reflection
+            return k_r, t if transmission else None, shape
         resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
         k_r = mi.UnpolarizedSpectrum(resp.R)
         if not transmission:
             return k_r, None, resp.reflection
         return k_r, self.transmission(si, cos_theta, resp.T, active), resp.reflection
+
+    def terms_at(self, si, active):
+        """``(R_dh, T_hemi)`` at the hit's wavelengths (without ``R_dh``'s derivatives): from
+        the :attr:`table`'s read at ``θ_i`` where it applies, else :attr:`terms`."""
+        table = self.table_at(si, active)
+        if table is not None:
+            cos_i = mitsuba_module().Frame3f.cos_theta(si.wi)
+            return table[0].lookup(cos_i, table[1], active)[2:]
+        return self.terms.lookup(si, self.coating, active)
 
     def r_dh_with_derivatives(self, r_dh, si, wavelengths, index_at, active):
         """``R_dh`` carrying its derivatives (:func:`~thinfilm_mi.render.diffuse.with_derivatives`;
@@ -325,11 +374,11 @@ class CoatedDiffuse:
         if self.film_n is not None:
             films.append((self.film_n, self.film_n_thickness))
         return with_derivatives(self.r_dh_grad, r_dh, films, si, wavelengths, index_at, active,
-                                self.coating.plugin)
+                                self.coating.plugin, self.index_gradients)
 
     def r_dh(self, si, active):
         """``R_dh`` at the hit's wavelengths, with its derivatives."""
-        return self.r_dh_with_derivatives(self.terms.lookup(si, self.coating, active)[0], si,
+        return self.r_dh_with_derivatives(self.terms_at(si, active)[0], si,
                                           si.wavelengths, lambda ix: ix.eval(si, active), active)
 
     def series(self, si, kd, active):
@@ -393,7 +442,7 @@ class CoatedDiffuse:
             if self.colour_gradients(si, active):
                 value = attach_gradient(value, self.colour_estimate(si, cos_i, cos_o, active, g))
             return value
-        _, t_o, _ = self.factors_at(si, cos_o, active, transmission=True)
+        _, t_o, _ = self.factors_at(si, cos_o, active, transmission=True, reflectance=False)
         if base is not None:
             return t_i * t_o * self.model.rough_series(base, lambda: self.r_dh(si, active))
         return kd * t_i * t_o * series
@@ -411,7 +460,7 @@ class CoatedDiffuse:
         if self.colour is not None:
             diff = spectral_mean(self.colour.albedo(cos_i, kd, active, self.colour_scale(si, active)))
         else:
-            diff = spectral_mean(t_i * kd * self.terms.lookup(si, self.coating, active)[1] * series)
+            diff = spectral_mean(t_i * kd * self.terms_at(si, active)[1] * series)
         total = spec + diff
         return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
 
@@ -439,7 +488,8 @@ class CoatedDiffuse:
             return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
 
         spectral = self.colour is None
-        k_r, t_i, spec_lobe = self.factors_at(si, cos_i, active, transmission=has_diff and spectral)
+        k_r, t_i, spec_lobe = self.factors_at(si, cos_i, active, transmission=has_diff and spectral,
+                                              lobe=True)
         kd = series = None
         if has_diff:
             kd = self.reflectance.eval(si, active)
@@ -536,6 +586,7 @@ class CoatedDiffuse:
         else:
             # gradients enabled or disabled on an unchanged value (the guard
             # compares values, not their AD state)
+            self.index_gradients.collect(self.media())
             self.update_derivatives()
 
     def describe(self) -> str:

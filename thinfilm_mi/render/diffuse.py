@@ -2,8 +2,9 @@
 (:mod:`thinfilm_mi.render.coated_diffuse`; no plugin classes here).
 
 * :class:`DiffuseFactors` — the factors of the paper's models as the colour tables
-  (:mod:`thinfilm_mi.tabulate.diffuse`) and the load-time terms integrate them: the
-  coating's transmittance ``t`` at any (angle, wavelength) and its hemispherical terms
+  (:mod:`thinfilm_mi.tabulate.diffuse`), the factor table and the load-time terms read
+  them: the coating's reflectance ``k_r`` and transmittance ``t`` at any (angle,
+  wavelength) and its hemispherical terms
   (:mod:`thinfilm_mi.tabulate.hemispherical`), read from the model's
   :class:`~thinfilm_mi.render.kernel.KernelStack` and media.
 * :class:`ExactFactors` — the same for model ``"exact"`` (the whole stack, coherent,
@@ -16,7 +17,10 @@
   over the thickness scale with ``∂R_dh/∂s`` for the texture's gradients.
 * :func:`with_derivatives` — ``R_dh`` carrying its derivatives with respect to the
   films' thicknesses and indices, from a
-  :class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`.
+  :class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`; :class:`IndexGradients`
+  — which indices carry gradients, read without evaluating their textures.
+* :func:`factor_table` — the spectral kernels' table of the factors
+  (:class:`~thinfilm_mi.tabulate.factors.FactorTable`).
 * :func:`colour_diffuse`, :func:`constant_albedo` — the RGB/mono tables of the diffuse
   term; :func:`scale_bounds` — the largest value of a ``thickness`` texture, read at load;
   :func:`texture_gradients_refused` — why film gradients and a texture do not go together.
@@ -40,6 +44,7 @@ from thinfilm_mi.render.params import ALBEDO_SLACK
 from thinfilm_mi.render.textures import checked_texture, mitsuba_module, regular, scalar, texture_range, uniform
 from thinfilm_mi.tabulate import base as tabulate_base
 from thinfilm_mi.tabulate.diffuse import ColourDiffuse, ScaledColourDiffuse
+from thinfilm_mi.tabulate.factors import FactorTable
 from thinfilm_mi.tabulate.hemispherical import (
     DEFAULT_NODES,
     PER_FILM,
@@ -49,14 +54,16 @@ from thinfilm_mi.tabulate.hemispherical import (
     r_dh_partials,
 )
 
-__all__ = ["DiffuseFactors", "ExactFactors", "SpectralTerms", "with_derivatives", "colour_diffuse",
+__all__ = ["DiffuseFactors", "ExactFactors", "SpectralTerms", "IndexGradients", "with_derivatives",
+           "factor_table", "colour_diffuse",
            "constant_albedo", "scale_bounds", "texture_gradients_refused", "absorbs",
            "reflectance_from_props", "grid_spectrum", "side_rt"]
 
 class DiffuseFactors:
     """The spectral factors of the paper's models for
-    :class:`~thinfilm_mi.tabulate.diffuse.ColourDiffuse` and :class:`SpectralTerms`:
-    ``t(cos, wl)`` (shape ``(len cos, len wl)``) and ``hemispherical(wl) ->
+    :class:`~thinfilm_mi.tabulate.diffuse.ColourDiffuse`, :class:`SpectralTerms` and
+    :func:`factor_table`: ``t(cos, wl)`` and ``rt(cos, wl) -> (k_r, t)`` (shape ``(len
+    cos, len wl)`` each) and ``hemispherical(wl) ->
     (R_dh, T_hemi)`` (over ``wl``), for the coating ``coating`` (a
     :class:`~thinfilm_mi.render.kernel.KernelStack`) over the absorbing film ``film_n``
     (a ``SpectralIndex``) of ``film_n_thickness`` nm, or over the base medium
@@ -80,16 +87,21 @@ class DiffuseFactors:
 
     def t(self, cos, wl):
         """``t = k_t k_a`` at every angle ``cos`` and wavelength ``wl``: shape ``(len cos, len wl)``."""
-        _, T = side_rt(self.coating, False, cos, wl, self.scale)
+        return self.rt(cos, wl)[1]
+
+    def rt(self, cos, wl):
+        """``(k_r, t)`` at every angle ``cos`` and wavelength ``wl``, each of shape ``(len cos,
+        len wl)``: the coating's reflectance and :meth:`t`, from one evaluation of the coating."""
+        R, T = side_rt(self.coating, False, cos, wl, self.scale)
         if self.film_n is None:
-            return T
+            return R, T
         n0 = self.coating.ambient.spectral_values(wl, real=True)
         n_f = self.film_n.spectral_values(wl)
         beta2 = (n0 ** 2)[None, :] * (1.0 - cos ** 2)[:, None]
         q = np.sqrt((n_f ** 2)[None, :] - beta2 + 0j)
         q = np.where(q.imag < 0, -q, q)           # the decaying root
-        return T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness
-                          * self.scale)
+        return R, T * np.exp(-(4.0 * math.pi / wl)[None, :] * q.imag * self.film_n_thickness
+                             * self.scale)
 
     def _arguments(self, wl):
         """The arguments of :func:`~thinfilm_mi.tabulate.hemispherical.paper_terms` and
@@ -132,8 +144,9 @@ class ExactFactors(DiffuseFactors):
         return (c.ambient.spectral_values(wl, real=True)
                 / c.substrate.spectral_values(wl, real=True))
 
-    def t(self, cos, wl):
-        return super().t(cos, wl) * self._ratio(wl)[None, :]
+    def rt(self, cos, wl):
+        R, T = super().rt(cos, wl)
+        return R, T * self._ratio(wl)[None, :]
 
     def hemispherical(self, wl):
         r, t = self.hemispherical_scales(wl, [self.scale])
@@ -206,6 +219,25 @@ class SpectralTerms:
         return r_dh, out[1]
 
 
+def factor_table(factors, coating: KernelStack, texture, media):
+    """The :class:`~thinfilm_mi.tabulate.factors.FactorTable` of ``factors`` (of the
+    coating ``coating``, between the ``media``: ``SpectralIndex``) in spectral JIT variants
+    where ``tabulate`` builds tables, without a ``thickness`` ``texture`` or a medium that
+    varies over the surface; ``None`` otherwise, or where no table within ``table_error``
+    fits (the kernel then evaluates the stack). In place of the stack's own tables for
+    every model and stack: its read of ``k_r`` and ``t`` at 4 wavelengths costs ~1/3 of the
+    exact 2-film recursion and ~1/4 of the stack's cubic table of ``R`` (measured in
+    ``llvm_ad_spectral``, ``benchmarks/sample_profile.py --plugins diffuse``)."""
+    if factors is None or texture is not None or not coating.tabulate.builds \
+            or not dr.is_jit_v(mitsuba_module().Float):
+        return None
+    if any(tex.is_spatially_varying() for ix in media for tex in (ix.eta, ix.k)):
+        return None
+    kinks = np.unique(np.concatenate([ix.kinks for ix in media]))
+    table = FactorTable(factors.rt, factors.hemispherical, coating.table_error, kinks)
+    return table if table.built else None
+
+
 def texture_gradients_refused(plugin: str, model) -> str:
     """Why film-parameter gradients are refused together with a ``thickness`` texture
     (``model``: one with interreflection, whose ``R_dh``'s derivative table holds scale 1
@@ -215,19 +247,63 @@ def texture_gradients_refused(plugin: str, model) -> str:
             "tabulated at scale 1); differentiate the texture, or use model 'single'")
 
 
-def with_derivatives(table, r_dh, films, si, wavelengths, index_at, active, plugin: str):
+class IndexGradients:
+    """Whether the indices (``SpectralIndex``) carry gradients at a hit, as
+    :meth:`~thinfilm_mi.render.media.SpectralIndex.carries_gradients` says, but read from
+    the parameters of their textures where those do not vary over the surface (their
+    values depend on the wavelength alone), collected here once (:meth:`collect`, after
+    every edit: ``mi.traverse`` is slow and allocates), instead of from an evaluation at
+    each trace: an evaluation of an ``irregular`` spectrum (a binary search) starts a
+    new Dr.Jit scope, and Dr.Jit merges identical computations (the coated-diffuse
+    model's table reads at ``θ_i`` in ``eval_pdf`` and ``sample``) only within one; and
+    the allocations of a trace may start a pass of the garbage collector, which the GC
+    guard (:mod:`thinfilm_mi.render.gc_guard`) then owes as a full collection."""
+
+    def __init__(self, indices=()):
+        self.values = {}
+        self.collect(indices)
+
+    def collect(self, indices) -> None:
+        """Collect the parameters of ``indices``' textures (a texture that varies over the
+        surface is evaluated at each call instead)."""
+        mi = mitsuba_module()
+        self.values = {}
+        if not dr.is_diff_v(mi.Float):
+            return
+        for ix in indices:
+            if ix.eta.is_spatially_varying() or ix.k.is_spatially_varying():
+                continue
+            values = []
+            for tex in (ix.eta, ix.k):
+                params = mi.traverse(tex)
+                values += [params[k] for k in params.keys()]
+            self.values[id(ix)] = values
+
+    def __call__(self, index, si, active=True) -> bool:
+        if not dr.is_diff_v(mitsuba_module().Float):
+            return False
+        values = self.values.get(id(index))
+        if values is None:
+            return index.carries_gradients(si, active)
+        return any(dr.grad_enabled(v) for v in values)
+
+
+def with_derivatives(table, r_dh, films, si, wavelengths, index_at, active, plugin: str,
+                     carries=None):
     """``R_dh`` (at ``wavelengths``) plus ``Σ_x ∂R_dh/∂x (x - detach(x))`` over the
     ``films`` (``(SpectralIndex, thickness)``, the coating's then film N) whose
     thickness or index carries gradients: the same value, with ``R_dh``'s derivatives
     (``table``, a :class:`~thinfilm_mi.tabulate.hemispherical.DerivativeTable`).
-    ``index_at(ix)``: a film's index at ``wavelengths``. Gradients that reach here
+    ``index_at(ix)``: a film's index at ``wavelengths``; ``carries(ix, si, active)``:
+    whether it carries gradients (an :class:`IndexGradients`; default: the index's own
+    ``carries_gradients``). Gradients that reach here
     without a table (enabled without ``params.update()``) raise, never bias."""
     mi = mitsuba_module()
     carriers = {}
     for f, (ix, d) in enumerate(films):
         if dr.grad_enabled(d):
             carriers[PER_FILM * f] = mi.UnpolarizedSpectrum(d - dr.detach(d))
-        if ix.carries_gradients(si, active):
+        if (ix.carries_gradients if carries is None else lambda *a: carries(ix, *a))(si, active):
             n = index_at(ix)
             carriers[PER_FILM * f + 1] = mi.UnpolarizedSpectrum(n.re - dr.detach(n.re))
             carriers[PER_FILM * f + 2] = mi.UnpolarizedSpectrum(n.im - dr.detach(n.im))

@@ -1,0 +1,245 @@
+"""The coated-diffuse model's spectral factors in spectral variants as one table
+(:class:`FactorTable`; no plugin classes here): ``k_r(θ, λ)`` and ``t(θ, λ)`` of
+:class:`~thinfilm_mi.render.diffuse.DiffuseFactors` (the coating's reflectance, and the
+power that reaches the base: ``k_t k_a``, or ``T n_0/n_b`` for model "exact"), with
+``R_dh(λ)`` and ``T_hemi(λ)``, read by the kernel in place of the stack's recursion or
+its tables of ``R`` and ``T``: one bilinear read at ``θ_i`` serves ``k_r``, ``t`` and the
+hemispherical terms, one read of ``t`` alone each ``θ_o``. (The RGB and mono variants
+integrate the diffuse term instead: :mod:`thinfilm_mi.tabulate.diffuse`.)
+"""
+from __future__ import annotations
+
+import drjit as dr
+import numpy as np
+
+from thinfilm_mi.materials.model import SPECTRAL_RANGE
+from thinfilm_mi.tabulate.base import GRAZING_COS, BuildReport
+
+__all__ = ["FactorTable", "FACTOR_FIRST_NODES", "FACTOR_STEPS", "FACTOR_MAX_FLOATS",
+           "FACTOR_ANGLE_SHARE"]
+
+#: Angle nodes (uniform in ``sqrt(cos θ)`` over [0, 1]) of the first grid of a
+#: :class:`FactorTable`; doubled (less one) until the lookup is within the target.
+FACTOR_FIRST_NODES = 33
+#: Wavelength steps (nm) of a :class:`FactorTable`: the first everywhere, a finer one
+#: (the first that is within the target) in a band of angles towards grazing incidence.
+#: (Nodes uniform in wavenumber, as a stack's fringes, fail more often: under "SiO2 500;
+#: Au 5" the paper's factors need 0.5 nm at 830 nm as well, where Au's index varies.)
+FACTOR_STEPS = (1.0, 0.5, 0.25, 0.125)
+#: Most floats of a :class:`FactorTable` (8 MiB of float32): beyond, the factors are
+#: evaluated exactly (the kernel's recursion).
+FACTOR_MAX_FLOATS = 1 << 21
+#: The share of the target the angle nodes are refined to (the rest is the wavelength
+#: nodes'), as the cubic tables' refinement aims each axis at half of it.
+FACTOR_ANGLE_SHARE = 0.5
+
+
+def _check_points(step: float, kinks) -> tuple:
+    """The wavelength nodes over 360-830 nm ``step`` nm apart, and the wavelengths where
+    the linear lookup between them is checked: the midpoints, and the indices' kinks
+    (where a dataset's slope jumps, linear interpolation errs most at the kink) that
+    are not nodes."""
+    lo, hi = SPECTRAL_RANGE
+    wl = np.linspace(lo, hi, int(round((hi - lo) / step)) + 1)
+    x = (np.asarray(kinks, np.float64) - lo) / step
+    kinks = np.asarray(kinks, np.float64)[(x > 0) & (x < wl.size - 1)
+                                          & (np.abs(x - np.round(x)) > 1e-6)]
+    return wl, np.unique(np.concatenate([0.5 * (wl[:-1] + wl[1:]), kinks]))
+
+
+def _cell_errors(cos, at, between, wl, checks):
+    """The bilinear lookup's error per angle cell, the largest over wavelengths and
+    channels, from the exact values ``at`` the node wavelengths ``wl`` and at the
+    ``checks`` between them (angle x wavelength x channel) at the angles ``cos``, the
+    nodes' and their midpoints alternating: ``err_u + err_w`` (``err_u``: at the cell's
+    midpoints at the node wavelengths; ``err_w``: the larger of its two nodes' at the
+    checks) and ``err_c`` (at its midpoints at the checks), the larger; 0 in the grazing
+    sliver (a cell counts where both its nodes lie outside it)."""
+    step = wl[1] - wl[0]
+    j = np.clip(np.floor((checks - wl[0]) / step).astype(int), 0, wl.size - 2)
+    w = ((checks - wl[j]) / step)[None, :, None]
+    nodes = at[0::2]
+    err_u = np.abs(0.5 * (nodes[:-1] + nodes[1:]) - at[1::2]).max(axis=(1, 2))
+    linear = (1.0 - w) * nodes[:, j] + w * nodes[:, j + 1]
+    err_w = np.abs(linear - between[0::2]).max(axis=(1, 2))
+    err_c = np.abs(0.5 * (linear[:-1] + linear[1:]) - between[1::2]).max(axis=(1, 2))
+    keep = cos[0::2] >= GRAZING_COS
+    err = np.maximum(err_u + np.maximum(err_w[:-1], err_w[1:]), err_c)
+    return np.where(keep[:-1] & keep[1:], err, 0.0)
+
+
+class FactorTable:
+    """Spectral variants: the coated-diffuse model's spectral factors ``k_r(θ, λ)`` and
+    ``t(θ, λ)`` on a grid uniform in ``s = sqrt(cos θ)`` over [0, 1] and in ``λ`` over
+    360-830 nm, read by bilinear interpolation (one gather of both factors per texel,
+    four per wavelength), with ``R_dh(λ)`` and ``T_hemi(λ)`` every 1 nm (read linearly,
+    as the ``regular`` spectra they replace).
+
+    ``rt(cos, wl)``: the exact float64 ``(k_r, t)``, each of shape ``(len cos, len wl)``;
+    ``hemispherical(wl)``: ``(R_dh, T_hemi)`` over ``wl``; ``error``: the target max abs
+    error of ``k_r`` and ``t`` (``table_error``); ``kinks``: wavelengths where an index's
+    slope jumps (checked too). The build compares the bilinear lookup with exact values
+    at the midpoints of the angle cells at the wavelength nodes (``err_u``), at every
+    angle node between the wavelength nodes (``err_w``) and at the angle cells'
+    midpoints between them (``err_c``), outside the grazing sliver ``cos θ <``
+    :data:`~thinfilm_mi.tabulate.base.GRAZING_COS`, which the stack's tables leave out
+    of their verification too, and accepts a cell where ``err_u + err_w <= error`` (the
+    larger ``err_w`` of its two nodes) and ``err_c <= error``: linear interpolation errs
+    most at a cell's midpoint (for a locally constant second derivative), and the
+    bilinear lookup by at most the sum of its two
+    axes' errors (``f - P_u P_w f = (f - P_u f) + P_u (f - P_w f)``, ``|P_u g| <= max
+    |g|``): the criterion of the cubic tables (``err_u + err_v <= table_error``,
+    :mod:`thinfilm_mi.tabulate.exact`). The angle nodes double from
+    :data:`FACTOR_FIRST_NODES` until ``err_u`` is within :data:`FACTOR_ANGLE_SHARE` of
+    the target at the first wavelength step of :data:`FACTOR_STEPS`; the angles where
+    the wavelength nodes miss the rest (towards grazing incidence, where a film between
+    media of unlike index is a cavity of high finesse: under a free-standing "SiO2 500"
+    ``R`` goes from 0.33 to 0.001 between 360 and 361.5 nm at ``cos θ = 0.022``) form a
+    band of their own with the first finer step that meets the target. :attr:`built` is
+    false when that needs more than :data:`FACTOR_MAX_FLOATS` floats or a step finer
+    than the finest (:attr:`report` says why); the plugin then evaluates the factors
+    exactly.
+
+    The angle coordinate ``s`` puts nodes towards grazing incidence, where ``R`` and
+    ``T`` change over ``cos θ ~ 1e-3`` (``R -> 1`` at ``cos θ = 0``; under "SiO2 500;
+    Au 5" at 543 nm a leaky mode takes ``R`` from 1 to 0.74 by ``cos θ = 1e-3``): nodes
+    uniform in ``cos θ`` miss it (an error of 0.07 at 1025 nodes); the sliver is not
+    verified, but its interpolation follows ``R -> 1``."""
+
+    def __init__(self, rt, hemispherical, error: float, kinks=()):
+        error = float(error)
+        #: what the build did: ``points`` (exact evaluations), the angle ``nodes``, the
+        #: ``band`` (angle cells with the finer wavelength ``fine_step``), the largest
+        #: ``error`` of a cell (``err_u + err_w`` or ``err_c``), ``texels`` (floats),
+        #: ``result``
+        self.report = BuildReport(kind="factors", points=0, result="table")
+        self.built = False
+
+        def evaluate(cos, wl):
+            self.report["points"] += cos.size * wl.size
+            return np.stack(rt(cos, wl), axis=-1)
+
+        nu = FACTOR_FIRST_NODES
+        wl, checks = _check_points(FACTOR_STEPS[0], kinks)
+        while True:
+            if 4 * nu * wl.size > FACTOR_MAX_FLOATS:
+                self._refuse(f"more than {FACTOR_MAX_FLOATS} floats for a bilinear error "
+                             f"within {FACTOR_ANGLE_SHARE * error:g} along the angle")
+                return
+            cos = np.linspace(0.0, 1.0, 2 * nu - 1) ** 2
+            at = evaluate(cos, wl)
+            nodes = at[0::2]
+            if np.abs(0.5 * (nodes[:-1] + nodes[1:]) - at[1::2])[
+                    cos[1::2] >= GRAZING_COS].max(initial=0.0) <= FACTOR_ANGLE_SHARE * error:
+                break
+            nu = 2 * nu - 1
+        err = _cell_errors(cos, at, evaluate(cos, checks), wl, checks)
+        # the band: angle cells 0..k-1 (nodes 0..k), up to the last cell that misses
+        k = int(np.flatnonzero(err > error).max(initial=-1)) + 1
+        error_max = err[k:].max(initial=0.0)
+        fine, fine_step = None, FACTOR_STEPS[0]
+        if k > 0:
+            band_cos = cos[:2 * k + 1]
+            for step in FACTOR_STEPS[1:]:
+                band_wl, band_checks = _check_points(step, kinks)
+                if 4 * (nu * wl.size + (k + 1) * band_wl.size) > FACTOR_MAX_FLOATS:
+                    break
+                at_b = evaluate(band_cos, band_wl)
+                band_err = _cell_errors(band_cos, at_b, evaluate(band_cos, band_checks), band_wl,
+                                        band_checks).max(initial=0.0)
+                if band_err <= error:
+                    fine, fine_step = at_b[0::2], step
+                    error_max = max(error_max, band_err)
+                    break
+            if fine is None:
+                self._refuse(f"no wavelength step of {FACTOR_STEPS} within {FACTOR_MAX_FLOATS} "
+                             f"floats for a bilinear error within {error:g}")
+                return
+        self.built = True
+        #: angle nodes; the band's nodes (0..band, sharing node ``band`` with the rest)
+        self.nu, self.band = nu, k
+        #: wavelength steps (nm): of the nodes beyond the band, of the band's
+        self.step, self.fine_step = FACTOR_STEPS[0], fine_step
+        self.nw = wl.size
+        self.nw_fine = 0 if fine is None else fine.shape[1]
+        self.report.update(nodes=nu, band=k, step=self.step, fine_step=fine_step,
+                           error=float(error_max))
+        # (R_dh, T_hemi) every 1 nm, linear between (as the regular spectra they replace:
+        # on the band's finer nodes too, which contain the 1 nm ones)
+        lo, hi = SPECTRAL_RANGE
+        grid = np.linspace(lo, hi, int(round(hi - lo)) + 1)
+        terms = np.stack(hemispherical(grid), axis=-1)
+
+        def with_terms(part, wavelengths):    # (angle, wavelength, 2) -> (wavelength, angle, 4)
+            at = np.stack([np.interp(wavelengths, grid, terms[:, c]) for c in range(2)], -1)
+            at = np.broadcast_to(at[None], part.shape[:2] + (2,))
+            return np.concatenate([part, at], axis=-1).transpose(1, 0, 2).reshape(-1, 4)
+        # (wavelength, angle) rows of (k_r, t, R_dh, T_hemi): the band's, then the rest's
+        parts = [] if fine is None else [with_terms(fine, _check_points(fine_step, ())[0])]
+        parts.append(with_terms(nodes[k:], wl))
+        flat = np.concatenate(parts)
+        #: the offset of the rows beyond the band
+        self.offset = 0 if fine is None else parts[0].shape[0]
+        import mitsuba as mi
+        #: the rows of (k_r, t, R_dh, T_hemi): read at ``θ_i`` (one gather of four floats
+        #: per texel costs about as much as one of two)
+        self.factors = mi.Float(np.ascontiguousarray(flat, np.float32).ravel())
+        #: ``t`` alone, in the same order: a lookup of ``t`` alone (at ``θ_o``) gathers one
+        #: float per texel (~1/3 of the time of the pair's gather, in ``llvm_ad_spectral``)
+        self.transmittance = mi.Float(np.ascontiguousarray(flat[:, 1], np.float32))
+        self.report["texels"] = int(flat.size + flat.shape[0])
+
+    def _refuse(self, why: str) -> None:
+        self.report["result"] = why
+
+    @staticmethod
+    def _cells(wavelengths, step: float, n: int):
+        import mitsuba as mi
+        out = []
+        for i in range(len(wavelengths)):
+            x = (wavelengths[i] - SPECTRAL_RANGE[0]) * (1.0 / step)
+            x = dr.select(x > 0.0, dr.minimum(x, n - 1.0), 0.0)   # (NaN: 0)
+            j = dr.minimum(mi.UInt32(x), n - 2)
+            out.append((j, x - mi.Float(j)))
+        return out
+
+    def cells(self, wavelengths):
+        """Per wavelength of ``wavelengths`` (``mi.Spectrum``; clamped to 360-830 nm): its
+        cell's first node and the weight of the next, on the wavelength nodes beyond the
+        band and (the second of each pair; ``None`` without a band) on the band's."""
+        coarse = self._cells(wavelengths, self.step, self.nw)
+        fine = self._cells(wavelengths, self.fine_step, self.nw_fine) if self.band else \
+            [None] * len(coarse)
+        return list(zip(coarse, fine))
+
+    def lookup(self, cos_theta, cells, active=True, reflectance: bool = True):
+        """``(k_r, t, R_dh, T_hemi)`` (``mi.UnpolarizedSpectrum``) at ``cos_theta`` and the
+        wavelengths of ``cells`` (:meth:`cells`); only ``t`` (the others ``None``) unless
+        ``reflectance``. The reads are not masked (every index lies in the table), so
+        that Dr.Jit merges identical ones."""
+        import mitsuba as mi
+        nu, k = self.nu, self.band
+        x = dr.sqrt(dr.select(cos_theta > 0.0, dr.minimum(cos_theta, 1.0), 0.0)) * (nu - 1.0)
+        i = dr.minimum(mi.UInt32(x), nu - 2)
+        u = x - mi.Float(i)
+        if k:
+            in_band = i < k
+            stride = dr.select(in_band, mi.UInt32(k + 1), mi.UInt32(nu - k))
+            first = dr.select(in_band, i, i - k + self.offset)
+        else:
+            stride, first = nu, i
+        out = []
+        for (j, w), band in cells:
+            if k:
+                j = dr.select(in_band, band[0], j)
+                w = dr.select(in_band, band[1], w)
+            row = j * stride + first
+            kind, buffer = (mi.Vector4f, self.factors) if reflectance else \
+                (mi.Float, self.transmittance)
+            v0 = dr.lerp(dr.gather(kind, buffer, row), dr.gather(kind, buffer, row + 1), u)
+            v1 = dr.lerp(dr.gather(kind, buffer, row + stride),
+                         dr.gather(kind, buffer, row + stride + 1), u)
+            out.append(dr.lerp(v0, v1, w))
+        if not reflectance:
+            return None, mi.UnpolarizedSpectrum(*out), None, None
+        return tuple(mi.UnpolarizedSpectrum(*(v[c] for v in out)) for c in range(4))
