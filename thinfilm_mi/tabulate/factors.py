@@ -9,11 +9,14 @@ integrate the diffuse term instead: :mod:`thinfilm_mi.tabulate.diffuse`.)
 """
 from __future__ import annotations
 
+import math
+
 import drjit as dr
 import numpy as np
 
 from thinfilm_mi.materials.model import SPECTRAL_RANGE
 from thinfilm_mi.tabulate.base import GRAZING_COS, BuildReport
+from thinfilm_mi.tabulate.refine import convergence_factor
 
 __all__ = ["FactorTable", "FACTOR_FIRST_NODES", "FACTOR_STEPS", "FACTOR_MAX_FLOATS",
            "FACTOR_ANGLE_SHARE"]
@@ -89,13 +92,16 @@ class FactorTable:
     bilinear lookup by at most the sum of its two
     axes' errors (``f - P_u P_w f = (f - P_u f) + P_u (f - P_w f)``, ``|P_u g| <= max
     |g|``): the criterion of the cubic tables (``err_u + err_v <= table_error``,
-    :mod:`thinfilm_mi.tabulate.exact`). The angle nodes double from
-    :data:`FACTOR_FIRST_NODES` until ``err_u`` is within :data:`FACTOR_ANGLE_SHARE` of
-    the target at the first wavelength step of :data:`FACTOR_STEPS`; the angles where
+    :mod:`thinfilm_mi.tabulate.exact`). The angle nodes grow from
+    :data:`FACTOR_FIRST_NODES` (to ``2^n + 1``, by the factor the error's observed order
+    asks for: :func:`~thinfilm_mi.tabulate.refine.convergence_factor`) until ``err_u`` is
+    within :data:`FACTOR_ANGLE_SHARE` of the target at the first wavelength step of
+    :data:`FACTOR_STEPS`; the angles where
     the wavelength nodes miss the rest (towards grazing incidence, where a film between
     media of unlike index is a cavity of high finesse: under a free-standing "SiO2 500"
     ``R`` goes from 0.33 to 0.001 between 360 and 361.5 nm at ``cos θ = 0.022``) form a
-    band of their own with the first finer step that meets the target. :attr:`built` is
+    band of their own with the first finer step that meets the target (steps that the
+    ``h²`` convergence of linear interpolation rules out are skipped). :attr:`built` is
     false when that needs more than :data:`FACTOR_MAX_FLOATS` floats or a step finer
     than the finest (:attr:`report` says why); the plugin then evaluates the factors
     exactly.
@@ -119,7 +125,7 @@ class FactorTable:
             self.report["points"] += cos.size * wl.size
             return np.stack(rt(cos, wl), axis=-1)
 
-        nu = FACTOR_FIRST_NODES
+        nu, last = FACTOR_FIRST_NODES, None
         wl, checks = _check_points(FACTOR_STEPS[0], kinks)
         while True:
             if 4 * nu * wl.size > FACTOR_MAX_FLOATS:
@@ -129,10 +135,14 @@ class FactorTable:
             cos = np.linspace(0.0, 1.0, 2 * nu - 1) ** 2
             at = evaluate(cos, wl)
             nodes = at[0::2]
-            if np.abs(0.5 * (nodes[:-1] + nodes[1:]) - at[1::2])[
-                    cos[1::2] >= GRAZING_COS].max(initial=0.0) <= FACTOR_ANGLE_SHARE * error:
+            err_u = np.abs(0.5 * (nodes[:-1] + nodes[1:]) - at[1::2])[
+                cos[1::2] >= GRAZING_COS].max(initial=0.0)
+            if err_u <= FACTOR_ANGLE_SHARE * error:
                 break
-            nu = 2 * nu - 1
+            # as many intervals (a power of 2) as the error's observed order asks for
+            grow = convergence_factor(nu, err_u, FACTOR_ANGLE_SHARE * error, last, 2.0, 1.1, 8.0)
+            last = (nu, err_u)
+            nu = max(2 * nu - 1, 2 ** math.ceil(math.log2((nu - 1) * grow)) + 1)
         err = _cell_errors(cos, at, evaluate(cos, checks), wl, checks)
         # the band: angle cells 0..k-1 (nodes 0..k), up to the last cell that misses
         k = int(np.flatnonzero(err > error).max(initial=-1)) + 1
@@ -140,7 +150,10 @@ class FactorTable:
         fine, fine_step = None, FACTOR_STEPS[0]
         if k > 0:
             band_cos = cos[:2 * k + 1]
+            worst = err[:k].max()
             for step in FACTOR_STEPS[1:]:
+                if worst * (step / FACTOR_STEPS[0]) ** 2 > error and step != FACTOR_STEPS[-1]:
+                    continue   # (linear interpolation errs as h²: this step cannot do)
                 band_wl, band_checks = _check_points(step, kinks)
                 if 4 * (nu * wl.size + (k + 1) * band_wl.size) > FACTOR_MAX_FLOATS:
                     break
