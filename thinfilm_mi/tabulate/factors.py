@@ -28,7 +28,7 @@ FACTOR_FIRST_NODES = 33
 #: (the first that is within the target) in a band of angles towards grazing incidence.
 #: (Nodes uniform in wavenumber, as a stack's fringes, fail more often: under "SiO2 500;
 #: Au 5" the paper's factors need 0.5 nm at 830 nm as well, where Au's index varies.)
-FACTOR_STEPS = (1.0, 0.5, 0.25, 0.125)
+FACTOR_STEPS = (1.0, 0.5, 0.25, 0.125)   # (the first: R_dh, T_hemi's 1 nm grid too)
 #: Most floats of a :class:`FactorTable` (8 MiB of float32): beyond, the factors are
 #: evaluated exactly (the kernel's recursion).
 FACTOR_MAX_FLOATS = 1 << 21
@@ -74,9 +74,9 @@ def _cell_errors(cos, at, between, wl, checks):
 class FactorTable:
     """Spectral variants: the coated-diffuse model's spectral factors ``k_r(θ, λ)`` and
     ``t(θ, λ)`` on a grid uniform in ``s = sqrt(cos θ)`` over [0, 1] and in ``λ`` over
-    360-830 nm, read by bilinear interpolation (one gather of both factors per texel,
-    four per wavelength), with ``R_dh(λ)`` and ``T_hemi(λ)`` every 1 nm (read linearly,
-    as the ``regular`` spectra they replace).
+    360-830 nm, read by bilinear interpolation (four reads of each per wavelength), with
+    ``R_dh(λ)`` and ``T_hemi(λ)`` every 1 nm (read linearly, as the ``regular`` spectra
+    they replace).
 
     ``rt(cos, wl)``: the exact float64 ``(k_r, t)``, each of shape ``(len cos, len wl)``;
     ``hemispherical(wl)``: ``(R_dh, T_hemi)`` over ``wl``; ``error``: the target max abs
@@ -177,30 +177,25 @@ class FactorTable:
         self.nw_fine = 0 if fine is None else fine.shape[1]
         self.report.update(nodes=nu, band=k, step=self.step, fine_step=fine_step,
                            error=float(error_max))
-        # (R_dh, T_hemi) every 1 nm, linear between (as the regular spectra they replace:
-        # on the band's finer nodes too, which contain the 1 nm ones)
-        lo, hi = SPECTRAL_RANGE
-        grid = np.linspace(lo, hi, int(round(hi - lo)) + 1)
-        terms = np.stack(hemispherical(grid), axis=-1)
-
-        def with_terms(part, wavelengths):    # (angle, wavelength, 2) -> (wavelength, angle, 4)
-            at = np.stack([np.interp(wavelengths, grid, terms[:, c]) for c in range(2)], -1)
-            at = np.broadcast_to(at[None], part.shape[:2] + (2,))
-            return np.concatenate([part, at], axis=-1).transpose(1, 0, 2).reshape(-1, 4)
-        # (wavelength, angle) rows of (k_r, t, R_dh, T_hemi): the band's, then the rest's
-        parts = [] if fine is None else [with_terms(fine, _check_points(fine_step, ())[0])]
-        parts.append(with_terms(nodes[k:], wl))
+        # (wavelength, angle) rows of k_r and of t: the band's, then the rest's
+        parts = [] if fine is None else [fine.transpose(1, 0, 2).reshape(-1, 2)]
+        parts.append(nodes[k:].transpose(1, 0, 2).reshape(-1, 2))
         flat = np.concatenate(parts)
         #: the offset of the rows beyond the band
         self.offset = 0 if fine is None else parts[0].shape[0]
+        # R_dh, T_hemi on the wavelength nodes beyond the band (every 1 nm), read linearly
+        # as the regular spectra they replace
+        r_dh, t_hemi = hemispherical(wl)
         import mitsuba as mi
-        #: the rows of (k_r, t, R_dh, T_hemi): read at ``θ_i`` (one gather of four floats
-        #: per texel costs about as much as one of two)
-        self.factors = mi.Float(np.ascontiguousarray(flat, np.float32).ravel())
-        #: ``t`` alone, in the same order: a lookup of ``t`` alone (at ``θ_o``) gathers one
-        #: float per texel (~1/3 of the time of the pair's gather, in ``llvm_ad_spectral``)
-        self.transmittance = mi.Float(np.ascontiguousarray(flat[:, 1], np.float32))
-        self.report["texels"] = int(flat.size + flat.shape[0])
+
+        def floats(values):
+            return mi.Float(np.ascontiguousarray(values, np.float32))
+        # one buffer per quantity: in llvm_ad_spectral (AMD EPYC) a read of four floats
+        # per texel (k_r, t, R_dh, T_hemi) took ~1.4x the time of the twelve reads of one
+        # float (k_r, t, and the λ-only R_dh, T_hemi at two nodes)
+        self.reflectance, self.transmittance = floats(flat[:, 0]), floats(flat[:, 1])
+        self.r_dh, self.t_hemi = floats(r_dh), floats(t_hemi)
+        self.report["texels"] = int(flat.size + 2 * wl.size)
 
     def _refuse(self, why: str) -> None:
         self.report["result"] = why
@@ -241,18 +236,19 @@ class FactorTable:
             first = dr.select(in_band, i, i - k + self.offset)
         else:
             stride, first = nu, i
-        out = []
-        for (j, w), band in cells:
-            if k:
-                j = dr.select(in_band, band[0], j)
-                w = dr.select(in_band, band[1], w)
+        buffers = [self.transmittance] + ([self.reflectance] if reflectance else [])
+        out = [[] for _ in range(4)]
+        for (j0, w0), band in cells:
+            j, w = (dr.select(in_band, band[0], j0), dr.select(in_band, band[1], w0)) if k \
+                else (j0, w0)
             row = j * stride + first
-            kind, buffer = (mi.Vector4f, self.factors) if reflectance else \
-                (mi.Float, self.transmittance)
-            v0 = dr.lerp(dr.gather(kind, buffer, row), dr.gather(kind, buffer, row + 1), u)
-            v1 = dr.lerp(dr.gather(kind, buffer, row + stride),
-                         dr.gather(kind, buffer, row + stride + 1), u)
-            out.append(dr.lerp(v0, v1, w))
-        if not reflectance:
-            return None, mi.UnpolarizedSpectrum(*out), None, None
-        return tuple(mi.UnpolarizedSpectrum(*(v[c] for v in out)) for c in range(4))
+            for c, buffer in enumerate(buffers):
+                def at(r, buffer=buffer):
+                    return dr.gather(mi.Float, buffer, r)
+                out[1 - c].append(dr.lerp(dr.lerp(at(row), at(row + 1), u),
+                                          dr.lerp(at(row + stride), at(row + stride + 1), u), w))
+            if reflectance:   # R_dh, T_hemi: on the wavelength nodes beyond the band
+                for c, buffer in ((2, self.r_dh), (3, self.t_hemi)):
+                    out[c].append(dr.lerp(dr.gather(mi.Float, buffer, j0),
+                                          dr.gather(mi.Float, buffer, j0 + 1), w0))
+        return tuple(mi.UnpolarizedSpectrum(*v) if v else None for v in out)
