@@ -81,7 +81,7 @@ def test_factor_table_terms_are_the_hemispherical_terms():
 def test_factor_table_refused_over_its_floats(monkeypatch):
     """A table that needs more than FACTOR_MAX_FLOATS floats is not built (the report
     says why), and the plugin evaluates the factors exactly."""
-    monkeypatch.setattr(factor_tables, "FACTOR_MAX_FLOATS", 4 * 33 * 471 - 1)
+    monkeypatch.setattr(factor_tables, "FACTOR_MAX_FLOATS", 2 * 33 * 471 - 1)
     coated = spectral_coated("SiO2 500; Au 5", "exact")
     assert coated.table is None
     factors = coated.factors()

@@ -128,7 +128,7 @@ class FactorTable:
         nu, last = FACTOR_FIRST_NODES, None
         wl, checks = _check_points(FACTOR_STEPS[0], kinks)
         while True:
-            if 4 * nu * wl.size > FACTOR_MAX_FLOATS:
+            if 2 * nu * wl.size > FACTOR_MAX_FLOATS:
                 self._refuse(f"more than {FACTOR_MAX_FLOATS} floats for a bilinear error "
                              f"within {FACTOR_ANGLE_SHARE * error:g} along the angle")
                 return
@@ -155,7 +155,7 @@ class FactorTable:
                 if worst * (step / FACTOR_STEPS[0]) ** 2 > error and step != FACTOR_STEPS[-1]:
                     continue   # (linear interpolation errs as h²: this step cannot do)
                 band_wl, band_checks = _check_points(step, kinks)
-                if 4 * (nu * wl.size + (k + 1) * band_wl.size) > FACTOR_MAX_FLOATS:
+                if 2 * (nu * wl.size + (k + 1) * band_wl.size) > FACTOR_MAX_FLOATS:
                     break
                 at_b = evaluate(band_cos, band_wl)
                 band_err = _cell_errors(band_cos, at_b, evaluate(band_cos, band_checks), band_wl,
