@@ -266,3 +266,36 @@ def test_binned_cell_lookup_matches_the_search(llvm, layers):
     assert np.all(same | ((np.abs(i.astype(int) - i_ref) == 1)
                           & np.isin(np.array(w), grid)))
     assert np.max(np.abs(t[same] - t_ref[same])) < 1e-6
+
+
+@pytest.mark.parametrize("layers", ["SiO2 500", "2.3 150", "MgF2 95"])
+
+
+def test_one_real_film_on_glass_in_closed_form_matches_float64(llvm, layers, monkeypatch):
+    """One real film above the ambient's index on a real substrate (LoopFilms.airy): R
+    in closed form (the Airy sum of the two interfaces), here through both sides of a
+    mirrored dielectric (the substrate side at the Snell-mapped angle, total reflection
+    beyond the critical angle), against float64, and equal to the recursion's value
+    (the real-amplitude steps, the closed form switched off) within float32 rounding."""
+    bsdf = mi.load_dict({"type": "thinfilm_dielectric", "layers": layers, "int_ior": 1.6})
+    loop = bsdf.stack.plan[False].loop
+    assert loop is not None and loop.airy and bsdf.stack.mode() == "exact"
+    cos, wls = points(4000, seed=31)
+    si, c = interaction(wls), mi.Float(cos)
+    films = tf.materials.stack.parse_layers(layers)
+    refs = {False: tf.Stack(films, substrate=1.6, ambient=media_mod.DEFAULT_EXT_IOR),
+            True: tf.Stack(films[::-1], substrate=media_mod.DEFAULT_EXT_IOR, ambient=1.6)}
+    ours = {}
+    for inside, ref in refs.items():
+        R, T = (np.array(x) for x in bsdf.stack.reflectance(si, c, inside=inside,
+                                                              transmission=True))
+        ours[inside] = R
+        for i in range(4):
+            r = ref.rt(wls[i], np.arccos(cos))
+            assert np.max(np.abs(R[i] - r.R)) < F32_DEEP
+            assert np.max(np.abs(T[i] - r.T)) < F32_DEEP
+    monkeypatch.setattr(loop, "airy", False)
+    for inside in (False, True):
+        R = np.array(bsdf.stack.reflectance(si, c, inside=inside))
+        # both float32 from the same indices: the rounding of a few operations
+        assert np.max(np.abs(R - ours[inside])) < 1e-5

@@ -216,7 +216,7 @@ class KernelStack:
                 if (not served and len(side.films) >= BUFFERED_MIN_FILMS
                         and not any(side.incoherent)
                         and all(ix.knots is not None for ix, _, _ in side.films)):
-                    side.loop = LoopFilms(side.films, side.n0)
+                    side.loop = LoopFilms(side.films, side.n0, side.exit)
 
     def _plan_tables(self, quantity=POWERS) -> None:
         # "auto" tabulates in vectorised variants only: in scalar variants every

@@ -13,7 +13,14 @@ import sys
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.optics.core import Cx, clip_transmittance, real_loop_applies, stack_rt
+from thinfilm_mi.optics.core import (
+    Cx,
+    clip_transmittance,
+    incidence,
+    phase_factor,
+    real_loop_applies,
+    stack_rt,
+)
 from thinfilm_mi.optics.unpolarized import LOOP_MIN_FILMS, unpolarized_rt_loop
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
@@ -42,7 +49,7 @@ class LoopFilms:
     #: float32); a grid with more knots in a bin this narrow is searched (binary search)
     MAX_BINS_PER_NM = 4
 
-    def __init__(self, films: list, n0: SpectralIndex):
+    def __init__(self, films: list, n0: SpectralIndex, exit_: SpectralIndex | None = None):
         mi = mitsuba_module()
         from thinfilm_mi.optics.backend import aligned_array
         grid = np.unique(np.concatenate([GRID[[0, -1]]] + [ix.knots for ix, _, _ in films]))
@@ -64,6 +71,11 @@ class LoopFilms:
         self.n0_constant = n0.knots is not None and n0.knots.size == 0
         #: The loop will run optics.stack_rt_loop_real (real amplitudes).
         self.real_steps = real_loop_applies(self.n0_max, self.film_n_min)
+        #: ``R`` of one such film over ``exit_`` in closed form (:meth:`_one_film_reflectance`):
+        #: the exit medium is real, its index nowhere below the ambient's (real ``q``)
+        self.airy = (self.real_steps and len(films) == 1 and exit_ is not None
+                     and not np.any(texture_on_grid(exit_.k))
+                     and float(np.min(texture_on_grid(exit_.eta))) >= self.n0_max)
         #: Every film's index is one constant (no knots: a single grid cell): one
         #: real per film, gathered once per lane for all the wavelengths.
         self.constant = self.real and self.cells == 1
@@ -224,6 +236,8 @@ class LoopFilms:
         (:func:`optics.stack_rt`: ``|T|^2`` carried as a power, no transmission
         amplitude), as :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt_loop`
         forms ``R`` and ``T`` from it."""
+        if self.airy and not transmission:
+            return self._one_film_reflectance(film, n0, cos_theta, exit_, wl)
         if self.real_steps:
             return unpolarized_rt_loop(n0, cos_theta, self.n_films, film, exit_, wl, transmission,
                                        n0_max=self.n0_max, film_n_min=self.film_n_min,
@@ -234,3 +248,33 @@ class LoopFilms:
         if not transmission:
             return R
         return R, clip_transmittance(0.5 * (Ts + Tp), R)
+
+    def _one_film_reflectance(self, film, n0, cos_theta, exit_: Cx, wl):
+        """``R`` of one real film (index above the ambient's) on a real exit medium of
+        index at least the ambient's (:attr:`airy`): every ``q`` is real, so are the
+        Fresnel amplitudes ``r01``, ``r12`` of both interfaces, and per polarisation
+        the film's reflectance is the Airy sum in closed form
+
+            R = (r01^2 + r12^2 + 2 r01 r12 cos 2δ) / (1 + r01^2 r12^2 + 2 r01 r12 cos 2δ)
+
+        (``|r01 + r12 E|^2 / |1 + r01 r12 E|^2`` with ``E = exp(2iδ)``, ``2δ = 4π q1 d /
+        λ``): the recursion's value with no complex arithmetic. The denominator is at
+        least ``(1 - |r01 r12|)^2 > 0`` (``|r12| < 1``). At grazing incidence ``r01 = -1``
+        and ``R = 1``."""
+        cos0, beta2, q0 = incidence(n0, cos_theta)
+        (m, d), = [film(0)]
+        n1 = m.re
+        n2 = exit_.re
+        n0_2, n1_2, n2_2 = n0 * n0, n1 * n1, n2 * n2
+        q1 = dr.sqrt(dr.maximum(n1_2 - beta2, 0.0))
+        q2 = dr.sqrt(dr.maximum(n2_2 - beta2, 0.0))
+        c = phase_factor(Cx(q1, 0.0), d / wl, True).re
+        R = 0.0
+        for a0, a1, b1, b2 in ((q0, q1, q1, q2),                       # s: q
+                               (q0 * n1_2, q1 * n0_2, q1 * n2_2, q2 * n1_2)):  # p: q / n^2, scaled
+            r01 = (a0 - a1) / (a0 + a1)
+            r12 = (b1 - b2) / (b1 + b2)
+            x = r01 * r12
+            b = 2.0 * x * c
+            R += dr.minimum((r01 * r01 + r12 * r12 + b) / (1.0 + x * x + b), 1.0)
+        return dr.select(cos0 <= 0.0, 1.0, 0.5 * R)
