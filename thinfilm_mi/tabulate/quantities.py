@@ -39,7 +39,10 @@ AUTO_MIN_FILMS = 1
 #: films of the exact loop do (issue 44, sphere scene, tabulated / exact: ``dielectric``
 #: "Au 20" 1.96x / 1.87x, "SiO2 500; Au 20; Al 10" 2.15x (outside) / 1.92x, six films of
 #: SiO2 / Au / Ag 2.41x / 2.79x; ``diffuse`` "SiO2 500; Au 5" 2.49x / 2.27x, 4 films
-#: 2.85x / 2.69x).
+#: 2.85x / 2.69x). Re-measured after few-film sides read their buffers unrolled (issue
+#: 44, scene of benchmarks/timing.py, one run, ``tabulate=true`` / exact): "Au 20"
+#: 2.18x / 1.46x, "SiO2 500; Au 20; Al 10" 1.72x (the outside tabulated; the inside's
+#: table is over budget) / 1.64x.
 RT_AUTO_MIN_FILMS = 5
 #: ``tabulate="auto"`` keeps tables of at most this many texels (over all
 #: channels, 2 MiB of float32): a cubic lookup in a table that fits the cache
