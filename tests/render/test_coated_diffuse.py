@@ -437,8 +437,8 @@ def test_factor_table_eval_is_the_model_with_its_factors():
 
 def test_factor_table_skipped_while_a_film_carries_gradients():
     """Where a film's thickness carries gradients, the kernel evaluates every film
-    exactly (the table holds numbers, not derivatives), and reads the table again once
-    they are disabled."""
+    exactly (the table holds numbers, not derivatives), an edit then builds no table (an
+    optimisation's steps), and the table is read again once gradients are disabled."""
     b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5"})
     params = mi.traverse(b)
     si = make_si(1, direction(30.0))
@@ -446,6 +446,10 @@ def test_factor_table_skipped_while_a_film_carries_gradients():
     dr.enable_grad(params["layers.0.thickness"])
     params.update()
     assert b.coated.table_at(si, True) is None
+    params["layers.0.thickness"] = mi.Float(510.0)
+    dr.enable_grad(params["layers.0.thickness"])
+    params.update()
+    assert b.coated.table is None and b.coated.table_at(si, True) is None
     dr.disable_grad(params["layers.0.thickness"])
     params.update()
-    assert b.coated.table_at(si, True) is not None
+    assert b.coated.table is not None and b.coated.table_at(si, True) is not None

@@ -237,8 +237,7 @@ class CoatedDiffuse:
         self.colour = None
         #: R_dh's derivative table, while a film parameter carries gradients
         self.r_dh_grad = None
-        #: spectral JIT variants: k_r, t, R_dh and T_hemi as one bilinear table
-        #: (:func:`~thinfilm_mi.render.diffuse.factor_table`), or None (exact)
+        #: spectral JIT variants: the model's table (``diffuse.factor_table``) or None
         self.table = None
         self.index_gradients = IndexGradients()   #: whether an index carries gradients
         self.update()
@@ -267,25 +266,27 @@ class CoatedDiffuse:
                     prepare_gradients([self.film_n])
             return
         self.terms = SpectralTerms(factors, self.texture, self.plugin, self.terms)
-        self.table = factor_table(factors, self.coating, self.texture, self.media())
+        self.table = None
+        self.update_table(factors)
+
+    def update_table(self, factors) -> None:
+        """Build a missing :attr:`table` unless a film parameter carries gradients (unread)."""
+        if self.table is None and not self.film_gradients():
+            self.table = factor_table(factors, self.coating, self.texture, self.media())
 
     def media(self):
         """The indices of the ambient, the base medium, the films and film ``N``."""
-        coating = self.coating
-        media = [coating.ambient, coating.substrate] + list(coating.indices)
-        return media if self.film_n is None else media + [self.film_n]
+        c = self.coating
+        return [c.ambient, c.substrate] + c.indices + ([] if self.film_n is None else [self.film_n])
 
     def table_at(self, si, active):
-        """``(table, the hit's wavelength cells)`` where the kernel reads the :attr:`table`;
-        ``None`` without one or where a film parameter carries gradients (then every film
-        is evaluated exactly; :attr:`index_gradients`: without evaluating a texture, so
-        that Dr.Jit merges the reads at ``θ_i`` of ``eval_pdf`` and ``sample``)."""
+        """``(table, the hit's wavelength cells)``; ``None`` without a table or where a film
+        parameter carries gradients (:attr:`index_gradients`: no texture evaluated, so that
+        Dr.Jit merges the reads at ``θ_i`` of ``eval_pdf`` and ``sample``)."""
         coating = self.coating
-        if self.table is None or coating.current_plan(False, True) is not coating.plan.get(False):
-            return None
-        if self.film_n is not None and dr.grad_enabled(self.film_n_thickness):
-            return None
-        if any(self.index_gradients(ix, si, active) for ix in self.media()):
+        if self.table is None or coating.current_plan(False, True) is not coating.plan.get(False) \
+                or (self.film_n is not None and dr.grad_enabled(self.film_n_thickness)) \
+                or any(self.index_gradients(ix, si, active) for ix in self.media()):
             return None
         return self.table, self.table.cells(si.wavelengths)
 
@@ -336,19 +337,17 @@ class CoatedDiffuse:
 
     def factors_at(self, si, cos_theta, active, transmission: bool, lobe: bool = False,
                    reflectance: bool = True):
-        """``k_r``, (if asked) ``t = k_t k_a`` for light at ``cos_theta`` (ambient side),
-        and (if ``lobe``) the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`
-        (``None`` otherwise). From the :attr:`table` where it applies (:meth:`table_at`;
-        ``k_r`` ``None`` there unless ``reflectance``); the polarized lobe's shape from the
-        stack's amplitudes."""
+        """``k_r``, (if asked) ``t = k_t k_a`` at ``cos_theta`` (ambient side), (if ``lobe``)
+        the lobe of ``k_r`` for :meth:`modes.SpectralMode.value`. From the :attr:`table`
+        where it applies (``k_r`` ``None`` unless ``reflectance``; a polarized lobe's shape
+        from the stack's amplitudes)."""
         mi = mitsuba_module()
         table = self.table_at(si, active)
         if table is not None:
             k_r, t, _, _ = table[0].lookup(cos_theta, table[1], active,
                                            reflectance or not transmission)
-            shape = None
-            if lobe and self.mode.polarized:   # (k_r is the table's: as eval_pdf's)
-                shape = self.mode.response(self.coating, si, cos_theta, active).reflection
+            shape = self.mode.response(self.coating, si, cos_theta, active).reflection \
+                if lobe and self.mode.polarized else None   # (k_r: the table's, as eval_pdf's)
             return k_r, t if transmission else None, shape
         resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
         k_r = mi.UnpolarizedSpectrum(resp.R)
@@ -361,8 +360,7 @@ class CoatedDiffuse:
         the :attr:`table`'s read at ``θ_i`` where it applies, else :attr:`terms`."""
         table = self.table_at(si, active)
         if table is not None:
-            cos_i = mitsuba_module().Frame3f.cos_theta(si.wi)
-            return table[0].lookup(cos_i, table[1], active)[2:]
+            return table[0].lookup(mitsuba_module().Frame3f.cos_theta(si.wi), table[1], active)[2:]
         return self.terms.lookup(si, self.coating, active)
 
     def r_dh_with_derivatives(self, r_dh, si, wavelengths, index_at, active):
@@ -588,6 +586,8 @@ class CoatedDiffuse:
             # compares values, not their AD state)
             self.index_gradients.collect(self.media())
             self.update_derivatives()
+            if self.terms is not None:
+                self.update_table(self.factors())
 
     def describe(self) -> str:
         """The model, the base's roughness and the stack, for ``to_string``."""
