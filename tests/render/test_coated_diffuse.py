@@ -453,3 +453,105 @@ def test_factor_table_skipped_while_a_film_carries_gradients():
     dr.disable_grad(params["layers.0.thickness"])
     params.update()
     assert b.coated.table is not None and b.coated.table_at(si, True) is not None
+
+
+@pytest.fixture
+def own_tables(tmp_path, monkeypatch):
+    """The table store in a temporary directory, this process's table cache empty, and
+    the factor tables built here counted (``builds``: one entry per build)."""
+    from thinfilm_mi.render import diffuse, kernel
+    from thinfilm_mi.tabulate import store
+
+    monkeypatch.setenv(store.ENVIRONMENT, str(tmp_path / "tables"))
+    kernel.TABLE_CACHE.clear()
+    builds = []
+
+    class Counted(diffuse.FactorTable):
+        def __init__(self, *args, **kwargs):
+            builds.append(args)
+            super().__init__(*args, **kwargs)
+
+    monkeypatch.setattr(diffuse, "FactorTable", Counted)
+    yield builds
+    kernel.TABLE_CACHE.clear()
+
+
+def test_an_identical_bsdf_shares_the_factor_table(own_tables):
+    """A second ``thinfilm_diffuse`` of the same optics takes the first's table from this
+    process's table cache: no second build (another albedo does not change the factors)."""
+    first = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5"})
+    assert first.coated.table is not None and len(own_tables) == 1
+    second = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5",
+                           "reflectance": 0.4})
+    assert second.coated.table is first.coated.table
+    assert len(own_tables) == 1
+
+
+def test_an_edit_back_to_previous_values_reuses_the_factor_table(own_tables):
+    """Through ``mi.traverse``: a new thickness builds a new table, the old thickness
+    again takes the first table back from the cache (no build)."""
+    b = mi.load_dict({"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5"})
+    params = mi.traverse(b)
+    table = b.coated.table
+    params["layers.0.thickness"] = 510.0
+    params.update()
+    assert b.coated.table is not None and b.coated.table is not table
+    assert len(own_tables) == 2
+    params["layers.0.thickness"] = 500.0
+    params.update()
+    assert b.coated.table is table and len(own_tables) == 2
+
+
+BASE_KEY = {"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5", "model": "exact"}
+
+
+def _factor_key(d: dict) -> str:
+    from thinfilm_mi.render.diffuse import factor_table_key
+    coated = mi.load_dict(d).coated
+    return factor_table_key(coated.factors(), coated.coating, coated.media())
+
+
+@pytest.mark.parametrize("model, change", [
+    ("exact", {"layers": "SiO2 501; Au 5"}),          # a film's thickness
+    ("exact", {"layers": "SiO2 500; Au 5.5"}),        # the last (metal) film's thickness
+    ("exact", {"layers": "1.46 500; Au 5"}),          # a film's index
+    ("exact", {"layers": "SiO2 500; Ag 5"}),          # the metal film's index
+    ("exact", {"ext_ior": 1.1}),                      # the ambient
+    ("exact", {"base_ior": 1.5}),                     # the base medium
+    ("exact", {"model": "single"}),                   # the model's factors
+    ("exact", {"table_error": 2e-3}),                 # the target
+    ("exact", {"coherence_thickness": 400.0}),        # SiO2 500 then incoherent
+    ("single", {"layers": "SiO2 500; Au 5.5"}),       # film N's thickness
+    ("single", {"layers": "SiO2 500; Ag 5"}),         # film N's index
+    ("single", {"layers": "SiO2 501; Au 5"}),         # the coating's film
+])
+def test_the_factor_table_key_changes_with_each_input(own_tables, model, change):
+    """Key completeness: each input the table's values depend on, changed alone, gives
+    another key."""
+    base = dict(BASE_KEY, model=model)
+    assert _factor_key(dict(base, **change)) != _factor_key(base)
+
+
+@pytest.mark.parametrize("cap, value", [("FACTOR_MAX_FLOATS", 1 << 20),
+                                        ("FACTOR_STEPS", (1.0, 0.5)),
+                                        ("FACTOR_FIRST_NODES", 17),
+                                        ("FACTOR_ANGLE_SHARE", 0.4)])
+def test_the_factor_table_key_changes_with_the_builds_caps(own_tables, monkeypatch, cap, value):
+    from thinfilm_mi.tabulate import factors as factor_build
+    key = _factor_key(BASE_KEY)
+    monkeypatch.setattr(factor_build, cap, value)
+    assert _factor_key(BASE_KEY) != key
+
+
+def test_the_factor_table_key_changes_with_the_variant_but_not_with_the_albedo(own_tables):
+    """Another variant holds its own buffers; the albedo, and the choice between the
+    paper's two models (the same factors), leave the key as it is."""
+    key = _factor_key(BASE_KEY)
+    assert _factor_key(dict(BASE_KEY, reflectance=0.3)) == key
+    single = _factor_key(dict(BASE_KEY, model="single"))
+    assert _factor_key(dict(BASE_KEY, model="multiple")) == single
+    mi.set_variant("llvm_ad_spectral_polarized")
+    try:
+        assert _factor_key(BASE_KEY) != key
+    finally:
+        mi.set_variant("llvm_ad_spectral")

@@ -200,6 +200,55 @@ class FactorTable:
     def _refuse(self, why: str) -> None:
         self.report["result"] = why
 
+    #: the names of the float32 buffers of a built table (:meth:`arrays`)
+    BUFFERS = ("reflectance", "transmittance", "r_dh", "t_hemi")
+    #: the names of its layout's numbers (:meth:`layout`)
+    LAYOUT = ("nu", "band", "step", "fine_step", "nw", "nw_fine", "offset")
+
+    @property
+    def nbytes(self) -> int:
+        """The bytes of its buffers (a :class:`~thinfilm_mi.tabulate.base.TableCache` bounds them)."""
+        return 4 * sum(dr.width(getattr(self, name)) for name in self.BUFFERS)
+
+    def arrays(self) -> dict:
+        """A built table's buffers as float32 numpy arrays, by :data:`BUFFERS` name."""
+        return {name: np.array(getattr(self, name), dtype=np.float32) for name in self.BUFFERS}
+
+    def layout(self) -> dict:
+        """A built table's layout (angle nodes, band, wavelength steps and counts, the rows'
+        offset), by :data:`LAYOUT` name."""
+        return {name: getattr(self, name) for name in self.LAYOUT}
+
+    @classmethod
+    def restore(cls, layout: dict, arrays: dict, report: dict) -> "FactorTable | None":
+        """The built table of ``layout`` and ``arrays`` (as :meth:`layout` and :meth:`arrays`
+        give them: read back from the table store) with the build ``report``; ``None`` unless
+        they are consistent: every buffer float32 and finite, as long as the layout says,
+        the angle nodes and the band within range, the steps of :data:`FACTOR_STEPS`."""
+        import mitsuba as mi
+        try:
+            nu, band, nw, nw_fine, offset = (int(layout[k]) for k in
+                                             ("nu", "band", "nw", "nw_fine", "offset"))
+            step, fine_step = float(layout["step"]), float(layout["fine_step"])
+            values = [np.asarray(arrays[name]) for name in cls.BUFFERS]
+        except (KeyError, TypeError, ValueError):
+            return None
+        rows, lo, hi = offset + nw * (nu - band), *SPECTRAL_RANGE
+        if (step != FACTOR_STEPS[0] or fine_step not in FACTOR_STEPS or nu < 2
+                or nw != round((hi - lo) / step) + 1 or not 0 <= band <= nu - 1
+                or nw_fine != (round((hi - lo) / fine_step) + 1 if band else 0)
+                or offset != nw_fine * (band + 1)
+                or [v.shape for v in values] != [(rows,), (rows,), (nw,), (nw,)]
+                or any(v.dtype != np.float32 or not np.all(np.isfinite(v)) for v in values)):
+            return None
+        table = cls.__new__(cls)
+        table.report, table.built = BuildReport(report), True
+        table.nu, table.band, table.step, table.fine_step = nu, band, step, fine_step
+        table.nw, table.nw_fine, table.offset = nw, nw_fine, offset
+        for name, v in zip(cls.BUFFERS, values):
+            setattr(table, name, mi.Float(v))
+        return table
+
     @staticmethod
     def _cells(wavelengths, step: float, n: int):
         import mitsuba as mi

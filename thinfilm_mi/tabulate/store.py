@@ -15,12 +15,13 @@ found not tabulable, with its build report) in one file per key under a director
   the source of this package and the versions of Mitsuba, Dr.Jit and NumPy, so a
   table built by other code is never read;
 * **what is read back**: the float32 texture values exactly as built (with a
-  band-limited table's shear, :class:`thinfilm_mi.tabulate.band.Shear`), so a table
-  from the store gives the same image bit for bit as the one it stands for
-  (``tests/tabulate/test_store.py``);
+  band-limited table's shear, :class:`thinfilm_mi.tabulate.band.Shear`), or a
+  coated-diffuse :class:`~thinfilm_mi.tabulate.factors.FactorTable`'s buffers and
+  layout, so a table from the store gives the same image bit for bit as the one it
+  stands for (``tests/tabulate/test_store.py``);
 * **safety**: files are written under a temporary name and renamed (atomic on one
   file system: another process never reads half a file), read with
-  ``allow_pickle=False`` and checked (shape, channels, finite values); a file that
+  ``allow_pickle=False`` and checked (shape, channels or layout, finite values); a file that
   fails is removed and the table rebuilt. A store that cannot be written (a
   read-only home) is skipped without error. The store is bounded
   (:data:`MAX_BYTES`): the least recently used files go first.
@@ -39,6 +40,7 @@ import numpy as np
 from thinfilm_mi.tabulate.axes import AXES, GHOST
 from thinfilm_mi.tabulate.band import Shear
 from thinfilm_mi.tabulate.base import BuildReport, Table
+from thinfilm_mi.tabulate.factors import FactorTable
 
 __all__ = ["ENVIRONMENT", "MAX_BYTES", "TableStore", "code_fingerprint", "default_store"]
 
@@ -98,20 +100,27 @@ class TableStore:
         return self.directory / (name + _SUFFIX)
 
     def get(self, key: str):
-        """``(True, table, report)`` for a stored key (``table`` ``None`` for a stack
+        """``(True, table, report)`` for a stored key (``table``: a
+        :class:`~thinfilm_mi.tabulate.base.Table` or a
+        :class:`~thinfilm_mi.tabulate.factors.FactorTable`, as stored; ``None`` for a stack
         the build found not tabulable; ``report`` the build's
         :class:`~thinfilm_mi.tabulate.base.BuildReport`), else ``(False, None, None)``."""
         path = self._path(key)
         try:
             with np.load(path, allow_pickle=False) as f:
                 meta = json.loads(bytes(f["meta"]).decode())
-                values = np.array(f["values"]) if meta["table"] else None
+                factors = meta["table"] and meta.get("factors") is not None
+                names = FactorTable.BUFFERS if factors else ("values",) if meta["table"] else ()
+                values = {name: np.array(f[name]) for name in names}
         except FileNotFoundError:
             return False, None, None
         except Exception:     # noqa: BLE001 -- any damaged file is a miss, and removed
             self._remove(path)
             return False, None, None
-        table = self._table(values, meta) if meta.get("table") else None
+        if factors:
+            table = FactorTable.restore(meta["factors"], values, meta.get("report") or {})
+        else:
+            table = self._table(values["values"], meta) if meta.get("table") else None
         if meta.get("table") and table is None:
             self._remove(path)
             return False, None, None
@@ -137,13 +146,16 @@ class TableStore:
             return None
         return Table(values, axis, error, channels, resolution, shear=shear)
 
-    def put(self, key: str, table: Table | None, report: dict | None) -> None:
+    def put(self, key: str, table: Table | FactorTable | None, report: dict | None) -> None:
         """Keep ``table`` (``None``: not tabulable) and its build ``report`` under ``key``;
         nothing happens where the directory cannot be written."""
         path = self._path(key)
         meta = {"table": table is not None, "report": _plain(dict(report or {}))}
         arrays = {}
-        if table is not None:
+        if isinstance(table, FactorTable):
+            meta["factors"] = _plain(table.layout())
+            arrays.update(table.arrays())
+        elif table is not None:
             meta.update(kind=table.axis.name, channels
 =table.channels, error=float(table.error),
                         resolution=float(table.resolution),
