@@ -196,6 +196,7 @@ class FactorTable:
         self.reflectance, self.transmittance = floats(flat[:, 0]), floats(flat[:, 1])
         self.r_dh, self.t_hemi = floats(r_dh), floats(t_hemi)
         self.report["texels"] = int(flat.size + 2 * wl.size)
+        self._opaque_layout()
 
     def _refuse(self, why: str) -> None:
         self.report["result"] = why
@@ -247,49 +248,64 @@ class FactorTable:
         table.nw, table.nw_fine, table.offset = nw, nw_fine, offset
         for name, v in zip(cls.BUFFERS, values):
             setattr(table, name, mi.Float(v))
+        table._opaque_layout()
         return table
 
-    @staticmethod
-    def _cells(wavelengths, step: float, n: int):
+    def _opaque_layout(self) -> None:
+        """The layout as the kernel reads it, opaque: a table built after an edit may have
+        other angle nodes, band or wavelength step, and literals would make the render
+        kernel's code change (and compile again, ~0.3-0.4 s) with them. Without a band the
+        band's reads are those of the rows beyond it (never selected: no angle is in it)."""
         import mitsuba as mi
+        nu, k = self.nu, self.band
+        fine = (self.fine_step, self.nw_fine) if k else (self.step, self.nw)
+
+        def axis(step, n):   # 1/step, the largest coordinate, the last cell
+            return (dr.opaque(mi.Float, 1.0 / step), dr.opaque(mi.Float, n - 1.0),
+                    dr.opaque(mi.UInt32, n - 2))
+        self._axes = (axis(self.step, self.nw), axis(*fine))
+        #: s's scale, the last angle cell, the band's cells, the strides of the band's rows
+        #: and of the rest's, the offset of the rest's rows less the band
+        self._angle = (dr.opaque(mi.Float, nu - 1.0), dr.opaque(mi.UInt32, nu - 2),
+                       dr.opaque(mi.UInt32, k), dr.opaque(mi.UInt32, k + 1),
+                       dr.opaque(mi.UInt32, nu - k), dr.opaque(mi.UInt32, self.offset - k))
+
+    @staticmethod
+    def _cells(wavelengths, axis):
+        import mitsuba as mi
+        inv_step, x_max, j_max = axis
         out = []
         for i in range(len(wavelengths)):
-            x = (wavelengths[i] - SPECTRAL_RANGE[0]) * (1.0 / step)
-            x = dr.select(x > 0.0, dr.minimum(x, n - 1.0), 0.0)   # (NaN: 0)
-            j = dr.minimum(mi.UInt32(x), n - 2)
+            x = (wavelengths[i] - SPECTRAL_RANGE[0]) * inv_step
+            x = dr.select(x > 0.0, dr.minimum(x, x_max), 0.0)   # (NaN: 0)
+            j = dr.minimum(mi.UInt32(x), j_max)
             out.append((j, x - mi.Float(j)))
         return out
 
     def cells(self, wavelengths):
         """Per wavelength of ``wavelengths`` (``mi.Spectrum``; clamped to 360-830 nm): its
         cell's first node and the weight of the next, on the wavelength nodes beyond the
-        band and (the second of each pair; ``None`` without a band) on the band's."""
-        coarse = self._cells(wavelengths, self.step, self.nw)
-        fine = self._cells(wavelengths, self.fine_step, self.nw_fine) if self.band else \
-            [None] * len(coarse)
-        return list(zip(coarse, fine))
+        band and (the second of each pair) on the band's (without a band, the same)."""
+        return list(zip(*(self._cells(wavelengths, axis) for axis in self._axes)))
 
     def lookup(self, cos_theta, cells, active=True, reflectance: bool = True):
         """``(k_r, t, R_dh, T_hemi)`` (``mi.UnpolarizedSpectrum``) at ``cos_theta`` and the
         wavelengths of ``cells`` (:meth:`cells`); only ``t`` (the others ``None``) unless
         ``reflectance``. The reads are not masked (every index lies in the table), so
-        that Dr.Jit merges identical ones."""
+        that Dr.Jit merges identical ones; the layout is read as opaque values (a band of
+        no cells where there is none), so that every table compiles to the same kernel."""
         import mitsuba as mi
-        nu, k = self.nu, self.band
-        x = dr.sqrt(dr.select(cos_theta > 0.0, dr.minimum(cos_theta, 1.0), 0.0)) * (nu - 1.0)
-        i = dr.minimum(mi.UInt32(x), nu - 2)
+        scale, i_max, band, band_stride, rest_stride, rest_first = self._angle
+        x = dr.sqrt(dr.select(cos_theta > 0.0, dr.minimum(cos_theta, 1.0), 0.0)) * scale
+        i = dr.minimum(mi.UInt32(x), i_max)
         u = x - mi.Float(i)
-        if k:
-            in_band = i < k
-            stride = dr.select(in_band, mi.UInt32(k + 1), mi.UInt32(nu - k))
-            first = dr.select(in_band, i, i - k + self.offset)
-        else:
-            stride, first = nu, i
+        in_band = i < band
+        stride = dr.select(in_band, band_stride, rest_stride)
+        first = dr.select(in_band, i, i + rest_first)
         buffers = [self.transmittance] + ([self.reflectance] if reflectance else [])
         out = [[] for _ in range(4)]
-        for (j0, w0), band in cells:
-            j, w = (dr.select(in_band, band[0], j0), dr.select(in_band, band[1], w0)) if k \
-                else (j0, w0)
+        for (j0, w0), (j1, w1) in cells:
+            j, w = dr.select(in_band, j1, j0), dr.select(in_band, w1, w0)
             row = j * stride + first
             for c, buffer in enumerate(buffers):
                 def at(r, buffer=buffer):
