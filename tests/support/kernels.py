@@ -1,6 +1,8 @@
 """Test helpers for the files that evaluate thin-film stacks in LLVM kernels."""
 from __future__ import annotations
 
+import gc
+
 import drjit as dr
 import mitsuba as mi
 import numpy as np
@@ -25,7 +27,13 @@ def compiled(history):
 def assert_edits_render_from_cache(scene, params, edits: dict) -> None:
     """Apply ``edits`` (key -> value) to ``params`` of ``scene``: the render after them runs
     every JIT kernel from the cache (the edited values are opaque inputs, nothing
-    recompiles) and differs from the render before them (the edits took effect)."""
+    recompiles) and differs from the render before them (the edits took effect).
+
+    Garbage is collected first: a render traces every live instance of a Python BSDF,
+    those of a scene an earlier test dropped included, so a collection between the two
+    renders (a dropped scene freed) would change the kernel as an edit must not (seen
+    once in a full run of the suite, on a worker that had run other renders before)."""
+    gc.collect()
     first = np.array(mi.render(scene, seed=1))
     dr.set_flag(dr.JitFlag.KernelHistory, True)
     try:
