@@ -491,6 +491,61 @@ def test_float32_near_critical_angle_bound():
     assert worst_ratio > 0  # the regime is really exercised (float32 differs)
 
 
+def test_film_bounds_skip_only_what_cannot_happen():
+    """optics.film_bounds: a real root where n_min >= n0_max, the q = 0 guard skipped
+    only where |q| stays far above its reach (a real film at the ambient's index, or
+    one barely absorbing below it, keeps the guard)."""
+    b = optics.film_bounds(1.45, 1.47, 0.0, 0.0, 1.0)
+    assert b.n2_min == 1.45 ** 2 and b.q_away
+    assert not optics.film_bounds(1.0, 1.2, 0.0, 0.0, 1.0).q_away          # q = 0 at grazing
+    assert not optics.film_bounds(1.3, 1.5, 0.0, 0.0, 1.6).q_away          # below the ambient
+    assert optics.film_bounds(0.05, 1.6, 1.8, 5.0, 1.6) == optics.FilmBounds(None, True)  # a metal
+    assert not optics.film_bounds(1.0, 1.0, 1e-6, 1e-6, 1.0).q_away        # barely absorbing
+
+
+@pytest.mark.parametrize("n0", [1.0, 1.6])
+def test_stack_rt_with_film_bounds_matches_float64(n0):
+    """stack_rt given each film's bounds (a real root, no q = 0 guard where they allow;
+    the ambient an array, bounded by n0_max) against float64 without them: random
+    stacks of real and absorbing films (metals: n in [0.05, 2], k in [1, 6]), every
+    angle including grazing, from air and from glass (a real film below the ambient's
+    index keeps the general root and the guard)."""
+    rng = np.random.default_rng(17)
+    worst = worst_plain = 0.0
+    for _ in range(40):
+        count = int(rng.integers(1, 4))
+        metal = rng.random(count) < 0.5
+        n = np.where(metal, rng.uniform(0.05, 2.0, count), rng.uniform(1.3, 2.4, count))
+        k = np.where(metal, rng.uniform(1.0, 6.0, count), 0.0)
+        d = rng.uniform(5.0, 300.0, count)
+        bounds = [optics.film_bounds(nj, nj, kj, kj, n0) for nj, kj in zip(n, k)]
+        th = np.radians(np.concatenate([rng.uniform(0.0, 90.0, 200), [0.0, 90.0]]))
+        # away from critical angles, where float32's q carries ~sqrt(eps) errors
+        # (test_float32_near_critical_angle_bound), with or without bounds
+        crit = [math.asin(m / n0) for m in [*n[~metal], 1.6 if n0 == 1.0 else 1.0] if m < n0]
+        th = th[np.all([np.abs(th - c) > math.radians(2.0) for c in crit], axis=0)] \
+            if crit else th
+        wl = rng.uniform(360.0, 830.0, th.size)
+        n_exit = 1.6 if n0 == 1.0 else 1.0
+        f32 = [(Cx(Float(float(nj)), 0.0 if kj == 0 else Float(float(kj))), Float(float(dj)))
+               for nj, kj, dj in zip(n, k, d)]
+        f64 = [(complex(nj, kj), dj) for nj, kj, dj in zip(n, k, d)]
+        ours = optics.stack_rt(Float(np.full(th.size, n0)), Float(np.cos(th)), f32, n_exit,
+                               Float(wl), bounds=bounds, n0_max=n0,
+                               exit_bounds=optics.film_bounds(n_exit, n_exit, 0.0, 0.0, n0))
+        plain = optics.stack_rt(Float(np.full(th.size, n0)), Float(np.cos(th)), f32, n_exit,
+                                Float(wl))
+        ref = optics.stack_rt(n0, Float64(np.cos(th)), f64, n_exit, Float64(wl))
+        for a, b, r in zip(ours, plain, ref):
+            worst = max(worst, float(np.max(np.abs(np.array(a) - np.array(r)))))
+            worst_plain = max(worst_plain, float(np.max(np.abs(np.array(b) - np.array(r)))))
+    # thin films (phases <= ~2 pi 2.4 * 300 / 360 ~ 13 rad) and at most 4 interfaces:
+    # float32 rounding as in test_float32_matches_float64_moderate_stacks (bound 1e-5);
+    # the bounds change the traced operations, not the values beyond a few ulp
+    assert worst <= 1e-5, worst
+    assert worst <= worst_plain + 1e-6, (worst, worst_plain)
+
+
 def random_stack(rng, count):
     """Films with n in [1, 6], k in [0, 20] (half of them absorbing), d in [0, 2000] nm."""
     n = rng.uniform(1.0, 6.0, count)

@@ -217,6 +217,11 @@ def test_few_films_unrolled_match_float64_and_the_loop(llvm, monkeypatch):
     refs = {False: tf.Stack(films, substrate=1.6, ambient=media_mod.DEFAULT_EXT_IOR),
             True: tf.Stack(list(reversed(films)), substrate=media_mod.DEFAULT_EXT_IOR,
                            ambient=1.6)}
+    # the metals' absorption keeps q away from 0: their q = 0 guard is not traced;
+    # SiO2 above air has a real root (optics.film_bounds)
+    outside = unrolled.stack.plan[False].loop
+    assert [b.q_away for b in outside.bounds] == [True, True, True]
+    assert outside.bounds[0].n2_min is not None and outside.exit_bounds.n2_min is not None
     ours = {}
     for inside, ref in refs.items():
         assert unrolled.stack.plan[inside].loop is not None

@@ -65,6 +65,9 @@ __all__ = [
     "fresnel_s",
     "fresnel_p",
     "StackAmplitudes",
+    "FilmBounds",
+    "film_bounds",
+    "UNBOUNDED",
     "stack_amplitudes",
     "stack_rt",
     "stack_rt_loop",
@@ -504,13 +507,56 @@ def exit_admittances(n_exit, beta2, beta2_max):
     return n_ex, q_ex, {"s": q_ex, "p": cmul(q_ex, cinv(n_ex.square()))}
 
 
-def prepare_stack(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission):
-    """Everything the recursion needs, shared by both polarisations."""
+@dataclass(frozen=True)
+class FilmBounds:
+    """What is known at trace time of one film's index over every wavelength and angle
+    the kernel may see (:func:`stack_rt`'s ``bounds``): ``n2_min``, a lower bound of
+    ``n^2`` for a real film (``None``: absorbing, or unknown), and ``q_away``: ``|q|``
+    cannot come within :func:`guard_zero_q`'s reach of 0, so the guard is not traced."""
+
+    n2_min: float | None = None
+    q_away: bool = False
+
+
+#: No trace-time knowledge of a film: the general root and the guard.
+UNBOUNDED = FilmBounds()
+
+
+def film_bounds(n_min: float, n_max: float, k_min: float, k_max: float,
+                n0_max: float) -> FilmBounds:
+    """:class:`FilmBounds` of a film whose index ``n + ik`` lies in ``[n_min, n_max] x
+    [k_min, k_max]`` (``k_min >= 0``) at every wavelength, seen from an ambient of index
+    at most ``n0_max`` (so ``beta^2 <= n0_max^2``), in float32 arithmetic.
+
+    ``q^2 = n^2 - k^2 - beta^2 + 2ink``, so ``|q|^2 >= |Re q^2|`` and ``|q|^2 >= 2 n k``:
+    for a real film ``|q|^2 >= n_min^2 - n0_max^2``, for an absorbing one ``|q|^2 >= 2
+    n_min k_min``. The guard acts below ``eps_q^2 = 4 eps (|n| + |k| + beta)^2``
+    (``eps = 2^-24``); a lower bound 16 times that (``|q|`` 4 times ``eps_q``) leaves room
+    for the rounding of ``q^2`` itself (relative ``~eps (|n|^2 + beta^2) / |q|^2 <
+    1/64``)."""
+    eps_q2 = 4.0 * 2.0 ** -24 * (n_max + k_max + n0_max) ** 2
+    if k_max == 0.0:
+        q2_min = n_min * n_min - n0_max * n0_max
+        return FilmBounds(n2_min=n_min * n_min, q_away=q2_min > 16.0 * eps_q2)
+    return FilmBounds(q_away=2.0 * n_min * k_min > 16.0 * eps_q2)
+
+
+def prepare_stack(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmission,
+                  bounds: Sequence[FilmBounds] | None = None, n0_max: float | None = None,
+                  exit_bounds: FilmBounds = UNBOUNDED):
+    """Everything the recursion needs, shared by both polarisations; ``bounds`` (per film),
+    ``n0_max`` (a bound of the ambient's index) and ``exit_bounds`` as :func:`stack_rt`
+    takes them."""
     cos0, beta2, q0 = incidence(n0, cos0)
-    beta2_max = n0 * n0 if _is_literal(n0) else None
+    if _is_literal(n0):
+        n0_max = n0
+    beta2_max = n0_max * n0_max if n0_max is not None else None
+    bounds = list(bounds) if bounds is not None else [UNBOUNDED] * len(films)
 
     media = [Cx.of(n0)] + [Cx.of(n) for n, _ in films] + [Cx.of(n_exit)]
-    qs = [Cx(q0, 0.0)] + [normal_index_bounded(m, beta2, beta2_max) for m in media[1:]]
+    qs = [Cx(q0, 0.0)] + [normal_index_bounded(m, beta2, beta2_max, b.n2_min)
+                          for m, b in zip(media[1:-1], bounds)] \
+        + [normal_index_bounded(media[-1], beta2, beta2_max, exit_bounds.n2_min)]
     # A film whose q is within rounding of 0 (|q|^2 below the rounding error
     # ~eps (|n|^2 + beta^2) of q^2 = n^2 - beta^2: exactly at, or within rounding
     # of, its critical angle) makes the Rouard step 0/0: gamma -> -1 and
@@ -520,8 +566,10 @@ def prepare_stack(n0, cos0, films, n_exit, wavelength, s, p, amplitudes, transmi
     # only by the amount its own rounding already leaves open. Two neighbours
     # at q = 0 (the same medium) then get r = 0 as they should.
     beta = dr.sqrt(beta2)
+    # (not traced where the film's bounds keep q away from 0)
     for j in range(1, len(media) - 1):
-        qs[j] = guard_zero_q(media[j], qs[j], beta, cos0)
+        if not bounds[j - 1].q_away:
+            qs[j] = guard_zero_q(media[j], qs[j], beta, cos0)
     inv_wl = 1.0 / wavelength
     E = [None] * len(media)
     e1 = [None] * len(media) if (amplitudes and transmission) else None
@@ -626,7 +674,9 @@ def stack_amplitudes(
     return StackAmplitudes(rs, rp, ts, tp, q0, qs[-1], media[-1], grazing)
 
 
-def stack_rt(n0, cos0, films, n_exit, wavelength, *, transmission: bool = True):
+def stack_rt(n0, cos0, films, n_exit, wavelength, *, transmission: bool = True,
+             bounds: Sequence[FilmBounds] | None = None, n0_max: float | None = None,
+             exit_bounds: FilmBounds = UNBOUNDED):
     """Reflectance and transmittance ``(Rs, Rp, Ts, Tp)`` of a stack (energy fractions).
 
     ``Rs = |r_s|^2`` and ``Rp = |r_p|^2`` (eq. 5 averages them for unpolarised
@@ -637,9 +687,16 @@ def stack_rt(n0, cos0, films, n_exit, wavelength, *, transmission: bool = True):
 
     Powers are formed from the projective ``(N, D, T)`` of :func:`rouard_recursion`
     directly (``R = |N|^2 / |D|^2``), one division per polarisation.
+
+    ``bounds`` (one :class:`FilmBounds` per film, :func:`film_bounds`) and ``n0_max`` (an
+    upper bound of ``n0``) are trace-time knowledge that lets the kernel skip work: a
+    real film's single real root where ``n^2 >= n0_max^2``, no ``q = 0`` guard where
+    ``q`` stays away from 0 (``exit_bounds``: the exit medium's ``n2_min``). They must
+    hold for every input, or the results are wrong.
     """
     cos0, q0, media, qs, E, _, tpow, zero_pairs, adm = prepare_stack(
-        n0, cos0, films, n_exit, wavelength, True, True, False, transmission)
+        n0, cos0, films, n_exit, wavelength, True, True, False, transmission,
+        bounds, n0_max, exit_bounds)
     grazing = cos0 <= 0.0
     fac = None
     if transmission:

@@ -14,8 +14,10 @@ import drjit as dr
 import numpy as np
 
 from thinfilm_mi.optics.core import (
+    UNBOUNDED,
     Cx,
     clip_transmittance,
+    film_bounds,
     incidence,
     phase_factor,
     real_loop_applies,
@@ -76,6 +78,15 @@ class LoopFilms:
         self.airy = (self.real_steps and len(films) == 1 and exit_ is not None
                      and not np.any(texture_on_grid(exit_.k))
                      and float(np.min(texture_on_grid(exit_.eta))) >= self.n0_max)
+        #: Trace-time bounds of each film's index (and the exit's, where real) for the
+        #: unrolled recursion (optics.stack_rt): a real root, no q = 0 guard where they allow
+        self.bounds = [film_bounds(float(e.min()), float(e.max()), float(kj.min()),
+                                   float(kj.max()), self.n0_max) for e, kj in zip(eta, k)]
+        self.exit_bounds = UNBOUNDED
+        if exit_ is not None and not np.any(texture_on_grid(exit_.k)):
+            ex = texture_on_grid(exit_.eta)
+            self.exit_bounds = film_bounds(float(ex.min()), float(ex.max()), 0.0, 0.0,
+                                           self.n0_max)
         #: Every film's index is one constant (no knots: a single grid cell): one
         #: real per film, gathered once per lane for all the wavelengths.
         self.constant = self.real and self.cells == 1
@@ -243,7 +254,9 @@ class LoopFilms:
                                        n0_max=self.n0_max, film_n_min=self.film_n_min,
                                        film_n_max=self.film_n_max, films_max=self.n_films)
         films = [film(j) for j in range(self.n_films)]
-        Rs, Rp, Ts, Tp = stack_rt(n0, cos_theta, films, exit_, wl, transmission=transmission)
+        Rs, Rp, Ts, Tp = stack_rt(n0, cos_theta, films, exit_, wl, transmission=transmission,
+                                  bounds=self.bounds, n0_max=self.n0_max,
+                                  exit_bounds=self.exit_bounds)
         R = 0.5 * (Rs + Rp)
         if not transmission:
             return R
