@@ -491,20 +491,6 @@ def test_float32_near_critical_angle_bound():
     assert worst_ratio > 0  # the regime is really exercised (float32 differs)
 
 
-def test_cos_turns_matches_float64():
-    """optics.cos_turns (the one-film closed form's cos 2δ): float32 phases in turns,
-    reduced exactly to the nearest half turn, against float64 cos of the same float32
-    value: the fit's 1.3e-7 plus a few roundings of the Horner steps (bound 3e-7, ~2.5
-    ulp of 1); half turns exactly (-1)^j; Python floats through dr.cos."""
-    rng = np.random.default_rng(4)
-    x = np.concatenate([rng.uniform(-3.0, 3.0, 20000), rng.uniform(0.0, 2000.0, 20000),
-                        np.arange(-8, 9) * 0.5, np.arange(-8, 9) * 0.5 + 0.25]).astype(np.float32)
-    ours = np.array(optics.cos_turns(Float(x)), np.float64)
-    assert np.max(np.abs(ours - np.cos(2.0 * np.pi * x.astype(np.float64)))) <= 3e-7
-    assert np.array_equal(ours[40000:40017], (-1.0) ** np.arange(17))
-    assert optics.cos_turns(0.125) == pytest.approx(math.cos(math.pi / 4), abs=1e-15)
-
-
 def test_film_bounds_skip_only_what_cannot_happen():
     """optics.film_bounds: a real root where n_min >= n0_max, the q = 0 guard skipped
     only where |q| stays far above its reach (a real film at the ambient's index, or

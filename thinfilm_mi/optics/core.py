@@ -73,7 +73,6 @@ __all__ = [
     "stack_rt_loop",
     "stack_loop_terms",
     "film_attenuation",
-    "cos_turns",
     "transmittance_factor_s",
     "transmittance_factor_p",
 ]
@@ -301,27 +300,6 @@ def _sincos_turns(x):
     sin = dr.select(k >= 2.0, -sw, sw)
     cos = dr.select((k == 1.0) | (k == 2.0), -cw, cw)
     return sin, cos
-
-
-# cos(2 pi g) = C(g^2) for |g| <= 1/4 (a least-squares fit on 20001 points with C(0) = 1,
-# done for this module; largest error 1.3e-7 in float32 Horner, about one ulp of 1)
-_COS_HALF_C = (1.0, -19.739208221435547, 64.93936157226562, -85.45420837402344,
-               60.15614318847656, -25.063676834106445)
-
-
-def cos_turns(x):
-    """``cos(2 pi x)`` for a phase ``x`` in turns, without the sine: float32 arrays reduce
-    exactly to the nearest half turn (``x - round(2x)/2``) and take one polynomial
-    (:func:`_sincos_turns` needs both of its polynomials for the cosine); other types
-    ``dr.cos``."""
-    if not _is_float32(x):
-        return dr.cos((2.0 * math.pi) * x)
-    j = dr.round(2.0 * x)
-    g = dr.fma(j, -0.5, x)
-    z = g * g
-    c = _COS_HALF_C
-    p = dr.fma(dr.fma(dr.fma(dr.fma(dr.fma(c[5], z, c[4]), z, c[3]), z, c[2]), z, c[1]), z, c[0])
-    return dr.select(j - 2.0 * dr.floor(0.5 * j) == 1.0, -p, p)   # (-1)^j
 
 
 def phase_factor(q: Cx, u, twice: bool) -> Cx:

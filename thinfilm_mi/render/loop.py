@@ -17,9 +17,9 @@ from thinfilm_mi.optics.core import (
     UNBOUNDED,
     Cx,
     clip_transmittance,
-    cos_turns,
     film_bounds,
     incidence,
+    phase_factor,
     real_loop_applies,
     stack_rt,
 )
@@ -281,7 +281,7 @@ class LoopFilms:
         n0_2, n1_2, n2_2 = n0 * n0, n1 * n1, n2 * n2
         q1 = dr.sqrt(dr.maximum(n1_2 - beta2, 0.0))
         q2 = dr.sqrt(dr.maximum(n2_2 - beta2, 0.0))
-        c = cos_turns(2.0 * q1 * (d / wl))   # cos 2δ
+        c = phase_factor(Cx(q1, 0.0), d / wl, True).re
         R = 0.0
         for a0, a1, b1, b2 in ((q0, q1, q1, q2),                       # s: q
                                (q0 * n1_2, q1 * n0_2, q1 * n2_2, q2 * n1_2)):  # p: q / n^2, scaled
