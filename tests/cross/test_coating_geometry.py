@@ -373,8 +373,14 @@ def test_coating_albedo_matches_the_geometry(base, layers):
     assert agree(geometry, ours, 1e-6), (geometry, ours)
 
 
+#: the slice's bases: all but thinfilm_diffuse, whose delta reflection over a Lambertian is
+#: plastic's structure (sliced here) and whose albedo is checked above; its slices cost 34 s
+#: of the suite's time on 2 cores (a Python BSDF under the geometry's path tracer as well)
+SLICE_BASES = [base for base in PLUGIN_BASES if base != "thinfilm_diffuse"]
+
+
 @pytest.mark.parametrize("layers", ["", FILMS], ids=["bare", "films"])
-@pytest.mark.parametrize("base", list(PLUGIN_BASES))
+@pytest.mark.parametrize("base", SLICE_BASES)
 def test_coating_slice_matches_the_geometry(base, layers):
     """The BRDF slice at θ_o = 60° in the plane of incidence, from ``sample`` alone (the
     mirror part, the stack's R, and the scattered bins) and from ``eval`` alone (the
