@@ -271,9 +271,12 @@ class LoopFilms:
             R = (r01^2 + r12^2 + 2 r01 r12 cos 2δ) / (1 + r01^2 r12^2 + 2 r01 r12 cos 2δ)
 
         (``|r01 + r12 E|^2 / |1 + r01 r12 E|^2`` with ``E = exp(2iδ)``, ``2δ = 4π q1 d /
-        λ``): the recursion's value with no complex arithmetic. The denominator is at
-        least ``(1 - |r01 r12|)^2 > 0`` (``|r12| < 1``). At grazing incidence ``r01 = -1``
-        and ``R = 1``."""
+        λ``): the recursion's value with no complex arithmetic. With ``r01 = A / B`` and
+        ``r12 = C / D`` both numerator and denominator are multiplied by ``(B D)^2``, and
+        the two polarisations' ``R`` are added over one product of denominators: one
+        division per wavelength (where six were). The denominator is at least ``(1 -
+        |r01 r12|)^2 (B D)^2 > 0`` (``|r12| < 1``). At grazing incidence ``r01 = -1`` and
+        ``R = 1``."""
         cos0, beta2, q0 = incidence(n0, cos_theta)
         (m, d), = [film(0)]
         n1 = m.re
@@ -282,12 +285,17 @@ class LoopFilms:
         q1 = dr.sqrt(dr.maximum(n1_2 - beta2, 0.0))
         q2 = dr.sqrt(dr.maximum(n2_2 - beta2, 0.0))
         c = phase_factor(Cx(q1, 0.0), d / wl, True).re
-        R = 0.0
+        terms = []
         for a0, a1, b1, b2 in ((q0, q1, q1, q2),                       # s: q
                                (q0 * n1_2, q1 * n0_2, q1 * n2_2, q2 * n1_2)):  # p: q / n^2, scaled
-            r01 = (a0 - a1) / (a0 + a1)
-            r12 = (b1 - b2) / (b1 + b2)
-            x = r01 * r12
-            b = 2.0 * x * c
-            R += dr.minimum((r01 * r01 + r12 * r12 + b) / (1.0 + x * x + b), 1.0)
-        return dr.select(cos0 <= 0.0, 1.0, 0.5 * R)
+            # r01 = A / B, r12 = C / D: numerator and denominator times (B D)^2
+            A, B, C, D = a0 - a1, a0 + a1, b1 - b2, b1 + b2
+            AD, CB = A * D, C * B
+            b = 2.0 * (AD * CB) * c
+            terms.append((dr.fma(AD, AD, dr.fma(CB, CB, b)),
+                          dr.fma(B * D, B * D, dr.fma(A * C, A * C, b))))
+        # R_s + R_p over one division: each denominator lies in [(1 - |r01 r12|)^2,
+        # (1 + |r01 r12|)^2] (B D)^2 with B, D >= q1 > 0 and |q| <= n: far inside float32
+        (num_s, den_s), (num_p, den_p) = terms
+        R = dr.fma(num_s, den_p, num_p * den_s) / (den_s * den_p)
+        return dr.select(cos0 <= 0.0, 1.0, dr.minimum(0.5 * R, 1.0))
