@@ -491,6 +491,23 @@ def test_float32_near_critical_angle_bound():
     assert worst_ratio > 0  # the regime is really exercised (float32 differs)
 
 
+def test_real_cx_keeps_a_literal_zero_imaginary_part():
+    """A real medium (Cx with a literal 0 imaginary part, e.g. the glass substrate):
+    its square and inverse stay real at trace time (no traced zeros, one real division),
+    with the values of the general complex formulas."""
+    x = Float([1.6, 0.5, 2.4])
+    z = Cx(x, 0.0)
+    sq, inv = z.square(), optics.cinv(z)
+    assert isinstance(sq.im, float) and sq.im == 0.0
+    assert isinstance(inv.im, float) and inv.im == 0.0
+    general = Cx(x, Float([0.0, 0.0, 0.0]))
+    np.testing.assert_allclose(np.array(sq.re), np.array(general.square().re), rtol=0)
+    # the general re * (1 / re^2) rounds three times, 1 / re once: a few ulp apart
+    np.testing.assert_allclose(np.array(inv.re), np.array(optics.cinv(general).re),
+                               rtol=4 * EPS32)
+    np.testing.assert_allclose(np.array(z.abs2()), np.array(general.abs2()), rtol=0)
+
+
 def test_film_bounds_skip_only_what_cannot_happen():
     """optics.film_bounds: a real root where n_min >= n0_max, the q = 0 guard skipped
     only where |q| stays far above its reach (a real film at the ambient's index, or

@@ -145,10 +145,16 @@ class Cx:
         return Cx(self.re, -self.im)
 
     def abs2(self):
-        """``|z|^2``."""
+        """``|z|^2`` (``re^2`` where the imaginary part is a literal 0)."""
+        if is_zero(self.im):
+            return self.re * self.re
         return self.re * self.re + self.im * self.im
 
     def square(self) -> "Cx":
+        """``z^2``; a literal 0 imaginary part stays a literal 0 (traced code specialises
+        on it: a real medium's products and inverses)."""
+        if is_zero(self.im):
+            return Cx(self.re * self.re, 0.0)
         return Cx(self.re * self.re - self.im * self.im, 2.0 * self.re * self.im)
 
     def select(self, mask, other: "Cx") -> "Cx":
@@ -341,6 +347,8 @@ def cinv(z: Cx) -> Cx:
     if _is_literal(z.re) and _is_literal(z.im):
         w = 1.0 / complex(z.re, z.im)
         return Cx(w.real, w.imag)
+    if is_zero(z.im):
+        return Cx(1.0 / z.re, 0.0)
     inv = 1.0 / z.abs2()
     return Cx(z.re * inv, -z.im * inv)
 
