@@ -118,10 +118,18 @@ def render_sync(scene, **kw):
 
 def mode_of(scene) -> str:
     """How the stack of the scene's first thin-film BSDF is evaluated (``stack.mode()``; the
-    coating's stack is its walk's)."""
+    coating's stack is its walk's; ``thinfilm_diffuse`` reads its model's factor table where
+    it has one, else its coating's stack)."""
     for shape in scene.shapes():
         b = shape.bsdf()
-        stack = getattr(b, "stack", None) or getattr(getattr(b, "coating", None), "stack", None)
+        coated = getattr(b, "coated", None)
+        if coated is not None and coated.table is not None:
+            return "factor table"
+        # explicit None tests: a stack without films has length 0
+        candidates = (getattr(b, "stack", None),
+                      getattr(getattr(b, "coating", None), "stack", None),
+                      getattr(coated, "coating", None))
+        stack = next((s for s in candidates if s is not None), None)
         if stack is not None:
             return stack.mode()
     return "–"

@@ -31,7 +31,7 @@ BENCHMARKS = {
     "optics_throughput": [],
     "speed_vs_error": [],
     "render_bench": ["--films", "1,10,30", "--repeats", "3", "--first-repeats", "1"],
-    "plugin_bench": ["--repeats", "3", "--demo-repeats", "3", "--first-repeats", "1"],
+    "plugin_bench": ["--repeats", "3", "--demo-repeats", "3", "--first-repeats", "3"],
     "rgb_bench": ["--build-repeats", "3"],
     "band_bench": ["--repeats", "3", "--first-repeats", "1", "--de-spp", "256"],
     "deep_bench": ["--rounds", "1"],
