@@ -9,6 +9,7 @@ import pytest
 
 import thinfilm_mi as tf
 from tests.support.kernels import compiled, interaction
+from tests.support.stacks import sphere_scene
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
 
@@ -306,26 +307,12 @@ def test_one_real_film_on_glass_in_closed_form_matches_float64(llvm, layers, mon
         assert np.max(np.abs(R - ours[inside])) < 1e-5
 
 
-def _sphere_1spp(bsdf: dict):
-    """A sphere of ``bsdf`` under a constant sky, 32², 1 spp, box filter: renders
-    comparable bit for bit across processes' thread schedules."""
-    return mi.load_dict({
-        "type": "scene", "integrator": {"type": "path", "max_depth": 6},
-        "sensor": {"type": "perspective", "fov": 40,
-                   "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 4], target=[0, 0, 0],
-                                                              up=[0, 1, 0]),
-                   "film": {"type": "hdrfilm", "width": 32, "height": 32,
-                            "rfilter": {"type": "box"}},
-                   "sampler": {"type": "independent", "sample_count": 1}},
-        "light": {"type": "constant"}, "obj": {"type": "sphere", "bsdf": bsdf}})
-
-
 @pytest.mark.parametrize("plugin", ["thinfilm_dielectric", "thinfilm_roughdielectric"])
 @pytest.mark.parametrize("before,key,value,after", [
     # a real film above both media (real root, one-film closed form) edited below the glass
-    ("2.0 100", "obj.bsdf.layers.0.eta.value", 1.2, "1.2 100"),
+    ("2.0 100", "ball.bsdf.layers.0.eta.value", 1.2, "1.2 100"),
     # a lossless film among metals (a literal zero imaginary part) edited to absorb
-    ("1.46 500; Au 20", "obj.bsdf.layers.0.k.value", 0.05, "1.46+0.05i 500; Au 20"),
+    ("1.46 500; Au 20", "ball.bsdf.layers.0.k.value", 0.05, "1.46+0.05i 500; Au 20"),
 ], ids=["real-film-below-the-glass", "lossless-film-absorbs"])
 def test_an_edit_across_a_trace_time_bound_renders_as_a_fresh_load(llvm, plugin, before, key,
                                                                    value, after):
@@ -335,12 +322,12 @@ def test_an_edit_across_a_trace_time_bound_renders_as_a_fresh_load(llvm, plugin,
     them: the render equals a fresh load of the edited stack bit for bit (1 spp, box
     filter), and differs from before the edit."""
     bsdf = {"type": plugin, "tabulate": False, "int_ior": 1.6}
-    scene = _sphere_1spp({**bsdf, "layers": before})
+    scene = mi.load_dict(sphere_scene({**bsdf, "layers": before}))
     params = mi.traverse(scene)
     first = np.array(mi.render(scene, seed=3))
     params[key] = value
     params.update()
     edited = np.array(mi.render(scene, seed=3))
-    fresh = np.array(mi.render(_sphere_1spp({**bsdf, "layers": after}), seed=3))
+    fresh = np.array(mi.render(mi.load_dict(sphere_scene({**bsdf, "layers": after})), seed=3))
     assert np.array_equal(edited, fresh)
     assert np.abs(edited - first).max() > 1e-2
