@@ -49,11 +49,14 @@ def test_bspline_coefficients_solve_the_clamped_system(n):
 
 def test_table_cache_is_bounded_in_bytes_least_recently_used_first_out(monkeypatch):
     """Thousands of distinct tables (a sweep, an optimisation) must not pile up: the
-    shared cache holds at most ``max_bytes`` of texture data (here 100 kB instead of
-    32 MiB, so that a few small tables exceed it) and evicts the least recently used.
-    Tables still used by a BSDF stay valid (the BSDF holds them)."""
+    shared cache holds at most ``max_bytes`` of texture data (here what about three of
+    the test's tables take instead of 64 MiB, so that a few exceed it) and evicts the
+    least recently used. Tables still used by a BSDF stay valid (the BSDF holds them)."""
     from thinfilm_mi.tabulate import base as tabulate_base
-    cache = tabulate_base.TableCache(max_bytes=100_000)
+    monkeypatch.setattr(K, "TABLE_CACHE", tabulate_base.TableCache())
+    one = mi.load_dict({"type": "thinfilm_conductor", "material": "Al",
+                        "layers": "1.46 150; 2.3 60", "tabulate": True}).stack.plan[False].table
+    cache = tabulate_base.TableCache(max_bytes=int(3.5 * one.nbytes))
     monkeypatch.setattr(K, "TABLE_CACHE", cache)
     bsdfs = []
     for i in range(12):

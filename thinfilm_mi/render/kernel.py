@@ -457,7 +457,7 @@ def _rt(n0, cos0, films, n_exit, wl, incoherent, transmission):
     return unpolarized_rt(n0, cos0, films, n_exit, wl, transmission)
 
 
-#: Tables shared between stacks with identical optics (bounded: 32 MiB of texture data).
+#: Tables shared between stacks with identical optics (bounded: 64 MiB of texture data).
 TABLE_CACHE = TableCache()
 #: Builds of at least this many exact evaluations (~30 ms and more: the probes of
 #: 10 films and more, every band-limited build) are kept in the table store
@@ -496,7 +496,8 @@ def _tables_cache(stack: KernelStack, side: SidePlan, quantity=POWERS):
     budget_scale = option.budget_scale
     key = table_key(arrays, side.films, (mi.variant(), side.transmission, side.exit_real, side.opaque,
                                          stack.table_error, stack.spectral_resolution, max_texels,
-                                         budget_scale, quantity.name))
+                                         budget_scale, quantity.name,
+                                         quantity.linear_max_floats))
     found, table = TABLE_CACHE.get(key)
     if found:
         side.build_report = BuildReport(result="from the cache")
@@ -514,7 +515,7 @@ def _tables_cache(stack: KernelStack, side: SidePlan, quantity=POWERS):
     side.build_report = report = BuildReport()
     table = band.build_table(data, stack.table_error, GRID, max_texels,
                              stack.spectral_resolution, report=report,
-                             budget_scale=budget_scale)
+                             budget_scale=budget_scale, linear_floats=quantity.linear_max_floats)
     TABLE_CACHE.put(key, table)
     work = report.get("points", 0) + (report.get("exact_attempt") or {}).get("points", 0)
     if disk is not None and work >= STORE_MIN_POINTS:

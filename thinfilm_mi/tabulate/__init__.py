@@ -7,7 +7,8 @@ The shared base, used by every builder:
   nodes beyond their ends are made.
 * :mod:`thinfilm_mi.tabulate.base` -- a lit side of a stack (:class:`~thinfilm_mi.tabulate.base.SideData`)
   and its exact float64 evaluation in batches, the wavelength axis, B-splines and their
-  midpoint prediction, the :class:`~thinfilm_mi.tabulate.base.Table` lookup,
+  midpoint prediction, the :class:`~thinfilm_mi.tabulate.base.Table` lookup and how it
+  interpolates (:data:`~thinfilm_mi.tabulate.base.INTERPOLATIONS`),
   :class:`~thinfilm_mi.tabulate.base.BuildReport` and the :class:`~thinfilm_mi.tabulate.base.TableCache`.
 * :mod:`thinfilm_mi.tabulate.quantities` -- what a table holds
   (:data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`: the powers, or the Mueller
@@ -23,6 +24,8 @@ The builders on top:
 
 * :mod:`thinfilm_mi.tabulate.exact` -- cubic B-spline tables of the exact ``R``/``T`` over
   (angle, wavelength) and their verification.
+* :mod:`thinfilm_mi.tabulate.bilinear` -- a verified spline table resampled for bilinear
+  lookups (4 texels where the spline reads 16), verified against the spline.
 * :mod:`thinfilm_mi.tabulate.band` -- tables of ``R``/``T`` convolved with a Gaussian in
   wavenumber (deep stacks), on a sheared axis, from rows sampled through the stack's
   smooth amplitudes: one algorithm in one module.

@@ -132,6 +132,7 @@ from thinfilm_mi.tabulate.base import (
     side_indices,
     with_ghosts,
 )
+from thinfilm_mi.tabulate.bilinear import SPLINE_SHARE, resample
 from thinfilm_mi.tabulate.refine import Budget, convergence_factor, optical_thickness, power_of_two_step
 
 __all__ = ["COLOUR_TOLERANCE", "EXPECTED_TOTAL", "FIRST_NU", "FIRST_ORDER", "GRADING",
@@ -908,7 +909,8 @@ SAMPLE_ROWS = 8
 
 def build_table(side: SideData, error: float, wavelengths: np.ndarray,
                 max_texels: int = MAX_TEXELS, resolution: float = 0.0,
-                report: BuildReport | None = None, budget_scale: float = 1.0) -> Table | None:
+                report: BuildReport | None = None, budget_scale: float = 1.0,
+                linear_floats: int = 0) -> Table | None:
     """The table of one side: of the exact values
     (:func:`~thinfilm_mi.tabulate.exact.build_exact_table`) if one resolves them within
     ``error`` (1-3 films: unchanged by band-limiting),
@@ -917,17 +919,31 @@ def build_table(side: SideData, error: float, wavelengths: np.ndarray,
     :class:`~thinfilm_mi.tabulate.base.BuildReport`; the exact attempt's report
     under ``"exact_attempt"`` when a band-limited table was tried after it).
     ``budget_scale`` multiplies the evaluations and work both builds may spend
-    (:meth:`~thinfilm_mi.tabulate.refine.Budget.scaled`)."""
+    (:meth:`~thinfilm_mi.tabulate.refine.Budget.scaled`).
+
+    With ``linear_floats`` > 0 the spline is built within
+    :data:`~thinfilm_mi.tabulate.bilinear.SPLINE_SHARE` of ``error`` and resampled for
+    bilinear lookups within the rest (:func:`~thinfilm_mi.tabulate.bilinear.resample`)
+    where that takes at most ``linear_floats`` floats; ``report["interpolation"]`` says
+    which the table is."""
     report = report if report is not None else BuildReport()
+    target = error * SPLINE_SHARE if linear_floats > 0 else error
     attempt = BuildReport()
-    table = exact.build_exact_table(side, error, wavelengths, max_texels, report=attempt,
+    table = exact.build_exact_table(side, target, wavelengths, max_texels, report=attempt,
                                     budget_scale=budget_scale)
     if table is not None or resolution <= 0:
         report.update(attempt)
-        return table
-    table = build_band_table(side, error, wavelengths, max_texels, resolution, report=report,
-                             budget_scale=budget_scale)
-    report["exact_attempt"] = attempt
+    else:
+        table = build_band_table(side, target, wavelengths, max_texels, resolution,
+                                 report=report, budget_scale=budget_scale)
+        report["exact_attempt"] = attempt
+    if table is not None and linear_floats > 0:
+        fine = resample(table, side, error, linear_floats)
+        if fine is not None:
+            report.update(factors=list(fine.factors), spline_error=table.error)
+            table = fine
+    if table is not None:
+        report["interpolation"] = table.interpolation.name
     return table
 
 

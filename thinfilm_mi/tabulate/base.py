@@ -14,7 +14,9 @@ float64 batches, the table axes, cubic B-splines, the lookup object and the cach
   :data:`GHOST` nodes), :func:`bspline_midpoints` (the values a table predicts
   between its nodes, which the builders verify against exact values).
 * :class:`Table`: the float32 ``Texture2f`` a render kernel looks up, with opaque
-  scale and offset constants; :class:`TableCache`: built tables shared by key.
+  scale and offset constants, interpolated as one of :data:`INTERPOLATIONS` says (the
+  spline's coefficients, or the spline resampled for bilinear lookups by
+  :mod:`thinfilm_mi.tabulate.bilinear`); :class:`TableCache`: built tables shared by key.
 
 The refinement shared by the builders (budget, first step, convergence order, the
 linear tables' 4-point rule) is :mod:`thinfilm_mi.tabulate.refine`. The builders on
@@ -35,7 +37,8 @@ from thinfilm_mi.materials.model import GRID, SPECTRAL_RANGE
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.tabulate.axes import GHOST, AngleAxis, GhostEnd
 
-__all__ = ["BUILD_LOOP_MIN_FILMS", "BuildReport", "GRAZING_COS", "MAX_BUILD_POINTS",
+__all__ = ["BILINEAR", "BUILD_LOOP_MIN_FILMS", "BuildReport", "CUBIC", "Bilinear", "CubicSpline",
+           "GRAZING_COS", "INTERPOLATIONS", "MAX_BUILD_POINTS",
            "MAX_BUILD_WORK", "MAX_ROUNDS", "MAX_TEXELS", "MAX_U", "MAX_V", "MIN_U", "MIN_V",
            "POINT_WORK", "REFINE_SHARE", "SIGMA_MAX", "SIGMA_MIN", "SideData", "Table",
            "TableCache", "bspline_at", "bspline_coefficients", "bspline_midpoints", "build_work",
@@ -234,24 +237,112 @@ def linear_texture(values: np.ndarray):
                    migrate=False, filter_mode=dr.FilterMode.Linear, wrap_mode=dr.WrapMode.Clamp)
 
 
-class Table:
-    """A built table: a float32 ``Texture2f`` (channels ``R`` [, ``T``]) with its axes.
+class CubicSpline:
+    """A table's texture holds the coefficients of the interpolating cubic B-spline
+    with :data:`GHOST` ghost nodes around every segment of each axis: shape ``(nv +
+    2g, nu + 2g, channels)``, or for a split axis ``(nv + 2g, 2 (nu/2 + 2g),
+    channels)`` (the transmit segment's columns, then the total-reflection
+    segment's); a lookup reads 16 texels (``Texture2f.eval_cubic``). What the builders
+    make and verify (:mod:`~thinfilm_mi.tabulate.exact`, :mod:`~thinfilm_mi.tabulate.band`)."""
 
-    ``values`` holds the cubic spline's coefficients with :data:`GHOST` ghost
-    nodes around every segment of each axis: shape ``(nv + 2g, nu + 2g,
-    channels)``, or for a split axis ``(nv + 2g, 2 (nu/2 + 2g), channels)``
-    (the transmit segment's columns, then the total-reflection segment's).
-    """
+    name = "cubic"
+
+    @staticmethod
+    def nodes(shape, axis, factors) -> tuple[int, int]:
+        """``(nu, nv)``: the spline's nodes along the angle and the wavelength."""
+        return shape[1] - 2 * GHOST * axis.segments, shape[0] - 2 * GHOST
+
+    @staticmethod
+    def constants(table, shape) -> None:
+        g = GHOST
+        table._inv_u = opaque_float(1.0 / shape[1])
+        table._inv_v = opaque_float(1.0 / shape[0])
+        table._offset = g + 0.5   # node 0 sits at texel centre g
+        # a split axis: node coordinates beyond the critical cell are in the
+        # second segment, 2g texels further
+        table._split = opaque_float(0.5 * table.nu - 0.5) if table.axis.split else None
+
+    @staticmethod
+    def u(table, x):
+        if table._split is not None:
+            x = x + dr.select(x > table._split, 2.0 * GHOST, 0.0)
+        return (x + table._offset) * table._inv_u
+
+    @staticmethod
+    def v(table, t):
+        return (t + table._offset) * table._inv_v
+
+    @staticmethod
+    def eval(texture, pos, active):
+        return texture.eval_cubic(pos, active)
+
+
+class Bilinear:
+    """A table's texture holds the values of the spline resampled ``factors = (ku,
+    kv)`` times finer along each axis, read by bilinear interpolation (4 texels a
+    lookup, where the spline reads 16: :mod:`~thinfilm_mi.tabulate.bilinear`). Shape
+    ``(kv (nv - 1) + 1, ku (nu - 1) + 1, channels)``, or for a split axis two
+    segments of ``ku (nu/2 - 1) + 1`` columns side by side (the cell between them,
+    across the critical angle, has no width: no lookup falls in it)."""
+
+    name = "linear"
+
+    @staticmethod
+    def nodes(shape, axis, factors) -> tuple[int, int]:
+        ku, kv = factors
+        per_segment = shape[1] // axis.segments
+        return axis.segments * ((per_segment - 1) // ku + 1), (shape[0] - 1) // kv + 1
+
+    @staticmethod
+    def constants(table, shape) -> None:
+        ku, kv = table.factors
+        table._inv_u = opaque_float(1.0 / shape[1])
+        table._inv_v = opaque_float(1.0 / shape[0])
+        table._ku, table._kv = opaque_float(ku), opaque_float(kv)
+        # a split axis: the second segment's node m starts at column ku (m - 1) + 1
+        table._split = opaque_float(0.5 * table.nu - 0.5) if table.axis.split else None
+        table._seam = opaque_float(1.0 - ku) if table.axis.split else None
+
+    @staticmethod
+    def u(table, x):
+        xf = x * table._ku
+        if table._split is not None:
+            xf = xf + dr.select(x > table._split, table._seam, 0.0)
+        return (xf + 0.5) * table._inv_u
+
+    @staticmethod
+    def v(table, t):
+        return dr.fma(t, table._kv, 0.5) * table._inv_v
+
+    @staticmethod
+    def eval(texture, pos, active):
+        return texture.eval(pos, active)
+
+
+CUBIC, BILINEAR = CubicSpline(), Bilinear()
+#: How a :class:`Table`'s texture is interpolated, by name (the name is what the table
+#: store keeps on disk).
+INTERPOLATIONS = {i.name: i for i in (CUBIC, BILINEAR)}
+
+
+class Table:
+    """A built table: a float32 ``Texture2f`` (channels ``R`` [, ``T``], or the Mueller
+    components) with its axes, interpolated as ``interpolation`` (one of
+    :data:`INTERPOLATIONS`) says: the cubic spline the builders verify
+    (:class:`CubicSpline`, the texture holds its coefficients), or its values resampled
+    ``factors`` times finer for bilinear lookups (:class:`Bilinear`)."""
 
     def __init__(self, values: np.ndarray, axis: AngleAxis, error: float, channels: int,
-                 resolution: float = 0.0, shear=None):
-        g = GHOST
-        self.nv, self.nu = values.shape[0] - 2 * g, values.shape[1] - 2 * g * axis.segments
+                 resolution: float = 0.0, shear=None, interpolation=CUBIC, factors=(1, 1)):
         #: the angle axis (:data:`~thinfilm_mi.tabulate.axes.AXES`)
         self.axis = axis
+        self.interpolation = interpolation
+        #: resampling factors along the angle and the wavelength (:class:`Bilinear`)
+        self.factors = tuple(int(f) for f in factors)
+        self.nu, self.nv = interpolation.nodes(values.shape, axis, self.factors)
         self.channels = channels
-        #: the verified max abs interpolation error (sum of both axes' maxima),
-        #: against ``R_σ`` for a band-limited table
+        #: the verified max abs interpolation error (sum of both axes' maxima, and of
+        #: the resampling's), against ``R_σ`` for a band-limited table
         self.error = error
         #: ``spectral_resolution`` (nm) of the band-limited values tabulated
         #: (:mod:`thinfilm_mi.tabulate.band`); 0: the exact values
@@ -264,12 +355,7 @@ class Table:
         # another shape reuses the render kernel.
         self._nu = opaque_float(self.nu)
         self._nv = opaque_float(self.nv)
-        self._inv_u = opaque_float(1.0 / values.shape[1])
-        self._inv_v = opaque_float(1.0 / (self.nv + 2 * g))
-        self._offset = g + 0.5   # node 0 sits at texel centre g
-        # a split axis: node coordinates beyond the critical cell are in the
-        # second segment, 2g texels further
-        self._split = opaque_float(0.5 * self.nu - 0.5) if axis.split else None
+        interpolation.constants(self, values.shape)
         #: a band-limited table's sheared v axis (:class:`~thinfilm_mi.tabulate.band.Shear`)
         self.shear = shear
         if shear is not None:
@@ -279,11 +365,12 @@ class Table:
     def texels(self) -> int:
         return self.nu * self.nv
 
+    def values(self) -> np.ndarray:
+        """The texture's float32 data (float32 numpy, as built)."""
+        return np.array(self.texture.tensor(), dtype=np.float32)
+
     def _u(self, cos_i, sin_i, n0, n_exit):
-        x = self.axis.texel(cos_i, sin_i, n0, n_exit, self._nu)
-        if self._split is not None:
-            x = x + dr.select(x > self._split, 2.0 * GHOST, 0.0)
-        return (x + self._offset) * self._inv_u
+        return self.interpolation.u(self, self.axis.texel(cos_i, sin_i, n0, n_exit, self._nu))
 
     def lookup(self, cos_i, n0, n_exit, wavelengths, active=True, sin_i=None):
         """``[R]`` or ``[R, T]`` as spectra: one lookup per wavelength.
@@ -320,8 +407,8 @@ class Table:
                 factor = self.shear.factor(sin_i[i]) if self.shear is not None else None
             t = (v_texel(wavelengths[i], self._nv) if factor is None
                  else (SIGMA_MAX - factor / wavelengths[i]) * self._v_scale)
-            v = (t + self._offset) * self._inv_v
-            res = self.texture.eval_cubic(mi.Point2f(u, v), active)
+            res = self.interpolation.eval(self.texture,
+                                          mi.Point2f(u, self.interpolation.v(self, t)), active)
             for c in range(self.channels):
                 out[c].append(res[c])
         return [mi.UnpolarizedSpectrum(*vals) for vals in out]
@@ -427,7 +514,8 @@ class TableCache:
     Bounded in bytes as well as in entries: a sweep or an optimisation that builds
     thousands of distinct tables would otherwise keep hundreds of tables of up to
     2-32 MiB each alive (RSS grew from 116 to 641 MB over 2500 rebuilds with a
-    count bound of 257 alone). With 32 MiB, 1200 rebuilds of random 1-3-film
+    count bound of 257 alone). With 32 MiB (the bound until tables of 1-3 films were
+    resampled for bilinear lookups, 2-8 MiB each: 64 MiB since), 1200 rebuilds of random 1-3-film
     tables stayed at 225-250 MB from a 122 MB start, and clearing the cache,
     ``dr.flush_malloc_cache()`` and the C library's ``malloc_trim`` gave back all
     of it (no leak). Tables still used by a BSDF stay alive through it.
@@ -435,7 +523,7 @@ class TableCache:
     parallel scene loading.
     """
 
-    def __init__(self, max_bytes: int = 32 << 20, max_entries: int = 1024):
+    def __init__(self, max_bytes: int = 64 << 20, max_entries: int = 1024):
         import threading
         from collections import OrderedDict
 

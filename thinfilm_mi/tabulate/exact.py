@@ -16,7 +16,9 @@ interpolation (h^2) for the same error, and a table ~20x fewer texels. The
 coefficients are solved for (a tridiagonal system per axis) on a grid extended
 by :data:`GHOST` nodes beyond each edge, at which the stack is evaluated too
 (its analytic continuation), so the spline's end conditions do not reach the
-tabulated range. Where the exit medium totally reflects, ``R`` has a
+tabulated range. (A render reads most spectral tables of the powers resampled from
+this spline for bilinear lookups, which are cheaper in a kernel:
+:mod:`thinfilm_mi.tabulate.bilinear`.) Where the exit medium totally reflects, ``R`` has a
 square-root kink at the critical angle: the angle axis is split there into two
 segments, each a spline of its own with its own ghost nodes (mirrored about
 normal and grazing incidence, where the functions are even, and extrapolated

@@ -114,6 +114,11 @@ class MuellerQuantity:
 
     name = "mueller"
     auto_max_floats = AUTO_MAX_FLOATS
+    #: Mueller tables stay splines (not measured resampled): ``"auto"`` tabulates from
+    #: :data:`AUTO_MIN_FILMS` films, whose spline tables of 4 channels or more take
+    #: 1.5-8 MiB; resampled (16-25x the texels) they would exceed what a bilinear lookup
+    #: gains by (:data:`~thinfilm_mi.tabulate.quantities.LINEAR_MAX_FLOATS`)
+    linear_max_floats = 0
     #: channels 8-9 of :meth:`smooth_terms` are amplitudes (``T``), not their squares
     squared_terms = False
     #: First v-node spacing of band-limited tables (in σ_ν; the powers' is

@@ -28,7 +28,7 @@ from thinfilm_mi.optics.unpolarized import unpolarized_rt, unpolarized_rt_loop
 from thinfilm_mi.tabulate.band import V_SPACING, amplitudes, powers_of
 from thinfilm_mi.tabulate.mueller import MUELLER
 
-__all__ = ["AUTO_MAX_TEXELS", "AUTO_MIN_FILMS", "POWERS", "QUANTITIES", "RT_AUTO_MIN_FILMS",
+__all__ = ["AUTO_MAX_TEXELS", "AUTO_MIN_FILMS", "LINEAR_MAX_FLOATS", "POWERS", "QUANTITIES", "RT_AUTO_MIN_FILMS",
            "PowersQuantity"]
 
 #: ``tabulate="auto"`` tabulates a side of ``R`` only from this many films (after the
@@ -50,6 +50,13 @@ RT_AUTO_MIN_FILMS = 5
 #: of 3-10 films (benchmarks/SPEED.md). ``tabulate=true`` allows
 #: :data:`~thinfilm_mi.tabulate.base.MAX_TEXELS` per channel.
 AUTO_MAX_TEXELS = 1 << 19
+#: Tables of the powers are read bilinearly where the spline resampled for that
+#: (:mod:`thinfilm_mi.tabulate.bilinear`) takes at most this many floats (8 MiB): a
+#: bilinear lookup of such a table (4 texels a wavelength) still costs less than a cubic
+#: one of the spline (16), ~2.5-3.5 against 4-8.5 ns per point at random positions
+#: (issue 44, one process, 4 lookups per point of 1-2-channel tables of 0.1-9 MiB);
+#: beyond it the spline stays.
+LINEAR_MAX_FLOATS = 1 << 21
 
 
 class PowersQuantity:
@@ -57,6 +64,7 @@ class PowersQuantity:
 
     name = "powers"
     auto_max_floats = AUTO_MAX_TEXELS
+    linear_max_floats = LINEAR_MAX_FLOATS
     #: First v-node spacing of band-limited tables (σ_ν units)
     v_spacing = V_SPACING
     squared_terms = True

@@ -15,7 +15,9 @@ found not tabulable, with its build report) in one file per key under a director
   the source of this package and the versions of Mitsuba, Dr.Jit and NumPy, so a
   table built by other code is never read;
 * **what is read back**: the float32 texture values exactly as built (with a
-  band-limited table's shear, :class:`thinfilm_mi.tabulate.band.Shear`), or a
+  band-limited table's shear, :class:`thinfilm_mi.tabulate.band.Shear`, and how they
+  are interpolated: the spline's coefficients or its bilinear resampling,
+  :data:`~thinfilm_mi.tabulate.base.INTERPOLATIONS`), or a
   coated-diffuse :class:`~thinfilm_mi.tabulate.factors.FactorTable`'s buffers and
   layout, so a table from the store gives the same image bit for bit as the one it
   stands for (``tests/tabulate/test_store.py``);
@@ -39,7 +41,7 @@ import numpy as np
 
 from thinfilm_mi.tabulate.axes import AXES, GHOST
 from thinfilm_mi.tabulate.band import Shear
-from thinfilm_mi.tabulate.base import BuildReport, Table
+from thinfilm_mi.tabulate.base import CUBIC, INTERPOLATIONS, BuildReport, Table
 from thinfilm_mi.tabulate.factors import FactorTable
 
 __all__ = ["ENVIRONMENT", "MAX_BYTES", "TableStore", "code_fingerprint", "default_store"]
@@ -139,12 +141,24 @@ class TableStore:
             shear = Shear.from_plain(meta["shear"]) if meta.get("shear") is not None else None
         except (KeyError, TypeError, ValueError):
             return None
-        g = GHOST
+        try:
+            interpolation = INTERPOLATIONS[meta.get("interpolation", CUBIC.name)]
+            factors = tuple(int(f) for f in meta.get("resampling", (1, 1)))
+        except (KeyError, TypeError, ValueError):
+            return None
         if (axis is None or values.dtype != np.float32 or values.ndim != 3
-                or values.shape[2] != channels or min(values.shape[:2]) <= 4 * g
+                or values.shape[2] != channels or len(factors) != 2 or min(factors) < 1
                 or not np.all(np.isfinite(values)) or not np.isfinite(error)):
             return None
-        return Table(values, axis, error, channels, resolution, shear=shear)
+        nu, nv = interpolation.nodes(values.shape, axis, factors)
+        if min(nu // axis.segments, nv) < 2 or (interpolation is CUBIC and min(
+                values.shape[:2]) <= 4 * GHOST) or (interpolation is not CUBIC and (
+                values.shape[1] % axis.segments
+                or (values.shape[1] // axis.segments - 1) % factors[0]
+                or (values.shape[0] - 1) % factors[1])):
+            return None
+        return Table(values, axis, error, channels, resolution, shear=shear,
+                     interpolation=interpolation, factors=factors)
 
     def put(self, key: str, table: Table | FactorTable | None, report: dict | None) -> None:
         """Keep ``table`` (``None``: not tabulable) and its build ``report`` under ``key``;
@@ -159,8 +173,9 @@ class TableStore:
             meta.update(kind=table.axis.name, channels
 =table.channels, error=float(table.error),
                         resolution=float(table.resolution),
-                        shear=table.shear.to_plain() if table.shear is not None else None)
-            arrays["values"] = np.array(table.texture.tensor(), dtype=np.float32)
+                        shear=table.shear.to_plain() if table.shear is not None else None,
+                        interpolation=table.interpolation.name, resampling=list(table.factors))
+            arrays["values"] = table.values()
         arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
         tmp = path.with_name(f"{path.stem}.{os.getpid()}.{threading.get_ident()}.tmp")
         try:

@@ -1,0 +1,136 @@
+"""Tables resampled for bilinear lookups (thinfilm_mi/tabulate/bilinear.py): against the
+float64 recursion (tmm-checked in tests/optics) on every angle axis, against the spline
+they come from (the coordinate mapping, the split axis's seam), the caps that keep a
+spline, and what the build reports."""
+import mitsuba as mi
+import numpy as np
+import pytest
+
+import thinfilm_mi as tf
+from tests.support.kernels import interaction
+from tests.support.stacks import benchmark_layers
+from tests.support.tables import F32, random_points, ref_R
+from thinfilm_mi.render import kernel as K
+from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.render.textures import GRID
+from thinfilm_mi.tabulate import band, bilinear, quantities
+from thinfilm_mi.tabulate.base import BILINEAR, CUBIC
+
+pytestmark = pytest.mark.usefixtures("llvm")
+
+#: (plugin properties, side, angle axis): a plain axis (one film on gold), a split one
+#: (gold on glass lit from the glass: total internal reflection beyond the critical
+#: angle, the surface plasmon dip just beyond it) and a band-limited one (30 films)
+CASES = [
+    ({"type": "thinfilm_conductor", "material": "Au", "layers": "SiO2 500"}, False, "plain"),
+    ({"type": "thinfilm_dielectric", "int_ior": 1.6, "layers": "Au 20"}, True, "tir"),
+    ({"type": "thinfilm_dielectric", "int_ior": 1.6, "layers": benchmark_layers(30)}, False,
+     "band"),
+]
+
+
+def _load(props):
+    K.TABLE_CACHE.clear()
+    return mi.load_dict(dict(props, tabulate=True))
+
+
+def _reference(props, inside):
+    ref = tf.Stack(props["layers"], substrate=props.get("material", props.get("int_ior")),
+                   ambient=media_mod.DEFAULT_EXT_IOR)
+    return ref.reversed() if inside else ref
+
+
+@pytest.mark.parametrize("props, inside, axis", CASES[:2])
+def test_resampled_tables_match_float64_within_their_error(props, inside, axis):
+    """Through the plugin, as a render reads it: the bilinear table is within its
+    ``error`` (spline's plus resampling's, <= ``table_error``) of the float64 recursion
+    at random points outside the grazing sliver, both channels where it has two. The
+    1.5x and the float32 term are the spline tables' allowance (tests/support/tables.py):
+    a bilinear cell errs most at its centre, which the resampling verifies."""
+    bsdf = _load(props)
+    side = bsdf.stack.plan[inside]
+    table = side.table
+    assert table.interpolation is BILINEAR and table.axis.name == axis
+    assert max(table.factors) > 1 and table.error <= K.DEFAULT_TABLE_ERROR
+    assert side.build_report["interpolation"] == "linear"
+    assert side.build_report["spline_error"] <= bilinear.SPLINE_SHARE * K.DEFAULT_TABLE_ERROR
+    cos, wls = random_points(20000, seed=5)
+    transmission = table.channels > 1
+    out = bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)),
+                                 inside=inside, transmission=transmission)
+    out = out if transmission else (out,)
+    ref = _reference(props, inside)
+    worst = 0.0
+    for c, got in enumerate(out):
+        for i in range(4):
+            want = ref_R(ref, cos, wls[i], T=c == 1)
+            worst = max(worst, float(np.max(np.abs(np.array(got)[i] - want))))
+    assert worst <= 1.5 * table.error + F32, worst
+    assert worst > 1e-6   # the table, not the recursion
+
+
+@pytest.mark.parametrize("props, inside, axis", CASES)
+def test_the_resampling_follows_its_spline(props, inside, axis):
+    """The same side's spline (built at SPLINE_SHARE of the target) and its resampling,
+    looked up at the same random directions and wavelengths in a kernel: they differ by
+    at most what the resampling verified (``error`` minus the spline's), so the fine
+    grid's coordinates map onto the spline's, across a split axis's critical angle
+    (directions straddling it included) and along a band-limited table's sheared
+    wavelength axis. The float32 term: both lookups round their coordinates."""
+    bsdf = _load(props)
+    side = bsdf.stack.plan[inside]
+    data = K.side_data(side, side.transmission and not side.opaque)
+    spline = band.build_table(data, bilinear.SPLINE_SHARE * K.DEFAULT_TABLE_ERROR, GRID,
+                              resolution=K.DEFAULT_SPECTRAL_RESOLUTION)
+    assert spline.interpolation is CUBIC and spline.axis.name == axis
+    fine = bilinear.resample(spline, data, K.DEFAULT_TABLE_ERROR, 1 << 22)
+    assert fine is not None and fine.interpolation is BILINEAR
+    assert (fine.nu, fine.nv) == (spline.nu, spline.nv)
+    cos, wls = random_points(20000, seed=6)
+    if axis == "tir":   # both sides of the critical angle, 1.6 -> 1.000277
+        cos[:2000] = np.float32(0.7804861 + np.linspace(-1e-3, 1e-3, 2000))
+    n0 = mi.Spectrum(float(np.asarray(data.n0(GRID))[0]))
+    n_exit = mi.Spectrum(float(np.asarray(data.n_exit(GRID)).real[0]))
+    wl = mi.Spectrum(*[mi.Float(w.astype(np.float32)) for w in wls])
+    c = mi.Float(cos.astype(np.float32))
+    a = fine.lookup_channels(c, n0, n_exit, wl)
+    b = spline.lookup_channels(c, n0, n_exit, wl)
+    dev = max(float(np.max(np.abs(np.array(x) - np.array(y)))) for x, y in zip(a, b))
+    assert dev <= (fine.error - spline.error) + F32, (dev, fine.error - spline.error)
+    assert dev > 1e-7   # they are different interpolations
+
+
+def test_a_table_over_the_cap_stays_a_spline(monkeypatch):
+    """Where the resampling would exceed the quantity's floats (or the target leaves it
+    nothing), the verified spline is what the render reads; a Mueller table (polarized
+    variants) is never resampled."""
+    props, inside, _ = CASES[0]
+    bsdf = _load(props)
+    side = bsdf.stack.plan[inside]
+    fine = side.table
+    data = K.side_data(side, False)
+    spline = band.build_table(data, bilinear.SPLINE_SHARE * K.DEFAULT_TABLE_ERROR, GRID)
+    assert bilinear.resample(spline, data, K.DEFAULT_TABLE_ERROR, fine.nbytes // 4 - 1) is None
+    assert bilinear.resample(spline, data, spline.error, 1 << 22) is None     # no budget left
+    monkeypatch.setattr(quantities.PowersQuantity, "linear_max_floats", 1000)
+    capped = _load(props).stack.plan[inside]
+    assert capped.table.interpolation is CUBIC
+    assert capped.build_report["interpolation"] == "cubic"
+    assert capped.table.error <= bilinear.SPLINE_SHARE * K.DEFAULT_TABLE_ERROR
+    assert quantities.QUANTITIES["mueller"].linear_max_floats == 0
+
+
+def test_a_resampled_table_keeps_edits_in_one_kernel():
+    """A thickness edit gives a table of other factors and shape: its lookup constants are
+    opaque, so the render kernel is reused (the spline's guarantee, kept)."""
+    from tests.support.kernels import assert_edits_render_from_cache
+    from tests.support.stacks import sphere_scene
+    scene = mi.load_dict(sphere_scene({"type": "thinfilm_conductor", "material": "Au",
+                                       "layers": "SiO2 500", "tabulate": True}))
+    params = mi.traverse(scene)
+    key = next(k for k in params.keys() if k.endswith("layers.0.thickness"))
+    before = scene.shapes()[0].bsdf().stack.plan[False].table
+    assert_edits_render_from_cache(scene, params, {key: 300.0})
+    after = scene.shapes()[0].bsdf().stack.plan[False].table
+    assert after.interpolation is BILINEAR and before.interpolation is BILINEAR
+    assert (after.factors, after.nu, after.nv) != (before.factors, before.nu, before.nv)
