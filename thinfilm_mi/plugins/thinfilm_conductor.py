@@ -43,10 +43,11 @@ Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
    - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
      ``T`` where needed) is read from a verified table over (angle, wavelength) instead
      of the recursion (a cubic B-spline, split at the critical angle where the exit
-     medium can totally reflect): its cost does not grow with the number of films.
-     ``auto`` tabulates every stack with films in vectorised variants, unless a
-     ``thickness`` texture is given, gradients are tracked, or the target cannot be met
-     within 2^19 texels (a table that still fits the cache), by a table of the exact
+     medium can totally reflect; in spectral variants resampled finer and read
+     bilinearly where that takes at most 8 MiB): its cost does not grow with the number
+     of films. ``auto`` tabulates every stack with films in vectorised variants, unless
+     a ``thickness`` texture is given, gradients are tracked, or the target cannot be
+     met within 2^19 texels (a table that still fits the cache), by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact),
      or in a build of ~2 s (70 films or more on a metal: not started); ``true`` waits up
      to 10x longer (100 films: ~2.5 s). Built tables are kept on disk (the table store).

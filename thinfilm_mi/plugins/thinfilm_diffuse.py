@@ -53,15 +53,16 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
    - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
      ``T`` where needed) is read from a verified table over (angle, wavelength) instead
      of the recursion (a cubic B-spline, split at the critical angle where the exit
-     medium can totally reflect): its cost does not grow with the number of films.
-     ``auto`` tabulates in vectorised variants by measured cost (``R`` alone of films
-     that do not absorb from 1 film, ``R`` and ``T`` from 5), unless a ``thickness``
-     texture is given, gradients are tracked, or the target cannot be met within 2^19
-     texels (a table that still fits the cache), by a table of the exact values or one
-     of the band-limited values (``spectral_resolution``) (then: exact), or in a build
-     of ~2 s (70 films or more on a metal: not started); ``true`` waits up to 10x longer
-     (100 films: ~2.5 s). Built tables are kept on disk (the table store). In
-     ``*_spectral_polarized`` variants a table holds each lobe's Mueller components
+     medium can totally reflect; in spectral variants resampled finer and read
+     bilinearly where that takes at most 8 MiB): its cost does not grow with the number
+     of films. ``auto`` tabulates in vectorised variants by measured cost (``R`` alone
+     of films that do not absorb from 1 film, ``R`` and ``T`` from 2), unless a
+     ``thickness`` texture is given, gradients are tracked, or the target cannot be met
+     within 2^19 texels (a table that still fits the cache), by a table of the exact
+     values or one of the band-limited values (``spectral_resolution``) (then: exact),
+     or in a build of ~2 s (70 films or more on a metal: not started); ``true`` waits up
+     to 10x longer (100 films: ~2.5 s). Built tables are kept on disk (the table store).
+     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller components
      (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each within
      ``table_error``, and ``auto`` tabulates from 40 films (fewer are as cheap exact)
      within 2^21 floats.

@@ -53,8 +53,16 @@ from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.base import opaque_float
 from thinfilm_mi.tabulate.hemispherical import DerivativeTable
 
-__all__ = ["DiffuseModel", "Exact", "Single", "Multiple", "DIFFUSE_MODELS", "diffuse_model",
-           "CoatedDiffuse"]
+__all__ = ["COATING_RT_MIN_FILMS", "DiffuseModel", "Exact", "Single", "Multiple",
+           "DIFFUSE_MODELS", "diffuse_model", "CoatedDiffuse"]
+
+#: ``tabulate="auto"`` tabulates the coating's side of ``R`` and ``T`` from this many films:
+#: in spectral JIT variants the model's factor table (:func:`~thinfilm_mi.render.diffuse.factor_table`)
+#: stands in for the coating's tables, which serve only where it cannot be built, so they
+#: keep the count of the spline lookups (issue 44) rather than the bilinear tables' 2
+#: (:data:`~thinfilm_mi.tabulate.quantities.RT_AUTO_MIN_FILMS`): a 2-4-film coating's
+#: table would be built at load and not read.
+COATING_RT_MIN_FILMS = 5
 
 
 class DiffuseModel(ABC):
@@ -225,7 +233,7 @@ class CoatedDiffuse:
         coating, exit_medium, self.film_n, self.film_n_thickness = model.split(films, ext, base)
         # RGB/mono: only k_r from the colour table; t enters through the diffuse table
         self.coating = KernelStack(coating, ext, exit_medium, sides={False: not mode.integrated},
-                                   **options)
+                                   rt_min_films=COATING_RT_MIN_FILMS, **options)
         #: t carries n_0/n_b (a base medium unlike the ambient)
         self.base_ratio = model.base_ratio(ext, base)
         #: no films and no interface (a base medium of the ambient's index): Mitsuba's diffuse

@@ -44,13 +44,13 @@ FAMILIES = {
         auto="every stack with films in vectorised variants,",
         thickness=_SPECULAR_THICKNESS),
     "dielectric": Family(
-        auto="in vectorised variants by measured cost: absorbing films from 5 films, "
-             "non-absorbing ones between constant indices from 10 (both sides are then one "
+        auto="in vectorised variants by measured cost: absorbing films from 2 films, "
+             "non-absorbing ones between constant indices from 3 (both sides are then one "
              "exact recursion at the Snell-mapped angle), other non-absorbing ones from 1,",
         thickness=_SPECULAR_THICKNESS),
     "diffuse": Family(
         auto="in vectorised variants by measured cost (``R`` alone of films that do not absorb "
-             "from 1 film, ``R`` and ``T`` from 5),",
+             "from 1 film, ``R`` and ``T`` from 2),",
         thickness="``R_dh``, ``T_hemi`` (RGB/mono: the integrated diffuse term) are tabulated "
                   "over its range, read at load."),
 }
@@ -63,7 +63,8 @@ _ROWS = (
     ("tabulate", "|string| or |bool|",
      "``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and ``T`` where "
      "needed) is read from a verified table over (angle, wavelength) instead of the recursion (a "
-     "cubic B-spline, split at the critical angle where the exit medium can totally reflect): its "
+     "cubic B-spline, split at the critical angle where the exit medium can totally reflect; in "
+     "spectral variants resampled finer and read bilinearly where that takes at most 8 MiB): its "
      "cost does not grow with the number of films. ``auto`` tabulates {auto} unless a "
      "``thickness`` texture is given, gradients are tracked, or the target cannot be met within "
      "2^19 texels (a table that still fits the cache), by a table of the exact values or one of "

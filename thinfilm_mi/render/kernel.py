@@ -114,7 +114,8 @@ class KernelStack:
     ``T = 0``; films thicker than ``coherence_thickness`` are averaged
     incoherently; with ``tabulate`` (``"auto"``, ``True``, ``False``) the
     needed sides are read from a verified table (:mod:`thinfilm_mi.tabulate.exact`)
-    within ``table_error``; identical stacks share one table. Sides evaluated
+    within ``table_error`` (``"auto"``: sides of ``R`` and ``T`` from ``rt_min_films``
+    films if given); identical stacks share one table. Sides evaluated
     exactly run the recursion as a loop over the films in JIT variants
     (:class:`LoopFilms`; from how many films: :data:`BUFFERED_MIN_FILMS`)."""
 
@@ -123,7 +124,8 @@ class KernelStack:
                  tabulate: bool | str = "auto", table_error: float = DEFAULT_TABLE_ERROR,
                  spectral_resolution: float = DEFAULT_SPECTRAL_RESOLUTION,
                  coherence_thickness: float = DEFAULT_COHERENCE_THICKNESS,
-                 sides: dict | None = None, plugin: str = "thin-film BSDF"):
+                 sides: dict | None = None, plugin: str = "thin-film BSDF",
+                 rt_min_films: int | None = None):
         self.indices = [f[0] for f in films]
         self.thickness = [opaque_float(f[1]) for f in films]
         self.ambient = ambient
@@ -138,6 +140,9 @@ class KernelStack:
         self.coherence_thickness = coherence_thickness
         self.sides = dict(sides) if sides is not None else {False: False}
         self.plugin = plugin
+        #: ``tabulate="auto"`` tabulates a side of ``R`` and ``T`` from this many films
+        #: (``None``: the quantity's own count, ``auto_min_films``)
+        self.rt_min_films = rt_min_films
         self._gave_up = set()   # sides whose table could not be built
         if self.tabulate.required and thickness_texture is not None:
             raise ThinFilmError(f"{plugin}: 'tabulate' is true but a 'thickness' texture is "
@@ -227,7 +232,10 @@ class KernelStack:
         def few(side):   # "auto": fewer films than a table of this side pays for
             if self.mirrored and mirror.exact_mirrors(self.ambient, self.substrate):
                 return len(side.films) < mirror.AUTO_MIN_FILMS
-            return len(side.films) < quantity.auto_min_films(side.transmission and not side.opaque)
+            rt = side.transmission and not side.opaque
+            if rt and self.rt_min_films is not None:
+                return len(side.films) < self.rt_min_films
+            return len(side.films) < quantity.auto_min_films(rt)
         want = option.builds and (not option.selective or (
             self.thickness_texture is None and dr.is_jit_v(mitsuba_module().Float)
             and not all(few(s) for s in self.plan.values())))

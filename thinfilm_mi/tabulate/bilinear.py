@@ -35,7 +35,6 @@ from thinfilm_mi.tabulate.base import (
     GRAZING_COS,
     SideData,
     Table,
-    bspline_at,
     side_indices,
     v_nodes_wl,
 )
@@ -56,23 +55,50 @@ _ROUNDS = 4
 _AIM = 0.8
 
 
-def _spline(coeffs: np.ndarray, axis, su: np.ndarray, tv: np.ndarray, nu: int) -> np.ndarray:
+def _weights(f: float) -> tuple:
+    """The uniform cubic B-spline's four weights at the fraction ``f`` of a cell."""
+    return ((1 - f) ** 3 / 6, (3 * f ** 3 - 6 * f ** 2 + 4) / 6,
+            (-3 * f ** 3 + 3 * f ** 2 + 3 * f + 1) / 6, f ** 3 / 6)
+
+
+def _along(coeffs: np.ndarray, n: int, k: int, half: bool) -> np.ndarray:
+    """The spline with ``coeffs`` along axis 0 (``n`` real nodes after :data:`GHOST`
+    ghosts) at the node coordinates ``j / k`` (``j = 0 .. k (n - 1)``), or with ``half``
+    ``(j + 1/2) / k`` (``j = 0 .. k (n - 1) - 1``): as :func:`~thinfilm_mi.tabulate.base.bspline_at`
+    does, one fraction of a cell at a time over every cell (array slices, no gathers)."""
+    g, cells = GHOST, n - 1
+    out = np.empty((cells * k + (0 if half else 1),) + coeffs.shape[1:], coeffs.dtype)
+    taps = [coeffs[g - 1 + t:g - 1 + t + cells] for t in range(4)]
+    for p in range(k):
+        w = _weights((p + (0.5 if half else 0.0)) / k)
+        out[p::k][:cells] = w[0] * taps[0] + w[1] * taps[1] + w[2] * taps[2] + w[3] * taps[3]
+    if not half:    # the last node (fraction 0 of the cell beyond it)
+        w = _weights(0.0)
+        out[-1] = sum(w[t] * coeffs[g - 1 + cells + t] for t in range(3))
+    return out
+
+
+def _resampled(coeffs: np.ndarray, axis, nu: int, nv: int, ku: int, kv: int) -> dict:
     """The spline of ``coeffs`` (a :class:`~thinfilm_mi.tabulate.base.CubicSpline`
-    texture, float64) at angle node coordinates ``su`` (per segment, ``0 .. nu/segments
-    - 1``) and wavelength node coordinates ``tv``: shape ``(len tv, segments len su,
-    channels)``."""
+    texture, float64) at the fine nodes (``"nodes"``), halfway between them along the
+    angle (``"u"``), along the wavelength (``"v"``) and at the fine cells' centres
+    (``"c"``): each of shape ``(wavelength coordinates, segments x angle coordinates,
+    channels)``, a split axis's segments side by side."""
     g, m = GHOST, nu // axis.segments
-    out = []
+    rows = {False: [], True: []}
     for s in range(axis.segments):
-        part = coeffs[:, s * (m + 2 * g):(s + 1) * (m + 2 * g)]
-        along_u = bspline_at(np.swapaxes(part, 0, 1), su, g)     # (len su, nv + 2g, C)
-        out.append(bspline_at(np.swapaxes(along_u, 0, 1), tv, g))
-    return np.concatenate(out, axis=1)
+        part = np.swapaxes(coeffs[:, s * (m + 2 * g):(s + 1) * (m + 2 * g)], 0, 1)
+        for half in (False, True):
+            rows[half].append(np.swapaxes(_along(part, m, ku, half), 0, 1))
+    nodes_u, mids_u = (np.concatenate(rows[h], axis=1) for h in (False, True))
+    return {"nodes": _along(nodes_u, nv, kv, False), "u": _along(mids_u, nv, kv, False),
+            "v": _along(nodes_u, nv, kv, True), "c": _along(mids_u, nv, kv, True)}
 
 
 def _verified(spline: Table, side: SideData, su: np.ndarray, tv: np.ndarray) -> np.ndarray:
     """Where (fine angle coordinates ``su`` of every segment x wavelength coordinates
-    ``tv``) the verification counts: incidence outside the grazing sliver."""
+    ``tv``) the verification counts: incidence outside the grazing sliver (one row for
+    every wavelength where the axis's angle does not depend on it)."""
     axis, m = spline.axis, spline.nu // spline.axis.segments
     s = np.concatenate([su + i * m for i in range(axis.segments)])[None, :]
     if axis.needs_n_exit:     # the coordinate's angle depends on the indices at λ
@@ -81,7 +107,7 @@ def _verified(spline: Table, side: SideData, su: np.ndarray, tv: np.ndarray) -> 
                              np.asarray(ne).real[:, None], spline.nu, ghost=0)
     else:
         cos = axis.nodes_cos(s, 1.0, 1.0, spline.nu, ghost=0)
-    return np.broadcast_to(cos >= GRAZING_COS, (tv.size, s.size))
+    return cos >= GRAZING_COS
 
 
 def _errors(spline: Table, side: SideData, coeffs: np.ndarray, ku: int, kv: int):
@@ -90,8 +116,8 @@ def _errors(spline: Table, side: SideData, coeffs: np.ndarray, ku: int, kv: int)
     m = spline.nu // spline.axis.segments
     su, tv = np.arange(ku * (m - 1) + 1) / ku, np.arange(kv * (spline.nv - 1) + 1) / kv
     mu, mv = (np.arange(su.size - 1) + 0.5) / ku, (np.arange(tv.size - 1) + 0.5) / kv
-    fine = _spline(coeffs, spline.axis, su, tv, spline.nu)
-    segs = spline.axis.segments
+    at = _resampled(coeffs, spline.axis, spline.nu, spline.nv, ku, kv)
+    fine, segs = at["nodes"], spline.axis.segments
 
     def cells(a):   # per segment, the values between neighbouring fine nodes along u
         parts = np.split(a, segs, axis=1)
@@ -99,15 +125,12 @@ def _errors(spline: Table, side: SideData, coeffs: np.ndarray, ku: int, kv: int)
 
     def worst(exact, linear, ok):
         dev = np.abs(exact - linear).max(axis=-1)
-        return float(np.max(np.where(ok, dev, 0.0), initial=0.0))
+        return float(np.max(dev, where=ok, initial=0.0))
 
-    ok_u = _verified(spline, side, mu, tv)
-    ok_v = _verified(spline, side, su, mv)
-    ok_c = _verified(spline, side, mu, mv)
-    err_u = worst(_spline(coeffs, spline.axis, mu, tv, spline.nu), cells(fine), ok_u)
     between = 0.5 * (fine[1:] + fine[:-1])
-    err_v = worst(_spline(coeffs, spline.axis, su, mv, spline.nu), between, ok_v)
-    err_c = worst(_spline(coeffs, spline.axis, mu, mv, spline.nu), cells(between), ok_c)
+    err_u = worst(at["u"], cells(fine), _verified(spline, side, mu, tv))
+    err_v = worst(at["v"], between, _verified(spline, side, su, mv))
+    err_c = worst(at["c"], cells(between), _verified(spline, side, mu, mv))
     return fine, err_u, err_v, err_c
 
 

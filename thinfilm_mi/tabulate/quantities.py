@@ -35,15 +35,16 @@ __all__ = ["AUTO_MAX_TEXELS", "AUTO_MIN_FILMS", "LINEAR_MAX_FLOATS", "POWERS", "
 #: skips): one film on a conductor renders at 0.98x ``conductor`` tabulated against
 #: 1.07x exact (issue 32), within ``table_error`` (~3e-4 at the default 1e-3).
 AUTO_MIN_FILMS = 1
-#: The same for a side of ``R`` and ``T`` (two channels): such a lookup costs what 4-5
-#: films of the exact loop do (issue 44, sphere scene, tabulated / exact: ``dielectric``
-#: "Au 20" 1.96x / 1.87x, "SiO2 500; Au 20; Al 10" 2.15x (outside) / 1.92x, six films of
-#: SiO2 / Au / Ag 2.41x / 2.79x; ``diffuse`` "SiO2 500; Au 5" 2.49x / 2.27x, 4 films
-#: 2.85x / 2.69x). Re-measured after few-film sides read their buffers unrolled (issue
-#: 44, scene of benchmarks/timing.py, one run, ``tabulate=true`` / exact): "Au 20"
-#: 2.18x / 1.46x, "SiO2 500; Au 20; Al 10" 1.72x (the outside tabulated; the inside's
-#: table is over budget) / 1.64x.
-RT_AUTO_MIN_FILMS = 5
+#: The same for a side of ``R`` and ``T`` (two channels). With cubic lookups (16 texels a
+#: wavelength) such a table cost what 4-5 films of the exact loop do, and this was 5
+#: (issue 44). Read bilinearly (:mod:`~thinfilm_mi.tabulate.bilinear`) a table wins from
+#: two films: sphere scene of benchmarks/timing.py on glass 1.6, one process, 7 rounds,
+#: tabulated / exact against Mitsuba's ``dielectric``: "Cr 5" 1.14x / 1.26x, "Au 20"
+#: 1.75x / 1.62x (its table from the glass, across the surface plasmon, is 4.5 MiB),
+#: "SiO2 100; Cr 5" 1.37x / 1.47x, twice that 1.26x / 1.83x, three times 1.37x / 2.43x,
+#: "TiO2 60; Ag 12; TiO2 60" 2.06x / 2.18x; "SiO2 500; Au 20; Al 10" 1.84x / 1.79x (its
+#: side lit from the glass is over the build budget: exact either way).
+RT_AUTO_MIN_FILMS = 2
 #: ``tabulate="auto"`` keeps tables of at most this many texels (over all
 #: channels, 2 MiB of float32): a cubic lookup in a table that fits the cache
 #: costs 3-4.6 ns per point, beyond it 7-12 ns, as much as the exact recursion
