@@ -14,8 +14,7 @@ one and delegates to it; another plugin may hold one the same way.
 in its class (:class:`DiffuseModel`): how it splits the films into a coating and film
 ``N``, its spectral factors (hence its hemispherical terms and colour tables), the
 series ``G(k_d, R_dh)`` of its diffuse term per wavelength, in the colour tables and over
-a rough base, and whether ``R_dh`` carries derivatives. :func:`diffuse_model` looks one
-up by name.
+a rough base, whether ``R_dh`` carries derivatives. :func:`diffuse_model` finds one.
 """
 from __future__ import annotations
 
@@ -36,6 +35,7 @@ from thinfilm_mi.render.colour_variants import (
     prepare_gradients,
 )
 from thinfilm_mi.render.diffuse import (
+    COATING_RT_MIN_FILMS,
     DiffuseFactors,
     ExactFactors,
     IndexGradients,
@@ -53,16 +53,8 @@ from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.base import opaque_float
 from thinfilm_mi.tabulate.hemispherical import DerivativeTable
 
-__all__ = ["COATING_RT_MIN_FILMS", "DiffuseModel", "Exact", "Single", "Multiple",
-           "DIFFUSE_MODELS", "diffuse_model", "CoatedDiffuse"]
-
-#: ``tabulate="auto"`` tabulates the coating's side of ``R`` and ``T`` from this many films:
-#: in spectral JIT variants the model's factor table (:func:`~thinfilm_mi.render.diffuse.factor_table`)
-#: stands in for the coating's tables, which serve only where it cannot be built, so they
-#: keep the count of the spline lookups (issue 44) rather than the bilinear tables' 2
-#: (:data:`~thinfilm_mi.tabulate.quantities.RT_AUTO_MIN_FILMS`): a 2-4-film coating's
-#: table would be built at load and not read.
-COATING_RT_MIN_FILMS = 5
+__all__ = ["DiffuseModel", "Exact", "Single", "Multiple", "DIFFUSE_MODELS", "diffuse_model",
+           "CoatedDiffuse"]
 
 
 class DiffuseModel(ABC):
