@@ -576,8 +576,8 @@ def test_polarized_gradients_over_a_walked_base_are_refused(polarized):
 def test_scalar_variant_single_bounce_equals_the_vector_variant():
     """scalar_spectral runs the same code (a Python loop): one bounce is deterministic,
     so its eval equals the LLVM variant's to float32 rounding (1e-6 relative). Both evaluate
-    the stack exactly (scalar variants build no tables; the LLVM variant would tabulate
-    the two films' ``R`` and ``T``)."""
+    the stack exactly (scalar variants build no tables; the LLVM variant might, as ``auto``
+    decides)."""
     props = {"type": "thinfilm_coating", "layers": FILMS, "bsdf": BASES["principled"],
              "max_bounces": 1, "coat_sigma_a": 0.1, "tabulate": False}
     wi, wo = [0.3, 0.2, float(np.sqrt(0.87))], [-0.5, 0.1, float(np.sqrt(0.74))]

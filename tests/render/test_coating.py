@@ -265,8 +265,8 @@ def test_smooth_conductor_base_is_the_closed_form(layers):
     ``T`` from outside at θ, its ``R_in`` from the coat at θ', the conductor's ``ρ`` at
     θ': unpolarised, as the spectral variant composes them), every term from ``tmm`` in
     float64. No noise (the delta chain is summed in closed form); float32: 2e-5. The stack
-    is evaluated exactly: this checks the composition, not a table's error (``auto`` would
-    tabulate the absorbing stack's two films: tests/tabulate)."""
+    is evaluated exactly whatever ``auto`` would choose: this checks the composition, not a
+    table's error (tests/tabulate)."""
     b = coating(layers=layers, bsdf={"type": "conductor", "eta": 2.0, "k": 3.0}, tabulate=False)
     assert b.component_count() == 1 and not b.flags() & mi.BSDFFlags.Smooth
     films = [f.split() for f in layers.split(";") if f.strip()]

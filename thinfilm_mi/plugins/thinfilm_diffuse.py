@@ -56,7 +56,7 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
      medium can totally reflect; in spectral variants resampled finer and read
      bilinearly where that takes at most 8 MiB): its cost does not grow with the number
      of films. ``auto`` tabulates in vectorised variants by measured cost (``R`` alone
-     of films that do not absorb from 1 film, ``R`` and ``T`` from 2), unless a
+     of films that do not absorb from 1 film, ``R`` and ``T`` from 5), unless a
      ``thickness`` texture is given, gradients are tracked, or the target cannot be met
      within 2^19 texels (a table that still fits the cache), by a table of the exact
      values or one of the band-limited values (``spectral_resolution``) (then: exact),

@@ -234,9 +234,9 @@ class SpectralTerms:
 
 #: ``tabulate="auto"`` tabulates a coating's side of ``R`` and ``T`` from this many films
 #: (:class:`~thinfilm_mi.render.coated_diffuse.CoatedDiffuse`), not from
-#: :data:`~thinfilm_mi.tabulate.quantities.RT_AUTO_MIN_FILMS` (2): :func:`factor_table`
+#: :data:`~thinfilm_mi.tabulate.quantities.RT_AUTO_MIN_FILMS` (4): :func:`factor_table`
 #: stands in for the coating's tables in spectral JIT variants, which serve only where it
-#: cannot be built; a 2-4-film coating's table would be built at load and not read.
+#: cannot be built; a 4-film coating's table would be built at load and not read.
 COATING_RT_MIN_FILMS = 5
 
 

@@ -44,13 +44,13 @@ FAMILIES = {
         auto="every stack with films in vectorised variants,",
         thickness=_SPECULAR_THICKNESS),
     "dielectric": Family(
-        auto="in vectorised variants by measured cost: absorbing films from 2 films, "
+        auto="in vectorised variants by measured cost: absorbing films from 4 films, "
              "non-absorbing ones between constant indices from 3 (both sides are then one "
              "exact recursion at the Snell-mapped angle), other non-absorbing ones from 1,",
         thickness=_SPECULAR_THICKNESS),
     "diffuse": Family(
         auto="in vectorised variants by measured cost (``R`` alone of films that do not absorb "
-             "from 1 film, ``R`` and ``T`` from 2),",
+             "from 1 film, ``R`` and ``T`` from 5),",
         thickness="``R_dh``, ``T_hemi`` (RGB/mono: the integrated diffuse term) are tabulated "
                   "over its range, read at load."),
 }
