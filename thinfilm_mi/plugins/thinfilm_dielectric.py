@@ -41,7 +41,7 @@ Thin-film coated smooth dielectric (:monosp:`thinfilm_dielectric`)
      medium can totally reflect; in spectral variants resampled finer and read
      bilinearly where that takes at most 8 MiB): its cost does not grow with the number
      of films. ``auto`` tabulates in vectorised variants by measured cost: absorbing
-     films from 4 films, non-absorbing ones between constant indices from 3 (both sides
+     films from 4 films, non-absorbing ones between constant indices from 4 (both sides
      are then one exact recursion at the Snell-mapped angle), other non-absorbing ones
      from 1, unless a ``thickness`` texture is given, gradients are tracked, or the
      target cannot be met within 2^19 texels (a table that still fits the cache), by a

@@ -45,7 +45,7 @@ FAMILIES = {
         thickness=_SPECULAR_THICKNESS),
     "dielectric": Family(
         auto="in vectorised variants by measured cost: absorbing films from 4 films, "
-             "non-absorbing ones between constant indices from 3 (both sides are then one "
+             "non-absorbing ones between constant indices from 4 (both sides are then one "
              "exact recursion at the Snell-mapped angle), other non-absorbing ones from 1,",
         thickness=_SPECULAR_THICKNESS),
     "diffuse": Family(
