@@ -17,8 +17,9 @@ the grazing sliver (cos theta >= ``tabulate_base.GRAZING_COS``) that table build
   the float32 recursion as traced into the render kernels (llvm_ad_spectral,
   4 wavelengths per lane; --points (cos, lambda) pairs in all);
 * table: the same call with ``tabulate`` true and ``table_error`` 1e-2, 3e-3,
-  1e-3, 3e-4: the interpolation (cubic B-spline; "split" where the angle
-  axis is split at a critical angle), the table's nu x nv, its build time
+  1e-3, 3e-4: the interpolation (cubic B-spline, or "bilinear KUxKV of a cubic": the
+  spline resampled KU x KV times finer, thinfilm_mi/tabulate/bilinear.py; "split" where
+  the angle axis is split at a critical angle), the spline's nu x nv, its build time
   (first build, which includes compiling the float64 build kernels, and a
   second build of the same stack with the table cache cleared), the verified
   error the build reports, and the measured errors. A stack whose sharp resonances cannot be resolved within
@@ -232,7 +233,9 @@ def main():
             mx, rms, mx_v = errors(R, ref_R, cos64)
             ns = t / npts * 1e9
             results.append((L, f"table {e:g}", ns, mx))
-            kind = "cubic, split" if tab.axis.split else "cubic"
+            kind = (f"bilinear {tab.factors[0]}x{tab.factors[1]} of a cubic"
+                    if tab.interpolation.name == "linear" else "cubic")
+            kind += ", split" if tab.axis.split else ""
             print(f"| {L} | table ({kind}) | {e:g} | {tab.nu} x {tab.nv} | {t_first:.3f} / "
                   f"{t_second:.3f} | {tab.error:.1e} | {ns:.2f} | {mx:.1e} | {mx_v:.1e} | "
                   f"{rms:.1e} |", flush=True)
