@@ -53,6 +53,7 @@ CONFIGS = {
                              "tabulate": False}),
     ]),
     "roughdielectric": ({"type": "roughdielectric", "int_ior": 1.6, "alpha": 0.2}, [
+        ("no films", {"type": "thinfilm_roughdielectric", "int_ior": 1.6, "alpha": 0.2}),
         (f"{STACK} (auto)", {"type": "thinfilm_roughdielectric", "int_ior": 1.6,
                              "alpha": 0.2, "layers": STACK}),
     ]),
