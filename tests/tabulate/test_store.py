@@ -110,7 +110,8 @@ def test_cheap_builds_are_not_stored(tables):
     assert not tables.exists() or not list(tables.glob("*.npz"))
 
 
-@pytest.mark.parametrize("damage", ["garbage", "truncated", "wrong shape", "nan"])
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "wrong shape", "nan",
+                                    "unknown interpolation", "resampling not the shape's"])
 def test_a_damaged_file_is_removed_and_the_table_rebuilt(tables, damage):
     mi.load_dict(BSDF)
     (path,) = tables.glob("*.npz")
@@ -121,7 +122,17 @@ def test_a_damaged_file_is_removed_and_the_table_rebuilt(tables, damage):
     else:
         with np.load(path) as f:
             values, meta = np.array(f["values"]), np.array(f["meta"])
-        values = values[:, :, :0] if damage == "wrong shape" else np.where(values > 0.5, np.nan, values)
+        plain = json.loads(bytes(meta).decode())
+        assert plain["interpolation"] == "linear"     # the 10-film table is read bilinearly
+        if damage == "wrong shape":
+            values = values[:, :, :0]
+        elif damage == "nan":
+            values = np.where(values > 0.5, np.nan, values)
+        elif damage == "unknown interpolation":
+            plain["interpolation"] = "nearest"
+        else:   # factors whose fine grid the values are not
+            plain["resampling"] = [plain["resampling"][0] + 1, plain["resampling"][1]]
+        meta = np.frombuffer(json.dumps(plain).encode(), dtype=np.uint8)
         with open(path, "wb") as fh:
             np.savez(fh, values=values.astype(np.float32), meta=meta)
     K.TABLE_CACHE.clear()
