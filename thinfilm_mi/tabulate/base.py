@@ -41,7 +41,7 @@ __all__ = ["BILINEAR", "BUILD_LOOP_MIN_FILMS", "BuildReport", "CUBIC", "Bilinear
            "GRAZING_COS", "INTERPOLATIONS", "MAX_BUILD_POINTS",
            "MAX_BUILD_WORK", "MAX_ROUNDS", "MAX_TEXELS", "MAX_U", "MAX_V", "MIN_U", "MIN_V",
            "POINT_WORK", "REFINE_SHARE", "SIGMA_MAX", "SIGMA_MIN", "SideData", "Table",
-           "TableCache", "bspline_at", "bspline_coefficients", "bspline_midpoints", "build_work",
+           "TableCache", "bspline_at", "bspline_coefficients", "bspline_weights", "bspline_midpoints", "build_work",
            "evaluate_side", "film_gather", "grid_coordinate", "linear_texture", "opaque_float",
            "side_indices", "v_nodes_wl", "v_texel", "with_ghosts"]
 
@@ -208,14 +208,19 @@ def with_ghosts(real: np.ndarray, left, right, g: int = GHOST) -> np.ndarray:
     return np.concatenate([lo, real, hi], axis=0)
 
 
+def bspline_weights(f):
+    """The uniform cubic B-spline's weights of the four coefficients around a cell, at the
+    fraction ``f`` (a number or an array) of the cell."""
+    return ((1 - f) ** 3 / 6, (3 * f ** 3 - 6 * f ** 2 + 4) / 6,
+            (-3 * f ** 3 + 3 * f ** 2 + 3 * f + 1) / 6, f ** 3 / 6)
+
+
 def bspline_at(coeffs: np.ndarray, t: np.ndarray, g: int) -> np.ndarray:
     """The spline with ``coeffs`` along axis 0 (node ``i`` at index ``i + g``) at
-    node coordinates ``t`` (uniform cubic B-spline weights)."""
+    node coordinates ``t`` (:func:`bspline_weights`)."""
     i = np.floor(t).astype(np.int64)
     f = (t - i)[(...,) + (None,) * (coeffs.ndim - 1)]
-    w = ((1 - f) ** 3 / 6, (3 * f ** 3 - 6 * f ** 2 + 4) / 6,
-         (-3 * f ** 3 + 3 * f ** 2 + 3 * f + 1) / 6, f ** 3 / 6)
-    return sum(wk * coeffs[i + g - 1 + k] for k, wk in enumerate(w))
+    return sum(wk * coeffs[i + g - 1 + k] for k, wk in enumerate(bspline_weights(f)))
 
 
 # -- building -------------------------------------------------------------------

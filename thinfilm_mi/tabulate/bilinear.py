@@ -36,6 +36,7 @@ from thinfilm_mi.tabulate.base import (
     GRAZING_COS,
     SideData,
     Table,
+    bspline_weights,
     side_indices,
     v_nodes_wl,
 )
@@ -56,12 +57,6 @@ _ROUNDS = 4
 _AIM = 0.8
 
 
-def _weights(f: float) -> tuple:
-    """The uniform cubic B-spline's four weights at the fraction ``f`` of a cell."""
-    return ((1 - f) ** 3 / 6, (3 * f ** 3 - 6 * f ** 2 + 4) / 6,
-            (-3 * f ** 3 + 3 * f ** 2 + 3 * f + 1) / 6, f ** 3 / 6)
-
-
 def _along(coeffs: np.ndarray, n: int, k: int, half: bool) -> np.ndarray:
     """The spline with ``coeffs`` along axis 0 (``n`` real nodes after :data:`GHOST`
     ghosts) at the node coordinates ``j / k`` (``j = 0 .. k (n - 1)``), or with ``half``
@@ -71,10 +66,10 @@ def _along(coeffs: np.ndarray, n: int, k: int, half: bool) -> np.ndarray:
     out = np.empty((cells * k + (0 if half else 1),) + coeffs.shape[1:], coeffs.dtype)
     taps = [coeffs[g - 1 + t:g - 1 + t + cells] for t in range(4)]
     for p in range(k):
-        w = _weights((p + (0.5 if half else 0.0)) / k)
+        w = bspline_weights((p + (0.5 if half else 0.0)) / k)
         out[p::k][:cells] = w[0] * taps[0] + w[1] * taps[1] + w[2] * taps[2] + w[3] * taps[3]
     if not half:    # the last node (fraction 0 of the cell beyond it)
-        w = _weights(0.0)
+        w = bspline_weights(0.0)
         out[-1] = sum(w[t] * coeffs[g - 1 + cells + t] for t in range(3))
     return out
 
