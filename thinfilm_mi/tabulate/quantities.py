@@ -55,9 +55,9 @@ RT_AUTO_MIN_FILMS = 4
 AUTO_MAX_TEXELS = 1 << 19
 #: Tables of the powers are read bilinearly where the spline resampled for that
 #: (:mod:`thinfilm_mi.tabulate.bilinear`) takes at most this many floats (8 MiB): a
-#: bilinear lookup of such a table (4 texels a wavelength) still costs less than a cubic
-#: one of the spline (16), ~2.5-3.5 against 4-8.5 ns per point at random positions
-#: (issue 44, one process, 4 lookups per point of 1-2-channel tables of 0.1-9 MiB);
+#: bilinear lookup (4 texels a wavelength) costs less than a cubic one of the spline (16):
+#: 1.1-3.5 ns against 3.9-10 ns per lookup at random positions in 1-2-channel tables of
+#: 0.1-6 MiB, but 7.5 ns in a bilinear table of 9 MiB (issue 44, one process, 10^6 points);
 #: beyond it the spline stays.
 LINEAR_MAX_FLOATS = 1 << 21
 
