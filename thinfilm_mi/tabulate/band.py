@@ -125,6 +125,7 @@ from thinfilm_mi.tabulate.base import (
     Table,
     bspline_coefficients,
     bspline_midpoints,
+    bspline_weights,
     build_work,
     evaluate_side,
     film_gather,
@@ -490,12 +491,6 @@ def first_bin_step(side: SideData, w: float, fringe: float | None = None) -> flo
     return power_of_two_step(fringe_step(side, w) if fringe is None else fringe, 0.5, MAX_STEP)
 
 
-def _bspline_weights(t):
-    """The four uniform cubic B-spline basis values at ``t`` in [0, 1] (knots i-1 .. i+2)."""
-    return ((1 - t) ** 3 / 6, (3 * t ** 3 - 6 * t ** 2 + 4) / 6,
-            (-3 * t ** 3 + 3 * t ** 2 + 3 * t + 1) / 6, t ** 3 / 6)
-
-
 class _Resonances:
     """The resonances the first level found (zeros ``x_p + i d`` of ``D`` near the
     axis; per row, positions and distances in bins), and the graded panels they
@@ -732,7 +727,7 @@ class Rows:
         R, n, _, C = V.shape
         out = np.zeros((R, n + 1, C))
         for g, (x, wg) in enumerate(zip(_GL3_X, _GL3_W)):
-            for j, bw in enumerate(_bspline_weights(0.5 + x)):
+            for j, bw in enumerate(bspline_weights(0.5 + x)):
                 # interval k feeds bin k - 1 + j
                 lo, hi = max(0, 1 - j), min(n, n + 1 - j + 1)
                 out[:, lo - 1 + j:hi - 1 + j] += (wg * bw) * V[:, lo:hi, g]
@@ -766,7 +761,7 @@ class Rows:
                 sfrac = 0.5 + x
                 val = fa[small] + sfrac * (c1[small] + sfrac * c2[small])
                 t = as_ + sfrac * hs - k
-                for j, bw in enumerate(_bspline_weights(t)):
+                for j, bw in enumerate(bspline_weights(t)):
                     node = np.clip(k + j - 1, 0, nb - 1) + rs * nb
                     for ch in range(C):
                         out.reshape(R * nb, C)[:, ch] += np.bincount(
