@@ -3,6 +3,8 @@
 * :mod:`thinfilm_mi.materials.catalog` -- materials (constants, tables, formulas), their
   sources (shipped data, refractiveindex.info, Mitsuba's presets, user files) and
   :func:`resolve`, which turns a name, number or file into a :class:`Material`.
+* :mod:`thinfilm_mi.materials.dispersion` -- refractiveindex.info's dispersion formulas, one
+  registry (:data:`~thinfilm_mi.materials.dispersion.FORMULAS`) for material files and the fit.
 * :mod:`thinfilm_mi.materials.stack` -- :class:`Stack`: films of materials over a
   substrate, evaluated exactly in float64 (numpy in and out).
 """

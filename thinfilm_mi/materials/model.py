@@ -1,8 +1,8 @@
 """The material model: a complex refractive index ``n + ik`` (``k >= 0``) as a function of
 the vacuum wavelength in nm, constant, tabulated (linear interpolation) or given by
-one of the refractiveindex.info dispersion formulas, and the ranges every index must
-keep (:data:`MIN_INDEX`, :data:`MAX_INDEX`) and every dataset must cover
-(:data:`SPECTRAL_RANGE`). :mod:`thinfilm_mi.materials.catalog` turns specifications into
+one of the refractiveindex.info dispersion formulas (:mod:`.dispersion`), and the
+ranges every index must keep (:data:`MIN_INDEX`, :data:`MAX_INDEX`) and every dataset
+must cover (:data:`SPECTRAL_RANGE`). :mod:`thinfilm_mi.materials.catalog` turns specifications into
 these objects.
 """
 from __future__ import annotations
@@ -14,6 +14,7 @@ from typing import Sequence
 import numpy as np
 
 from thinfilm_mi.errors import MaterialError
+from thinfilm_mi.materials.dispersion import formula_by_number
 
 __all__ = [
     "SPECTRAL_RANGE", "RANGE_RTOL", "DATA_DIR", "MIN_INDEX", "MAX_INDEX", "check_index_range", "Material",
@@ -119,74 +120,20 @@ class TabulatedIndex:
         return np.interp(wl, self.wl, self.values)
 
 
-def _formula_n(formula: int, c: Sequence[float], lam_um: np.ndarray) -> np.ndarray:
-    """n(λ) from refractiveindex.info dispersion formula ``formula`` (1-9).
-
-    ``c`` are the coefficients C1, C2, ... as listed in the database file, λ in
-    µm. Definitions follow the database's "Dispersion formulas" document
-    (refractiveindex.info-database/database/doc):
-
-    1 Sellmeier      n²-1 = C1 + Σ C(2j) λ²/(λ² - C(2j+1)²)
-    2 Sellmeier-2    n²-1 = C1 + Σ C(2j) λ²/(λ² - C(2j+1))
-    3 Polynomial     n²   = C1 + Σ C(2j) λ^C(2j+1)
-    4 RII formula    n²   = C1 + C2 λ^C3/(λ² - C4^C5) + C6 λ^C7/(λ² - C8^C9) + Σ_{j>=5} C(2j) λ^C(2j+1)
-    5 Cauchy         n    = C1 + Σ C(2j) λ^C(2j+1)
-    6 Gases          n-1  = C1 + Σ C(2j)/(C(2j+1) - λ⁻²)
-    7 Herzberger     n    = C1 + C2/(λ²-0.028) + C3/(λ²-0.028)² + C4 λ² + C5 λ⁴ + C6 λ⁶
-    8 Retro          (n²-1)/(n²+2) = C1 + C2 λ²/(λ²-C3) + C4 λ²
-    9 Exotic         n²   = C1 + C2/(λ²-C3) + C4 (λ-C5)/((λ-C5)² + C6)
-    """
-    lam = np.asarray(lam_um, dtype=np.float64)
-    coef = [float(x) for x in c]
-    pad = coef + [0.0] * 24
-    l2 = lam * lam
-    pairs = [(coef[i], coef[i + 1] if i + 1 < len(coef) else 0.0) for i in range(1, len(coef), 2)]
-    with np.errstate(all="ignore"):
-        if formula == 1:
-            eps = 1.0 + pad[0] + sum(a * l2 / (l2 - b * b) for a, b in pairs)
-            return np.sqrt(eps)
-        if formula == 2:
-            eps = 1.0 + pad[0] + sum(a * l2 / (l2 - b) for a, b in pairs)
-            return np.sqrt(eps)
-        if formula == 3:
-            eps = pad[0] + sum(a * lam ** b for a, b in pairs)
-            return np.sqrt(eps)
-        if formula == 4:
-            eps = pad[0] + pad[1] * lam ** pad[2] / (l2 - pad[3] ** pad[4])
-            eps = eps + pad[5] * lam ** pad[6] / (l2 - pad[7] ** pad[8])
-            for i in range(9, len(coef), 2):
-                eps = eps + pad[i] * lam ** pad[i + 1]
-            return np.sqrt(eps)
-        if formula == 5:
-            return pad[0] + sum(a * lam ** b for a, b in pairs) + 0.0 * lam
-        if formula == 6:
-            return 1.0 + pad[0] + sum(a / (b - 1.0 / l2) for a, b in pairs) + 0.0 * lam
-        if formula == 7:
-            d = l2 - 0.028
-            return pad[0] + pad[1] / d + pad[2] / (d * d) + pad[3] * l2 + pad[4] * l2 ** 2 + pad[5] * l2 ** 3
-        if formula == 8:
-            x = pad[0] + pad[1] * l2 / (l2 - pad[2]) + pad[3] * l2
-            return np.sqrt((1.0 + 2.0 * x) / (1.0 - x))
-        if formula == 9:
-            d = lam - pad[4]
-            return np.sqrt(pad[0] + pad[1] / (l2 - pad[2]) + pad[3] * d / (d * d + pad[5]))
-    raise MaterialError(f"unknown dispersion formula {formula!r} (refractiveindex.info knows 1-9)")
-
-
 class DispersionFormula:
-    """n from a refractiveindex.info dispersion formula, valid over ``range`` (nm)."""
+    """n from refractiveindex.info dispersion formula number ``formula`` (an entry of
+    :data:`~thinfilm_mi.materials.dispersion.FORMULAS`, λ in µm) with the file's
+    ``coefficients``, valid over ``range`` (nm)."""
 
     kind = "formula"
 
     def __init__(self, formula: int, coefficients: Sequence[float], range_nm: tuple[float, float]):
-        self.formula = int(formula)
+        self.formula = formula_by_number(formula)
         self.coefficients = tuple(float(x) for x in coefficients)
         self.range = (float(range_nm[0]), float(range_nm[1]))
-        if not 1 <= self.formula <= 9:
-            raise MaterialError(f"unknown dispersion formula {formula!r} (refractiveindex.info knows 1-9)")
 
     def __call__(self, wl: np.ndarray) -> np.ndarray:
-        return _formula_n(self.formula, self.coefficients, wl * 1e-3)
+        return self.formula.n(self.coefficients, wl * 1e-3)
 
 
 class DispersiveMaterial(Material):
