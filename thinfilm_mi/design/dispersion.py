@@ -2,17 +2,23 @@
 
 A measurement file's ``materials`` entry names a model (``model: cauchy``) and
 its parameters; :data:`MODELS` is the registry of them, one class per model,
-each holding its parameter names, its defaults and its formula with the
-derivatives of the index with respect to every parameter (the fit's Jacobian
-is chained through them, point by point). Wavelengths are in nm; the formulas
-use λ in µm, as refractiveindex.info writes them.
+each holding its parameter names, its defaults and the derivatives of the index
+with respect to every parameter (the fit's Jacobian is chained through them,
+point by point). Wavelengths are in nm; the formulas use λ in µm, as
+refractiveindex.info writes them. ``cauchy`` and ``sellmeier`` are formulas of
+:data:`thinfilm_mi.materials.dispersion.FORMULAS` with some coefficients fixed
+(:class:`FormulaModel`): a fitted Sellmeier and a material file's are one code.
 
 ``constant``
     ``n + ik`` (parameters ``n``, ``k``).
 ``cauchy``
-    ``n = A + B / λ² + C / λ⁴``, ``k = 0`` (``A``, ``B`` µm², ``C`` µm⁴).
+    ``n = A + B / λ² + C / λ⁴``, ``k = 0`` (``A``, ``B`` µm², ``C`` µm⁴): refractiveindex.info
+    formula 5 with ``C1 = A, C2 = B, C3 = -2, C4 = C, C5 = -4``.
 ``sellmeier``
-    ``n² = 1 + Σ Bi λ² / (λ² - Ci)``, ``k = 0`` (``B1 C1 B2 C2 B3 C3``, ``Ci`` in µm²).
+    ``n² = 1 + Σ Bi λ² / (λ² - Ci)``, ``k = 0`` (``B1 C1 B2 C2 B3 C3``, each pole ``Ci`` in µm²,
+    the square of its resonance wavelength, as in SCHOTT's catalogue): refractiveindex.info
+    formula 2 with its coefficients ``0 B1 C1 B2 C2 B3 C3``. A file's ``formula 1`` gives the
+    resonance wavelengths instead: its ``0 B1 λ1 B2 λ2 B3 λ3`` are this model's with ``Ci = λi²``.
 ``catalogue``
     a named material (anything ``layers`` accepts) with ``n`` scaled and shifted,
     ``n' = scale · n + shift``, its ``k`` kept (``shift``, ``scale``).
@@ -26,9 +32,10 @@ import numpy as np
 from thinfilm_mi.design.parsing import parse_number
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials import MIN_INDEX, Material
+from thinfilm_mi.materials.dispersion import FORMULAS, DifferentiableFormula
 from thinfilm_mi.materials.model import ConstantMaterial, DispersiveMaterial, TabulatedIndex
 
-__all__ = ["DispersionModel", "MODELS", "model_class", "TABLE_RANGE"]
+__all__ = ["DispersionModel", "FormulaModel", "MODELS", "model_class", "TABLE_RANGE"]
 
 #: The wavelengths (nm) over which a fitted dispersive material is tabulated: Mitsuba's
 #: spectral range (360-830 nm) and a margin.
@@ -103,34 +110,44 @@ class Constant(DispersionModel):
         return (params["n"] + 1j * params["k"]) * ones, np.stack([ones + 0j, 1j * ones], axis=-1)
 
 
-class Cauchy(DispersionModel):
+class FormulaModel(DispersionModel):
+    """A model that is a refractiveindex.info formula (``formula``, an entry of
+    :data:`~thinfilm_mi.materials.dispersion.FORMULAS`) whose coefficients
+    :meth:`coefficients` builds from the parameters; ``columns[i]`` is the coefficient
+    that parameter ``i`` is."""
+
+    formula: DifferentiableFormula
+    columns: tuple[int, ...] = ()
+
+    def coefficients(self, params: dict) -> tuple[float, ...]:
+        """The formula's ``C1, C2, ...`` for these parameters."""
+        raise NotImplementedError
+
+    def index_and_derivatives(self, wl, params):
+        n, grad = self.formula.n_and_gradient(self.coefficients(params), wl * 1e-3)
+        return n + 0j, grad[..., list(self.columns)] + 0j
+
+
+class Cauchy(FormulaModel):
     name = "cauchy"
     parameters = ("A", "B", "C")
     defaults = {"A": 1.5, "B": 0.0, "C": 0.0}
+    formula = FORMULAS[5]
+    columns = (0, 1, 3)
 
-    def index_and_derivatives(self, wl, params):
-        inv2 = (1e3 / wl) ** 2
-        n = params["A"] + params["B"] * inv2 + params["C"] * inv2 ** 2
-        return n + 0j, np.stack([np.ones(wl.shape), inv2, inv2 ** 2], axis=-1) + 0j
+    def coefficients(self, params):
+        return params["A"], params["B"], -2.0, params["C"], -4.0
 
 
-class Sellmeier(DispersionModel):
+class Sellmeier(FormulaModel):
     name = "sellmeier"
     parameters = ("B1", "C1", "B2", "C2", "B3", "C3")
     defaults = {"B1": 1.0, "C1": 0.01, "B2": 0.0, "C2": 0.0, "B3": 0.0, "C3": 0.0}
+    formula = FORMULAS[2]
+    columns = (1, 2, 3, 4, 5, 6)
 
-    def index_and_derivatives(self, wl, params):
-        l2 = (wl * 1e-3) ** 2
-        eps = np.ones(wl.shape)
-        der = []
-        for i in (1, 2, 3):
-            b, c = params[f"B{i}"], params[f"C{i}"]
-            eps = eps + b * l2 / (l2 - c)
-            der += [l2 / (l2 - c), b * l2 / (l2 - c) ** 2]
-        # n² <= 0 (a wavelength at or inside a resonance) has no real n: NaN, which the fit's
-        # optimiser answers with a shorter step, and which the file's start is checked against
-        n = np.sqrt(np.where(eps > 0, eps, np.nan))
-        return n + 0j, np.stack(der, axis=-1) / (2.0 * n[:, None]) + 0j
+    def coefficients(self, params):
+        return (0.0,) + tuple(params[p] for p in self.parameters)
 
 
 class Catalogue(DispersionModel):
