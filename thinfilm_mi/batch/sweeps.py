@@ -186,7 +186,8 @@ def gpu_worker_envs(gpus: Sequence[str], n_workers: int | None = None) -> list[d
 class SweepResult:
     """The table a sweep returns: one row per frame in grid order (the manifest's
     columns, plus for frames rendered by this call ``scene_loaded``, ``kernels``
-    (JIT kernels compiled or read from disk for it) and ``worker``)."""
+    (JIT kernels compiled or read from disk for it), ``worker`` and, with ``-P``
+    axes, ``notes``: which key each ``-P`` name that is not a key stands for)."""
 
     out_dir: Path
     columns: list[str]
