@@ -55,12 +55,16 @@ class ParameterNames:
                  holders: Mapping[str, tuple[str, str]] | None = None):
         self.keys = list(keys)
         self.holders = dict(holders or {})
+        by_object: dict[str, list[str]] = {}
+        for key in self.keys:
+            if "." in key:  # a scene's own parameters (allow_thread_reordering) have none
+                by_object.setdefault(key.split(".", 1)[0], []).append(key)
         self.aliases: dict[str, str] = {}
         for shape_id, bsdf_id in shapes:
             if shape_id and bsdf_id and shape_id != bsdf_id:
-                for key in self.keys:
-                    if key.startswith(bsdf_id + "."):
-                        self.aliases[f"{shape_id}.bsdf.{key[len(bsdf_id) + 1:]}"] = key
+                for key in by_object.get(bsdf_id, ()):
+                    self.aliases[f"{shape_id}.bsdf.{key.split('.', 1)[1]}"] = key
+        self.objects = set(by_object) | {a.split(".", 1)[0] for a in self.aliases}
         self.owners: dict[str, set[str]] = {}
         for name, key in [(k, k) for k in self.keys] + list(self.aliases.items()):
             for end in _suffixes(name):
@@ -107,7 +111,7 @@ class ParameterNames:
         """What comes close to a ``name`` that names nothing."""
         first, _, rest = name.partition(".")
         near = sorted(self.owners.get(rest, ())) if rest else []
-        if near and not any(k.startswith(first + ".") for k in [*self.keys, *self.aliases]):
+        if near and first not in self.objects:
             meant = rest if len(near) == 1 else ", ".join(near[:MAX_LISTED])
             return f": no object has the id {first!r}; did you mean {meant}?{self._no_id(near)}"
         depth = name.count(".") + 1
