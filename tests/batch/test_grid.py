@@ -53,7 +53,7 @@ def test_axis_kinds_registry():
     assert [k.flag for k in grid.AXIS_KINDS.values()] == ["-D", "-P"]
     assert grid.parse_axes(["a=1,2"], grid.DEFINE) == grid.parse_axes(["a=1,2"], "define")
     assert grid.parse_axes([f"{THICKNESS}=1"], "traverse")[0].kind is grid.TRAVERSE
-    with pytest.raises(UsageError, match=r"-P 'x': expected name=VALUES, e.g. -P sphere\.bsdf"):
+    with pytest.raises(UsageError, match=r"-P 'x': expected name=VALUES, e.g. -P teapot\.bsdf"):
         grid.parse_axes(["x"], grid.TRAVERSE)
     with pytest.raises(ValueError, match="kind: expected one of define, traverse, got 'other'"):
         grid.parse_axes(["a=1"], "other")

@@ -66,3 +66,30 @@ def test_bad_files_give_one_clear_error(tmp_path, case):
     if proc is not None:
         assert proc.returncode == 2 and proc.stdout == ""
         assert proc.stderr.count("\n") == 1 and message in proc.stderr, proc.stderr
+
+
+def test_a_wavelength_given_twice_with_two_values_is_refused_from_the_command(tmp_path):
+    """A data file that repeats a wavelength with two values is refused as a material file is:
+    the file, the line, the first occurrence; rows that go down in wavelength, several angles
+    at one wavelength and a row written twice stay."""
+    import yaml
+
+    doc = {"substrate": 1.52, "layers": "1.46 80", "data": [{"file": "d.csv", "quantity": "R"}]}
+    (tmp_path / "m.yml").write_text(yaml.safe_dump(doc))
+    (tmp_path / "d.csv").write_text("wavelength,value\n400,0.1\n400,0.2\n404,0.2\n")
+    proc = subprocess.run([sys.executable, "-m", "thinfilm_mi", "fit", str(tmp_path / "m.yml"), "--quiet"],
+                          capture_output=True, text=True)
+    assert proc.returncode == 2 and proc.stdout == "", proc.stderr
+    assert proc.stderr.count("\n") == 1, proc.stderr
+    assert (f"{tmp_path / 'm.yml'}: data[0] (d.csv): line 3 of {tmp_path / 'd.csv'} repeats the wavelength "
+            "400 nm with another value (first on line 2); give one value per wavelength") in proc.stderr
+    (tmp_path / "d.csv").write_text("wavelength,angle,value,sigma\n404,0,0.1,0.01\n400,0,0.2,0.01\n"
+                                    "400,45,0.3,0.01\n400,0,0.2,0.02\n")
+    with pytest.raises(ThinFilmError, match=r"line 5 of .* repeats the wavelength 400 nm at 0° with another "
+                                            r"value \(first on line 3\)"):
+        fit(tmp_path / "m.yml")
+    from thinfilm_mi.design.fitfile import load_measurements
+
+    (tmp_path / "d.csv").write_text("wavelength,angle,value\n404,0,0.1\n400,0,0.2\n400,45,0.3\n400,0,0.2\n")
+    (d,) = load_measurements(tmp_path / "m.yml").datasets
+    assert d.wavelengths.tolist() == [404, 400, 400, 400] and d.angles.tolist() == [0, 0, 45, 0]

@@ -6,7 +6,8 @@
 * :mod:`thinfilm_mi.batch.exr` -- EXR writing and reading, the PNG preview.
 * :mod:`thinfilm_mi.batch.sweeps` -- parameter sweeps on Dask (:func:`thinfilm_mi.sweep`),
   with :mod:`~thinfilm_mi.batch.grid` (axes, frames, tasks),
-  :mod:`~thinfilm_mi.batch.worker` (the worker processes) and
+  :mod:`~thinfilm_mi.batch.worker` (the worker processes),
+  :mod:`~thinfilm_mi.batch.keys` (the ``mi.traverse`` key a ``-P`` names) and
   :mod:`~thinfilm_mi.batch.outputs` (frames, manifest, contact sheet). Dask is the
   ``[sweep]`` extra: this package imports it only when a sweep module is imported.
 

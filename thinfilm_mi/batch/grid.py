@@ -63,11 +63,11 @@ class _Define(AxisKind):
 class _Traverse(AxisKind):
     """``-P``: a ``mi.traverse`` key (a number or true/false), set on the loaded scene."""
 
-    name, flag, example = "traverse", "-P", "sphere.bsdf.layers.0.thickness=100:800:25"
+    name, flag, example = "traverse", "-P", "teapot.bsdf.layers.0.thickness=100:800:25"
 
     def check_name(self, name):
         if not re.fullmatch(r"[^\s=,]+", name):
-            raise UsageError(f"-P {name!r}: not a mi.traverse key (e.g. sphere.bsdf.layers.0.thickness)")
+            raise UsageError(f"-P {name!r}: not a mi.traverse key (e.g. teapot.bsdf.layers.0.thickness)")
 
     def check_values(self, name, values):
         for v in values:

@@ -16,7 +16,10 @@ Axes of the grid:
 - ``-D name=VALUES`` sets the scene's ``$name`` parameter, as in
   ``thinfilm-render``; the scene is loaded once per combination of ``-D`` values.
 - ``-P key=VALUES`` sets a ``mi.traverse(scene)`` parameter (a number) on the
-  loaded scene, e.g. ``-P sphere.bsdf.layers.0.thickness=100:800:25``. Frames
+  loaded scene, e.g. ``-P teapot.bsdf.layers.0.thickness=100:800:25``; the end
+  of one key alone (``bsdf.layers.0.thickness``) or a shape's path to a BSDF with
+  its own id names it too, and the key chosen is said on stderr
+  (:mod:`~thinfilm_mi.batch.keys`). Frames
   that differ only in ``-P`` values share one loaded scene: they are rendered
   one after the other by one worker task (a chunk), and film thicknesses being
   opaque Dr.Jit values, no kernel is compiled again.
@@ -86,6 +89,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Mapping, Sequence, TextIO
+
+from tqdm import tqdm
 
 from thinfilm_mi.batch.grid import (
     COLUMNS,
@@ -181,7 +186,8 @@ def gpu_worker_envs(gpus: Sequence[str], n_workers: int | None = None) -> list[d
 class SweepResult:
     """The table a sweep returns: one row per frame in grid order (the manifest's
     columns, plus for frames rendered by this call ``scene_loaded``, ``kernels``
-    (JIT kernels compiled or read from disk for it) and ``worker``)."""
+    (JIT kernels compiled or read from disk for it), ``worker`` and, with ``-P``
+    axes, ``notes``: which key each ``-P`` name that is not a key stands for)."""
 
     out_dir: Path
     columns: list[str]
@@ -318,7 +324,7 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
 
     def log(msg: str) -> None:
         if stream is not None or verbose:
-            print(f"{PROG}: {msg}", file=stream or sys.stderr)
+            tqdm.write(f"{PROG}: {msg}", file=stream or sys.stderr)  # above a progress bar
 
     # ---- arguments
     scene_file = Path(scene)
@@ -382,7 +388,7 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
         n_workers = _run(job, todo, rows, total=len(frames),
                          workers=local_workers if client is None and scheduler is None else None,
                          scheduler=scheduler, client=client, frames_per_task=frames_per_task,
-                         stream=stream, on_frame=on_frame, timeout=timeout, flush=flush)
+                         stream=stream, on_frame=on_frame, timeout=timeout, flush=flush, log=log)
     flush()
     ordered = [rows[f.index] for f in frames]
     sheet = write_contact_sheet(out / CONTACT_SHEET, out, axes, ordered) if contact_sheet else None
@@ -419,9 +425,10 @@ def _results(fut, chunk: Sequence[Frame]) -> list[tuple[int, dict[str, Any]]]:
 
 def _run(job: Job, todo: Sequence[Frame], rows: dict[int, dict[str, Any]], *, total: int,
          workers, scheduler, client, frames_per_task, stream, on_frame, timeout,
-         flush) -> int:
+         flush, log) -> int:
     """Render ``todo`` on the cluster, adding to ``rows``; returns the number of
-    workers. On any exit: stops the work, removes temporary files, and on an
+    workers. Each line a frame notes (which key a ``-P`` name stands for) is
+    logged once. On any exit: stops the work, removes temporary files, and on an
     early exit (Ctrl-C, timeout, an error) records the frames that finished."""
     from distributed import as_completed
 
@@ -429,6 +436,7 @@ def _run(job: Job, todo: Sequence[Frame], rows: dict[int, dict[str, Any]], *, to
     prefix = f"thinfilm-sweep-{secrets.token_hex(6)}-"
     futures: dict[Any, list[Frame]] = {}
     consumed: set = set()
+    noted: set = set()
     bar = progress_bar(stream, total=total, unit="frame", desc=PROG, initial=len(rows))
     failed = sum(r["status"] == "failed" for r in rows.values())
     finished = False
@@ -444,6 +452,10 @@ def _run(job: Job, todo: Sequence[Frame], rows: dict[int, dict[str, Any]], *, to
             consumed.add(fut)
             for index, row in _results(fut, futures[fut]):
                 rows[index] = row
+                for note in row.get("notes", ()):
+                    if note not in noted:
+                        noted.add(note)
+                        log(note)
                 failed += row["status"] == "failed"
                 bar.set_postfix_str(f"{failed} failed", refresh=False)
                 bar.update(1)

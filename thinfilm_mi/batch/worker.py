@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from thinfilm_mi.batch.grid import Frame, Job, parse_scalar
+from thinfilm_mi.batch.keys import parameter_names, resolve_all
 from thinfilm_mi.batch.outputs import write_frame
 from thinfilm_mi.batch.scene import (
     DEFAULT_VARIANT,
@@ -113,30 +114,28 @@ _SCENES = _SceneCache()
 
 def set_parameters(scene, params, values: Sequence[tuple[str, str]]):
     """Set ``-P`` values on a loaded scene (``params``: its ``mi.traverse``, or
-    None to make it) and apply them; returns the parameters object."""
+    None to make it) and apply them; returns the parameters object and the lines
+    saying which key a ``-P`` name that is not a key stands for (:mod:`.keys`)."""
     import drjit as dr
     import mitsuba as mi
 
     if params is None:
         params = mi.traverse(scene)
-    for key, text in values:
-        if key not in params:
-            import difflib
-
-            close = difflib.get_close_matches(key, list(params.keys()), n=3, cutoff=0.5)
-            hint = f"; did you mean {', '.join(close)}?" if close else ""
-            raise UsageError(f"-P {key}: not a parameter of the scene (see mi.traverse){hint}")
+    keys, notes = resolve_all(parameter_names(scene, params), [name for name, _ in values])
+    for name, text in values:
+        key = keys[name]
         current = params[key]
-        value = parse_scalar(key, text)
+        value = parse_scalar(name, text)
         if isinstance(current, (bool, int, float)):
             params[key] = type(current)(value)
         else:
             if dr.is_array_v(current) and dr.depth_v(current) == 1 and dr.width(current) != 1:
-                raise UsageError(f"-P {key}: holds {dr.width(current)} values; "
+                held = "holds" if key == name else f"({key}) holds"
+                raise UsageError(f"-P {name}: {held} {dr.width(current)} values; "
                                  "-P sets single numbers only")
             params[key] = type(current)(value)
     params.update()
-    return params
+    return params, notes
 
 
 def _fresh_kernels() -> int:
@@ -158,7 +157,7 @@ def _render_one(job: Job, frame: Frame) -> dict[str, Any]:
     try:
         scene, params, row["scene_loaded"] = _SCENES.get(job, frame.defines)
         if frame.traverse:
-            _SCENES.params = set_parameters(scene, params, frame.traverse)
+            _SCENES.params, row["notes"] = set_parameters(scene, params, frame.traverse)
         sensors = scene.sensors()
         if not 0 <= job.sensor < len(sensors):
             raise UsageError(f"--sensor {job.sensor}: the scene has {len(sensors)} sensor(s)")

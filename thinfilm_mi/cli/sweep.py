@@ -44,7 +44,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "(STOP included), a,b,c or one value (repeatable)")
     parser.add_argument("-P", dest="parameters", action="append", default=[], metavar="key=VALUES",
                         help="a grid axis over a mi.traverse parameter (numbers), set on the "
-                             "loaded scene without reloading it (repeatable)")
+                             "loaded scene without reloading it; key may be the end of one key, "
+                             "e.g. bsdf.layers.0.thickness (repeatable)")
     parser.add_argument("--out-dir", default=DEFAULT_OUT_DIR,
                         help=f"output folder (default {DEFAULT_OUT_DIR})")
     where = parser.add_mutually_exclusive_group()

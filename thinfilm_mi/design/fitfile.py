@@ -23,6 +23,8 @@ Data files are CSV (``#`` comments): columns ``wavelength`` (nm), ``value`` (a
 fraction 0-1) and optionally ``sigma`` (its standard uncertainty, > 0) and
 ``angle`` (degrees; then one file holds several angles). A first row of names
 gives the columns in any order; without one they are wavelength, value[, sigma].
+Rows may come in any order; a wavelength given twice (at one angle) with two values
+is refused with its line and the line of its first occurrence.
 A dataset's ``sigma`` key gives one σ for all its points. Either every dataset
 carries σ or none does (the fit then scales its uncertainties by χ²/dof).
 
@@ -247,7 +249,23 @@ def _read_csv(path: Path, where: str) -> dict[str, np.ndarray]:
         if c in out and not np.all(ok(out[c])):
             i = int(np.argmin(ok(out[c])))
             fail(where, f"{c} must be {need}, got {out[c][i]:g} (line {line_of[i]})")
+    _check_repeats(out, line_of, where, path)
     return out
+
+
+def _check_repeats(cols: dict[str, np.ndarray], line_of: list[int], where: str, path: Path) -> None:
+    """Refuse a wavelength given twice (at one angle) with two values or sigmas, as
+    material files are refused: the fit could match only one of them. Rows may run in
+    any order (decreasing as spectrometers write them, angle by angle)."""
+    angles = cols.get("angle", np.zeros_like(cols["wavelength"]))
+    measured = [cols[c] for c in ("value", "sigma") if c in cols]
+    first: dict[tuple[float, float], int] = {}
+    for i, point in enumerate(zip(cols["wavelength"].tolist(), angles.tolist())):
+        j = first.setdefault(point, i)
+        if j != i and any(m[i] != m[j] for m in measured):
+            at = f" at {point[1]:g}°" if "angle" in cols else ""
+            fail(where, f"line {line_of[i]} of {path} repeats the wavelength {point[0]:g} nm{at} with another "
+                        f"value (first on line {line_of[j]}); give one value per wavelength")
 
 
 def _dataset(entry: Any, i: int, base: Path | None) -> tuple[Dataset, bool]:
