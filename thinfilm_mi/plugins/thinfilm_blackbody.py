@@ -115,7 +115,6 @@ def _scalar(value) -> float:
 
 class ThinFilmBlackbody(mi.Texture):
     def __init__(self, props):
-        mi.Texture.__init__(self, props)
         temperature = _check("temperature", _number(props, "temperature"), True, " (K)")
         scale = _check("scale", _number(props, "scale", 1.0), False, "")
         lo = _number(props, "wavelength_min", CIE_MIN)
@@ -136,6 +135,8 @@ class ThinFilmBlackbody(mi.Texture):
         self._valid = (temperature, scale)
         self._update(temperature, scale)
         self._make_opaque()
+        # registered once complete: from here on every thread's symbolic calls trace it
+        mi.Texture.__init__(self, props)
 
     # -- precomputation (float64) -----------------------------------------------------
 

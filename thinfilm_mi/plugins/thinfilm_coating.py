@@ -188,7 +188,6 @@ DEFAULT_COAT_IOR = 1.5
 class ThinFilmCoating(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
-        mi.BSDF.__init__(self, props)
         mode = modes.current()
         base = nested_bsdf(props, NAME)
         interior = real_index(props.get("int_ior", DEFAULT_COAT_IOR), "int_ior")
@@ -217,6 +216,8 @@ class ThinFilmCoating(mi.BSDF):
         flags = mi.BSDFFlags.Empty
         for component in components:
             flags = flags | component
+        # registered once complete: from here on every thread's symbolic calls trace it
+        mi.BSDF.__init__(self, props)
         # (m_components is a copy when read back: assigned whole)
         self.m_components, self.m_flags = components, flags
         self.guard = ParameterGuard(self, NAME)

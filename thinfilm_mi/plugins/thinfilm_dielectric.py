@@ -144,7 +144,6 @@ NAME = "thinfilm_dielectric"
 class ThinFilmDielectric(mi.BSDF):
     def __init__(self, props):
         check_variant(NAME)
-        mi.BSDF.__init__(self, props)
         self.mode = modes.current()
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
         self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
@@ -152,6 +151,8 @@ class ThinFilmDielectric(mi.BSDF):
         self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
         self.specular_transmittance = optional_texture(props, "specular_transmittance", NAME)
         check_unqueried(props, NAME)
+        # registered once complete: from here on every thread's symbolic calls trace it
+        mi.BSDF.__init__(self, props)
         self.m_components = [
             mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide,
             mi.BSDFFlags.DeltaTransmission | mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide

@@ -334,7 +334,6 @@ class ThinFilmDiffuse(mi.BSDF):
 
     def __init__(self, props):
         check_variant(NAME)
-        mi.BSDF.__init__(self, props)
         model = diffuse_model(props.get("model", next(iter(DIFFUSE_MODELS))), NAME)
         films = films_from_props(props, NAME)
         ext = ext_ior_from_props(props)
@@ -350,6 +349,8 @@ class ThinFilmDiffuse(mi.BSDF):
         #: the coated-diffuse model (stack, base, model; render/coated_diffuse.py)
         self.coated = CoatedDiffuse(model, films, ext, base, reflectance, rough, options,
                                     modes.current(), NAME)
+        # registered once complete: from here on every thread's symbolic calls trace it
+        mi.BSDF.__init__(self, props)
         self.m_components = [
             mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide,
             mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide,

@@ -159,12 +159,13 @@ NAME = "thinfilm_roughconductor"
 class ThinFilmRoughConductor(rough_bsdf_base()):
     def __init__(self, props):
         check_variant(NAME)
-        mi.BSDF.__init__(self, props)
         self.mode = modes.current()
         self.microfacet = Microfacet(props, NAME)
         self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
         self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
         check_unqueried(props, NAME)
+        # registered once complete: from here on every thread's symbolic calls trace it
+        mi.BSDF.__init__(self, props)
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | self.microfacet.flags
         self.m_components = [flags]
         self.m_flags = flags

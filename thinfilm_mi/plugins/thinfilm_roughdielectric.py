@@ -165,7 +165,6 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
 
     def __init__(self, props):
         check_variant(NAME)
-        mi.BSDF.__init__(self, props)
         self.mode = modes.current()
         self.microfacet = Microfacet(props, NAME)
         interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
@@ -181,6 +180,8 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
         self.specular_transmittance = optional_texture(props, "specular_transmittance", NAME)
         check_unqueried(props, NAME)
+        # registered once complete: from here on every thread's symbolic calls trace it
+        mi.BSDF.__init__(self, props)
         sides = mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide | self.microfacet.flags
         self.m_components = [GLOSSY_R | sides, GLOSSY_T | sides | mi.BSDFFlags.NonSymmetric]
         self.m_flags = self.m_components[0] | self.m_components[1]
