@@ -73,6 +73,8 @@ def _register_current() -> list[str]:
                 mod = modules[module] = importlib.reload(mod)
                 _built_for[module] = variant
             cls = getattr(mod, cls_name)
+            if not variant.startswith("scalar"):   # scalar variants make no symbolic calls
+                gc_guard.watch_traces(cls)
             register_plugin(name, lambda props, cls=cls: cls(props))
             done.append(name)
     return done
@@ -86,7 +88,8 @@ def _on_variant_change(old, new) -> None:
 def register() -> list[str]:
     """Register the plugins for the current variant (if one is set) and for every
     later variant, and install :mod:`~thinfilm_mi.render.gc_guard` (no cyclic garbage
-    collection while Dr.Jit traces a symbolic call). Returns the names registered now.
+    collection, on any thread, while some thread traces our plugins in a symbolic call;
+    their traced methods are wrapped to tell it). Returns the names registered now.
     Safe to call repeatedly."""
     global _callback_installed
     import mitsuba as mi

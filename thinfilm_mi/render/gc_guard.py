@@ -1,140 +1,177 @@
-"""No cyclic garbage collection while Dr.Jit traces a symbolic call.
+"""No cyclic garbage collection, on any thread, while some thread traces our plugins.
 
-The defect (Mitsuba 3.9.1, Dr.Jit 1.5; upstream, not ours):
+The defect (Mitsuba 3.9.1, Dr.Jit 1.5; upstream, not ours, see
+``docs/upstream_gc_during_symbolic_call.md``):
 
 * A symbolic virtual call (``ad_call_symbolic``, how an LLVM or CUDA variant's
   ``PathIntegrator`` calls ``BSDF::eval_pdf_sample``) traces *every* registered
   instance of the BSDF domain, those of scenes already dropped included. It
   holds no reference to an instance while it traces it.
-* Mitsuba's base ``BSDF::eval_pdf_sample`` calls ``eval_pdf()`` and then
-  ``sample()`` on ``this``; ``blendbsdf``, ``twosided`` and other wrappers call
-  their nested BSDFs the same way.
-* A Python BSDF's traced methods run Python code, which allocates; an
-  allocation may start a pass of the cyclic garbage collector. When that pass
-  frees a dropped scene (a scene kept only by a reference cycle: a kept
-  exception's traceback, a notebook's ``Out[]``, a self-referencing dict), the
-  scene's BSDFs die with it, the one being traced included, and the next call
-  on ``this`` is a use-after-free: a segfault in
-  ``BSDF::eval_pdf_sample`` or ``BlendBSDF::eval_pdf``. A pass during the
-  trace of a *live* scene's BSDF is harmless. Related upstream: mitsuba3 #771
-  (a dropped Python emitter still traced) and PR #776 (the lifetime of Python
-  plugin references). ``tests/cross/test_gc_guard.py`` runs a reproducer
-  without this package: a plain Python BSDF, a dropped scene in a cycle, a
-  render of another scene.
+* When a pass of the cyclic garbage collector frees a dropped scene (a scene kept
+  only by a reference cycle: a kept exception's traceback, a notebook's ``Out[]``,
+  a self-referencing dict) while some thread traces it, that thread's next call on
+  the freed BSDF (or on a ``blendbsdf`` or ``twosided`` around it) is a
+  use-after-free: a segfault, or Dr.Jit's abort "jit_registry_remove(): pointer is
+  not registered". The pass may start on the tracing thread, inside a Python
+  BSDF's traced method, or on any other thread that runs Python meanwhile: Mitsuba
+  releases the GIL while it renders.
 
-The guard (:func:`install`, called by :func:`thinfilm_mi.register` once per
-process): a :data:`gc.callbacks` hook. When a collection starts while this
-thread is inside a symbolic scope (``dr.JitFlag.SymbolicScope``), it calls
-:func:`gc.freeze`, which moves every tracked object to the permanent
-generation, so that this pass examines nothing and frees nothing. A watcher
-thread then asks the main thread, with ``Py_AddPendingCall`` every 20 ms, to
-run :func:`gc.unfreeze` and a full :func:`gc.collect` at its next safe point
-between two bytecodes, once it is outside the symbolic scope (the flag is per
-thread, so only the main thread can tell); a pass that starts on the main
-thread outside a scope (a user's ``gc.collect()`` included) unfreezes first. Without that collection, the deferred
-garbage would wait indefinitely: the passes that froze it never count toward
-the growth that makes Python collect the oldest generation, where unfreezing
-puts it, and a loop whose allocations all happen inside traces would keep
-every dropped scene. It protects every Python plugin of the process, ours
-and others', in every variant; scalar variants make no symbolic calls and
-never defer.
+The guard: a process-wide set of the threads that are tracing, and a
+:data:`gc.callbacks` hook that makes every pass a no-op (:func:`gc.freeze` moves
+every tracked object to the permanent generation, so the pass examines nothing and
+frees nothing) while that set is not empty, whichever thread starts the pass.
 
-Why this and not another fix: disabling the collector inside our methods
-does not work (the pending count fires at the first allocation after
-re-enabling it, while C++ is still inside the trace); overriding
-``eval_pdf_sample`` in Python does not either (Mitsuba 3.9.1 never calls the
-override); keeping our own instances alive does not protect a dropped
-``blendbsdf`` or ``twosided`` around them, which is what dies there.
+* A thread joins the set when a traced method of one of our plugins runs inside a
+  symbolic scope (``dr.JitFlag.SymbolicScope``): every live instance of a Python
+  BSDF is traced in every symbolic call of its domain, in whatever thread makes
+  it, so our methods see every trace begin while an instance of ours is alive
+  (:func:`watch_traces` wraps them when the plugins are registered). A pass that
+  starts inside a symbolic scope adds its own thread too (a trace of another
+  Python plugin).
+* It leaves the set at its first Python event outside any symbolic scope: a
+  profile function (:func:`sys.setprofile`, which is per thread) is set on the
+  thread when one of our traced methods returns, and removed while the next one
+  runs; the first event it sees outside a scope is the return of the render.
+* :func:`rendering` puts a thread in the set for a whole block, after waiting for a
+  pass that another thread began before (it may still be freeing: a pass can hand
+  the GIL to other threads while it runs finalizers). Importing the package wraps
+  ``mi.render`` in it, so that a render on any thread is covered from its start,
+  before any method of ours runs (symbolic calls of other domains, an emitter's
+  say, may come first); our own entry points (the CLI, sweeps, the renders of
+  design, through :func:`thinfilm_mi.batch.scene.render_scene`) render inside it
+  explicitly.
+* The thread that leaves the set last, once a pass was deferred, unfreezes the heap
+  and runs one full :func:`gc.collect`, so the dropped scenes are freed once no
+  thread traces them.
 
-What it costs: one Python call and one flag read per collection, and one full
-collection after each trace during which a pass was deferred (measured in
-``benchmarks/gc_guard_bench.py``); garbage made during a trace waits for the
-trace to end. Its side effects, process-wide: objects frozen by the user
-with :func:`gc.freeze` are unfrozen by the first owed collection; and
-only traces on the main thread are protected: a collection that another
-thread starts while the main thread traces, or one owed while another thread
-traces, is not deferred (Mitsuba renders and traces on the calling thread).
+Limits: a render started another way (the integrator's own ``render``, or a
+``render`` bound before this package was imported) is covered from the first
+traced call of a method of ours, not before it; a thread that has a profile
+function of its own (``cProfile``, a debugger's) leaves the set at its next pass
+outside a scope instead; garbage made during a render waits for the last tracing
+thread's render to end, and threads that render back to back without a moment in
+which none traces defer collection until there is one; objects the user froze with
+:func:`gc.freeze` are unfrozen by the owed collection. A scene freed by reference
+counting (``del scene``) on one thread while another thread renders is outside a
+garbage collector's reach: only the upstream fix covers it. Scalar variants make no
+symbolic calls and never defer. What it costs is measured in
+``benchmarks/gc_guard_bench.py``.
 """
 from __future__ import annotations
 
-import ctypes
+import contextlib
+import functools
 import gc
 import os
+import sys
 import threading
-import time
 
-__all__ = ["install", "installed", "deferred_collections"]
+__all__ = ["install", "installed", "deferred_collections", "rendering", "watch_traces", "TRACED_METHODS"]
+
+#: the methods Mitsuba calls on a Python BSDF or texture inside a symbolic call
+TRACED_METHODS = ("sample", "eval", "pdf", "eval_pdf", "eval_pdf_sample", "eval_diffuse_reflectance",
+                  "eval_null_transmission", "eval_attribute", "eval_attribute_1", "eval_attribute_3",
+                  "eval_1", "eval_3", "eval_1_grad", "eval_3_grad", "sample_spectrum", "pdf_spectrum",
+                  "mean")
 
 _lock = threading.Lock()
 
 
 class _Guard:
-    """The hook and its state: whether it froze the heap, how many passes it
-    deferred, and the watcher that asks the main thread for the owed collection."""
-
-    #: seconds between two requests for the owed collection while one is owed
-    POLL = 0.02
+    """The hook and its state: which threads trace, whether the heap is frozen, how
+    many passes were deferred and how many owed collections were run."""
 
     def __init__(self, drjit) -> None:
         self.flag = drjit.flag
         self.symbolic = drjit.JitFlag.SymbolicScope
+        #: threads seen inside a trace and not yet seen outside one
+        self.tracing: set[int] = set()
+        #: threads inside :func:`rendering`, with its nesting depth
+        self.scoped: dict[int, int] = {}
         self.frozen = False
         self.deferred = 0
         self.collections = 0
-        self.owed = threading.Event()
-        self.watcher: threading.Thread | None = None
-        # a C function pointer for Py_AddPendingCall, alive as long as the guard
-        self.pending = ctypes.CFUNCTYPE(ctypes.c_int, ctypes.c_void_p)(self._safe_point)
+        #: held while a pass runs, so that a render can wait for a pass that began
+        #: before it (a plain lock: the hook runs no Python that could start a pass)
+        self.pass_lock = threading.Lock()
+        self.pass_held = False
+        self.passing: int | None = None
 
+    def busy(self) -> bool:
+        return bool(self.tracing or self.scoped)
+
+    # -- the gc.callbacks hook -------------------------------------------------
     def __call__(self, phase: str, info: dict) -> None:
+        me = threading.get_ident()
         if phase != "start":
+            self.passing = None
+            if self.pass_held:
+                self.pass_held = False
+                self.pass_lock.release()
             return
-        if not self.flag(self.symbolic):
-            if self.frozen and threading.current_thread() is threading.main_thread():
-                # the main thread is outside its trace: this pass (a user's
-                # gc.collect() included) may see the deferred garbage again
-                gc.unfreeze()
-                self.frozen = False
-        else:
+        self.passing = me
+        self.pass_held = self.pass_lock.acquire(blocking=False)
+        if self.flag(self.symbolic):
+            self.join(me)
+        elif me in self.tracing:
+            self.tracing.discard(me)   # outside its trace (its profile function was taken)
+        if self.busy():
+            self._forget_dead_threads()
+        if self.busy():
             gc.freeze()
             self.frozen = True
             self.deferred += 1
-            self.owed.set()
-            if self.watcher is None:
-                self.watcher = threading.Thread(target=self._watch, name="thinfilm_mi-gc-guard", daemon=True)
-                self.watcher.start()
+        elif self.frozen:
+            # this pass may see the deferred garbage again; a full one frees it
+            gc.unfreeze()
+            self.frozen = False
 
-    def forget_watcher(self) -> None:
-        self.watcher = None
+    # -- joining and leaving ---------------------------------------------------
+    def join(self, me: int) -> None:
+        """The calling thread traces: it stays in the set until :meth:`watch` sees it
+        outside every symbolic scope."""
+        self.tracing.add(me)
+        if sys.getprofile() is None:
+            sys.setprofile(self.watch)
 
-    def _watch(self) -> None:
-        """While a collection is owed, ask the main thread for it every :data:`POLL` s.
-        (Only the main thread can tell whether it is inside a symbolic scope: the
-        flag is per thread.)"""
-        while True:
-            self.owed.wait()
-            ctypes.pythonapi.Py_AddPendingCall(self.pending, None)
-            time.sleep(self.POLL)
+    def watch(self, frame, event, arg) -> None:
+        """A profile function: the first Python event outside a symbolic scope takes
+        the thread out of the set."""
+        if self.flag(self.symbolic):
+            return
+        sys.setprofile(None)
+        self.tracing.discard(threading.get_ident())
+        self.collect_if_owed()
 
-    def _safe_point(self, _arg) -> int:
-        """Run by the main thread between two bytecodes: unfreeze and collect what
-        the deferred passes left, unless this thread is inside a trace (then the
-        watcher asks again)."""
-        if self.owed.is_set() and not self.flag(self.symbolic):
-            self.owed.clear()
-            if self.frozen:
-                gc.unfreeze()
-                self.frozen = False
+    def collect_if_owed(self) -> None:
+        """Once no thread traces, free what the deferred passes kept."""
+        if self.frozen and not self.busy():
+            gc.unfreeze()
+            self.frozen = False
             self.collections += 1
             gc.collect()
-        return 0
+
+    def _forget_dead_threads(self) -> None:
+        alive = sys._current_frames().keys()
+        self.tracing &= alive
+        for ident in list(self.scoped):   # (other threads may run between two lines)
+            if ident not in alive:
+                self.scoped.pop(ident, None)
+
+    def forget_threads(self) -> None:
+        """In a forked child, only the forking thread lives on (and no pass runs)."""
+        me = threading.get_ident()
+        self.tracing &= {me}
+        self.scoped = {i: n for i, n in self.scoped.items() if i == me}
+        self.pass_lock, self.pass_held, self.passing = threading.Lock(), False, None
 
 
 _guard: _Guard | None = None
 
 
 def install() -> None:
-    """Add the hook to :data:`gc.callbacks`, once per process (idempotent)."""
+    """Add the hook to :data:`gc.callbacks` and make ``mi.render`` render inside
+    :func:`rendering`, once per process (idempotent)."""
     global _guard
     import drjit
 
@@ -142,8 +179,29 @@ def install() -> None:
         if _guard is None:
             _guard = _Guard(drjit)
             gc.callbacks.append(_guard)
-            # a forked child has no watcher thread: it starts its own when it needs one
-            os.register_at_fork(after_in_child=_guard.forget_watcher)
+            os.register_at_fork(after_in_child=_guard.forget_threads)
+        _cover_mitsuba_render()
+
+
+def _cover_mitsuba_render() -> None:
+    """Replace ``mitsuba.render`` (and its other names in Mitsuba's modules) by a
+    wrapper that renders inside :func:`rendering`, so that a user's render on any
+    thread is covered from its first symbolic call."""
+    import mitsuba
+
+    render = getattr(mitsuba, "render", None)
+    if render is None or getattr(render, "__wrapped_by_gc_guard__", False):
+        return
+
+    @functools.wraps(render)
+    def covered_render(*args, **kwargs):
+        with rendering():
+            return render(*args, **kwargs)
+
+    covered_render.__wrapped_by_gc_guard__ = True
+    for name, module in list(sys.modules.items()):
+        if (name == "mitsuba" or name.startswith("mitsuba.")) and getattr(module, "render", None) is render:
+            setattr(module, "render", covered_render)
 
 
 def installed() -> bool:
@@ -155,3 +213,58 @@ def deferred_collections() -> tuple[int, int]:
     """How many collection passes the hook has deferred in this process, and how
     many full collections it has run for them."""
     return (0, 0) if _guard is None else (_guard.deferred, _guard.collections)
+
+
+@contextlib.contextmanager
+def rendering():
+    """No collection frees anything while the block runs on this thread (a render:
+    its symbolic calls trace every live BSDF, dropped scenes' included). A pass that
+    another thread began before is waited for: it may still be freeing."""
+    install()
+    guard, me = _guard, threading.get_ident()
+    guard.scoped[me] = guard.scoped.get(me, 0) + 1
+    if guard.passing not in (None, me):
+        with guard.pass_lock:
+            pass
+    try:
+        yield
+    finally:
+        depth = guard.scoped.pop(me, 1) - 1
+        if depth:
+            guard.scoped[me] = depth
+        guard.collect_if_owed()
+
+
+def _traced(method):
+    """``method``, putting its thread in the guard's set while it runs in a trace and
+    watching for the thread's first event outside every scope once it returns."""
+    @functools.wraps(method)
+    def traced(*args, **kwargs):
+        guard = _guard
+        if guard is None or not guard.flag(guard.symbolic):
+            return method(*args, **kwargs)
+        guard.tracing.add(threading.get_ident())
+        mine = sys.getprofile() in (None, guard.watch)
+        if mine:
+            sys.setprofile(None)   # no profile events while the method traces
+        try:
+            return method(*args, **kwargs)
+        finally:
+            if mine:
+                sys.setprofile(guard.watch)
+    traced.__wrapped_by_gc_guard__ = True
+    return traced
+
+
+def watch_traces(cls: type) -> type:
+    """Wrap the :data:`TRACED_METHODS` that ``cls`` defines in Python (its own or a
+    Python base's) so that a trace of them puts the thread in the guard's set.
+    Idempotent; returns ``cls``."""
+    for name in TRACED_METHODS:
+        for klass in cls.__mro__:
+            method = klass.__dict__.get(name)
+            if method is not None:
+                break
+        if callable(method) and hasattr(method, "__code__") and not getattr(method, "__wrapped_by_gc_guard__", False):
+            setattr(cls, name, _traced(method))
+    return cls
