@@ -1,6 +1,6 @@
 """Child process of ``tests/cross/test_gc_guard.py``: the loop users run, in one process.
 
-    python tests/support/gc_guard_child.py VARIANT ITERATIONS GC {thinfilm|plain}
+    python tests/support/gc_guard_child.py VARIANT ITERATIONS GC KIND [WHERE]
 
 Each iteration loads a scene, renders it, makes a refused edit whose exception is kept
 in a local (exception -> traceback -> frame -> locals -> scene: a reference cycle once
@@ -18,6 +18,13 @@ collector may run.
   ``thinfilm_mi``) imported.
 * ``thinfilm-unguarded``: ``thinfilm`` with the guard taken out of ``gc.callbacks``.
 
+``WHERE`` is where the loop runs: ``main`` (the default), ``worker`` (one worker thread,
+while the main thread keeps running Python: a loop that appends small lists and sleeps
+0.5 ms, as an event loop or a notebook kernel does) or ``workers`` (two worker threads,
+each loading and rendering its own scenes, the main thread as for ``worker``). In the
+``workers`` mode each iteration picks its BSDF at random (seeded per thread), so
+that the two threads render different scenes; elsewhere the BSDFs come in turn.
+
 ``GC`` is ``default`` or ``1`` (``gc.set_threshold(1, 1, 1)``: a pass at every
 allocation). On success it prints one line: ``ok ITERATIONS alive=N max_alive=M
 freed_in_trace=F``, where N counts the BSDF instances still alive after a final
@@ -28,7 +35,10 @@ from __future__ import annotations
 
 import gc
 import math
+import random
 import sys
+import threading
+import time
 import weakref
 
 import drjit as dr
@@ -41,6 +51,7 @@ BASES = {
     "thinfilm_diffuse": {"reflectance": 0.6},
     "thinfilm_roughconductor": {"alpha": 0.2},
     "thinfilm_roughdielectric": {"alpha": 0.2},
+    "thinfilm_coating": {"bsdf": {"type": "diffuse"}},
 }
 
 
@@ -95,7 +106,7 @@ def _bsdfs(kind):
     for name, extra in BASES.items():
         bsdf = {"type": name, "layers": LAYERS, **extra}
         out[name] = bsdf
-        if "dielectric" not in name:   # twosided nests only BSDFs that do not transmit
+        if "dielectric" not in name and name != "thinfilm_coating":   # twosided nests only BSDFs that do not transmit
             out[name + "_twosided"] = {"type": "twosided", "bsdf": dict(bsdf)}
         out[name + "_blend"] = {"type": "blendbsdf", "weight": 0.5, "a": dict(bsdf),
                                 "b": {"type": "diffuse"}}
@@ -116,15 +127,36 @@ def _scene(bsdf):
     return scene
 
 
-#: BSDFs freed while this thread was inside a symbolic scope: the defect's precondition
-#: (the next call on the freed object is a use-after-free, which crashes only when the
-#: freed memory has been reused, so a crash alone is not a reliable witness)
+#: BSDFs freed while this thread was inside a symbolic scope, or while any thread was
+#: inside Mitsuba's own ``mi.render`` (whose traces the per-thread flag does not show):
+#: the defect's precondition (the next call on the freed object is a use-after-free,
+#: which crashes only when the freed memory has been reused, so a crash alone is not a
+#: reliable witness)
 FREED_IN_TRACE = [0]
+#: threads inside Mitsuba's own ``mi.render`` now
+RENDERING = [0]
 
 
 def _on_free():
-    if dr.flag(dr.JitFlag.SymbolicScope):
+    if dr.flag(dr.JitFlag.SymbolicScope) or RENDERING[0]:
         FREED_IN_TRACE[0] += 1
+
+
+def _bracket_mitsuba_render():
+    """Count the threads inside Mitsuba's own ``mi.render`` (under whatever wraps it
+    later: ``thinfilm_mi`` covers it when imported, after this)."""
+    render = mi.render
+
+    def bracketed(*args, **kwargs):
+        RENDERING[0] += 1
+        try:
+            return render(*args, **kwargs)
+        finally:
+            RENDERING[0] -= 1
+
+    for name, module in list(sys.modules.items()):
+        if name.partition(".")[0] == "mitsuba" and getattr(module, "render", None) is render:
+            setattr(module, "render", bracketed)
 
 
 def _register_counted(classes, alive):
@@ -157,9 +189,46 @@ def _iteration(bsdf):
     return kept is not None
 
 
+def _loop(bsdfs, iterations, alive, most, seed=None):
+    """``iterations`` iterations over ``bsdfs``, in order or (with a seed) at random;
+    ``most[0]`` keeps the most dropped BSDFs alive at an iteration's start."""
+    rng = random.Random(seed)
+    for i in range(iterations):
+        alive[:] = [r for r in alive if r() is not None]
+        most[0] = max(most[0], len(alive))
+        _iteration(bsdfs[i % len(bsdfs)] if seed is None else rng.choice(bsdfs))
+
+
+def _threaded(bsdfs, iterations, alive, most, workers):
+    """The loop on ``workers`` threads while the main thread keeps running Python; a
+    worker's exception is re-raised here."""
+    errors = []
+
+    def work(seed):
+        try:
+            _loop(bsdfs, iterations, alive, most, seed)
+        except BaseException as e:   # noqa: BLE001 - reported by the main thread
+            errors.append(e)
+
+    seeds = [None] if workers == 1 else range(1, workers + 1)   # one: every BSDF in turn
+    threads = [threading.Thread(target=work, args=(seed,)) for seed in seeds]
+    for t in threads:
+        t.start()
+    junk = []
+    while any(t.is_alive() for t in threads):
+        junk.append([len(junk)])   # an event loop's small allocations
+        if len(junk) > 1000:
+            junk.clear()
+        time.sleep(0.0005)
+    if errors:
+        raise errors[0]
+
+
 def main():
     variant, iterations, threshold, kind = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+    where = sys.argv[5] if len(sys.argv) > 5 else "main"
     mi.set_variant(variant)
+    _bracket_mitsuba_render()
     alive = []
     if kind.startswith("plain"):
         _register_counted({"plain_lambert": _plain_class()}, alive)
@@ -178,14 +247,14 @@ def main():
     if threshold != "default":
         gc.set_threshold(int(threshold), 1, 1)
     bsdfs = list(_bsdfs(kind).values())
-    most = 0
-    for i in range(iterations):
-        alive[:] = [r for r in alive if r() is not None]
-        most = max(most, len(alive))
-        _iteration(bsdfs[i % len(bsdfs)])
+    most = [0]
+    if where == "main":
+        _loop(bsdfs, iterations, alive, most)
+    else:
+        _threaded(bsdfs, iterations, alive, most, {"worker": 1, "workers": 2}[where])
     gc.collect()
     left = sum(r() is not None for r in alive)
-    print(f"ok {iterations} alive={left} max_alive={most} freed_in_trace={FREED_IN_TRACE[0]}", flush=True)
+    print(f"ok {iterations} alive={left} max_alive={most[0]} freed_in_trace={FREED_IN_TRACE[0]}", flush=True)
 
 
 if __name__ == "__main__":
