@@ -1,23 +1,26 @@
-"""The GC guard (thinfilm_mi.render.gc_guard): the 200-iteration loop of issue 39, and its cost.
+"""The GC guard (thinfilm_mi.render.gc_guard): the loop that crashed renders, on the main thread and on worker threads, and the guard's cost.
 
-    python benchmarks/gc_guard_bench.py [--iterations 200] [--skip-matrix] [--skip-cost]
+    python benchmarks/gc_guard_bench.py [--iterations 60] [--skip-matrix] [--skip-cost]
                                         [--repeats 9]
 
 1. The matrix: ``tests/support/gc_guard_child.py`` in a fresh process per (variant, collector
-   setting, kind): every thin-film plugin, bare, in ``blendbsdf`` and (those that do not
-   transmit) in ``twosided``, one configuration per iteration in turn, in
+   setting, kind, thread): every thin-film plugin, bare, in ``blendbsdf`` and (those that do
+   not transmit) in ``twosided``, one configuration per iteration in turn, in
    ``llvm_ad_rgb``, ``llvm_ad_spectral`` and ``llvm_ad_spectral_polarized``, with the
-   default collector and with ``gc.set_threshold(1, 1, 1)``; each iteration loads, renders,
-   makes a refused edit whose exception it keeps in a local, renders and returns. Prints
-   the exit status (a crash is -11), the dropped BSDFs alive at most at an iteration's
-   start and after a final collection, and the seconds (mostly kernel compilations: each
-   iteration traces another set of instances). The plain-BSDF reproducer without the
-   package and our plugins with the guard taken out (both must crash), and the plain BSDF
-   with the guard (must not) run first.
+   default collector and with ``gc.set_threshold(1, 1, 1)``, on the main thread and on a
+   worker thread while the main thread runs Python, and on two worker threads at once; each
+   iteration loads, renders, makes a refused edit whose exception it keeps in a local,
+   renders and returns. Prints the exit status (a crash is -11, Dr.Jit's abort -6), the
+   dropped BSDFs alive at most at an iteration's start and after a final collection, and the
+   seconds (mostly kernel compilations: each iteration traces another set of instances).
+   The plain-BSDF reproducer without the package (main thread and worker) and our plugins
+   with the guard taken out (all must crash), and the plain BSDF with the guard (must not)
+   run first.
 2. The cost: one process, ``llvm_ad_spectral``, the demo's glass sphere
    (``thinfilm_dielectric`` "SiO2 500; Au 20; Al 10" on 1.5) on a diffuse floor, 128x128,
-   4 spp: ``mi.render`` + ``dr.eval`` with the hook in ``gc.callbacks`` and with it taken
-   out, in alternating pairs (the median of --repeats pairs), and the passes it deferred and
+   4 spp: ``mi.render`` + ``dr.eval`` with the guard (the hook in ``gc.callbacks``, the
+   wrapped ``mi.render``) and without (the hook taken out, Mitsuba's own ``render``), in
+   alternating pairs (the median of --repeats pairs), and the passes it deferred and
    full collections it ran per render. Also the hook's own cost per collection pass
    outside a trace (a young pass with and without it), and what the owed full collection
    costs with this process's heap (plus 2e5 lists, as a notebook holds).
@@ -42,24 +45,28 @@ CHILD = ROOT / "tests" / "support" / "gc_guard_child.py"
 VARIANTS = ["llvm_ad_rgb", "llvm_ad_spectral", "llvm_ad_spectral_polarized"]
 
 
-def _child(variant, iterations, threshold, kind):
+def _child(variant, iterations, threshold, kind, where):
     t0 = time.perf_counter()
-    out = subprocess.run([sys.executable, str(CHILD), variant, str(iterations), threshold, kind],
+    out = subprocess.run([sys.executable, str(CHILD), variant, str(iterations), threshold, kind, where],
                          capture_output=True, text=True, cwd=ROOT)
     last = (out.stdout.strip().splitlines() or ["(no output)"])[-1]
     return out.returncode, last, time.perf_counter() - t0
 
 
 def matrix(iterations):
-    print(f"{'variant':28s} {'gc':8s} {'kind':18s} {'status':>6s}  result{'':26s} seconds")
-    runs = [("llvm_ad_rgb", "default", "plain", 30), ("llvm_ad_rgb", "default", "thinfilm-unguarded", 26),
-            ("llvm_ad_rgb", "default", "plain+guard", iterations),
-            ("llvm_ad_rgb", "1", "plain+guard", iterations)]
-    runs += [(v, g, "thinfilm", iterations) for v in VARIANTS for g in ("default", "1")]
-    for variant, threshold, kind, n in runs:
-        rc, last, seconds = _child(variant, n, threshold, kind)
-        print(f"{variant:28s} {threshold:8s} {kind:18s} {rc:6d}  {last if rc == 0 else 'crashed':50s} "
-              f"{seconds:7.1f}", flush=True)
+    print(f"{'variant':28s} {'gc':8s} {'kind':18s} {'thread':8s} {'status':>6s}  result{'':26s} seconds")
+    runs = [("llvm_ad_rgb", "default", "plain", "main", 30), ("llvm_ad_rgb", "default", "plain", "worker", 30),
+            ("llvm_ad_rgb", "1", "plain", "worker", 30),
+            ("llvm_ad_rgb", "default", "thinfilm-unguarded", "main", 26),
+            ("llvm_ad_rgb", "default", "plain+guard", "main", iterations),
+            ("llvm_ad_rgb", "1", "plain+guard", "worker", iterations)]
+    runs += [(v, g, "thinfilm", where, iterations) for v in VARIANTS for g in ("default", "1")
+             for where in ("main", "worker")]
+    runs += [("llvm_ad_rgb", g, "thinfilm", "workers", max(iterations // 10, 1)) for g in ("default", "1")]
+    for variant, threshold, kind, where, n in runs:
+        rc, last, seconds = _child(variant, n, threshold, kind, where)
+        print(f"{variant:28s} {threshold:8s} {kind:18s} {where:8s} {rc:6d}  "
+              f"{last if rc == 0 else 'crashed':50s} {seconds:7.1f}", flush=True)
 
 
 def cost(repeats):
@@ -83,10 +90,11 @@ def cost(repeats):
                   "to_world": mi.ScalarTransform4f().translate([0, -1, 0]).rotate([1, 0, 0], -90).scale(5)},
     })
     hook = gc_guard._guard
+    covered, plain = mi.render, mi.render.__wrapped__   # the guard's wrapper, Mitsuba's own
 
-    def render(seed):
+    def render(seed, render_fn=covered):
         t0 = time.perf_counter()
-        dr.eval(mi.render(scene, seed=seed))
+        dr.eval(render_fn(scene, seed=seed))
         dr.sync_thread()
         return time.perf_counter() - t0
 
@@ -95,13 +103,12 @@ def cost(repeats):
     for i in range(repeats):
         d0, c0 = gc_guard.deferred_collections()
         with_hook.append(render(2 * i + 1))
-        time.sleep(0.1)   # let the watcher's request reach the main thread
         d1, c1 = gc_guard.deferred_collections()
         deferred.append(d1 - d0)
         collections.append(c1 - c0)
         gc.callbacks.remove(hook)
         try:
-            without.append(render(2 * i + 2))
+            without.append(render(2 * i + 2, plain))
         finally:
             gc.callbacks.append(hook)
     a, b = statistics.median(with_hook), statistics.median(without)
@@ -140,7 +147,7 @@ def cost(repeats):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--iterations", type=int, default=200)
+    ap.add_argument("--iterations", type=int, default=60)
     ap.add_argument("--repeats", type=int, default=9)
     ap.add_argument("--skip-matrix", action="store_true")
     ap.add_argument("--skip-cost", action="store_true")
