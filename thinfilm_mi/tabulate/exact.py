@@ -186,13 +186,12 @@ PROBE_HOT_LINES = 4
 PROBE_SHARE = 0.4
 #: Nodes of the reference axis on which the probe's columns and rows are placed.
 _REF = 1001
-#: Exact evaluations of a probe (measured 5.6e4 on a plain axis, its lines with
-#: their ghosts; more where a line is probed again finer).
+#: Exact evaluations of a probe: its lines with their ghosts on a plain axis, with a
+#: margin for lines probed again finer.
 PROBE_POINTS = 60_000
 #: The probe runs only where :data:`PROBE_POINTS` cost at most this
-#: (:func:`~thinfilm_mi.tabulate.base.build_work`): ~0.2 s on two cores, ~160
-#: films. A deeper stack is not probed (no exact table resolves its fringes: its
-#: optical thickness is tens of microns); its band-limited build decides alone.
+#: (:func:`~thinfilm_mi.tabulate.base.build_work`): a deeper stack is not probed, as no
+#: exact table resolves its fringes; its band-limited build decides alone.
 MAX_PROBE_WORK = MAX_BUILD_WORK // 10
 
 
