@@ -23,7 +23,7 @@ the grazing sliver (cos theta >= ``tabulate_base.GRAZING_COS``) that table build
   (first build, which includes compiling the float64 build kernels, and a
   second build of the same stack with the table cache cleared), the verified
   error the build reports, and the measured errors. A stack whose sharp resonances cannot be resolved within
-  ``tabulate_base.MAX_TEXELS`` texels and ``tabulate_base.MAX_BUILD_POINTS`` evaluations gets
+  ``policy.MAX_TEXELS`` texels and ``policy.MAX_BUILD_POINTS`` evaluations gets
   no table: the row says so. Every target is tried (a failing build took
   0.02-0.06 s in our runs: the probe rejects it); with --stop-at-failure
   the smaller targets of a stack are skipped once one has failed;
@@ -61,6 +61,7 @@ mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
 from thinfilm_mi.render import kernel as tf_kernel  # noqa: E402
 from thinfilm_mi.tabulate import base as tabulate_base  # noqa: E402
+from thinfilm_mi.tabulate import policy  # noqa: E402
 from thinfilm_mi.tabulate.band import sigma_nu  # noqa: E402
 
 AMBIENT = 1.000277
@@ -185,7 +186,7 @@ def main():
     print(f"mitsuba {mi.__version__}, drjit {dr.__version__}, LLVM "
           f"{'.'.join(map(str, dr.detail.llvm_version()))}, {dr.thread_count()} threads; "
           f"{npts} (cos, lambda) points, median of {args.repeats}; substrate {args.material}; "
-          f"MAX_TEXELS = {tabulate_base.MAX_TEXELS}\n")
+          f"MAX_TEXELS = {policy.MAX_TEXELS}\n")
     print("| films | method | table_error | nu x nv | build 1st / 2nd (s) | verified err "
           "| ns/pt | max err | max err, cos ≥ 0.02 | RMS err |")
     print("|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|")

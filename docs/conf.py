@@ -29,6 +29,7 @@ extensions = [
     "sphinx.ext.mathjax",
     "thinfilm_plugins",
     "thinfilm_generated",       # {generated} NAME: a benchmark's tables, docs/_generated/NAME.md
+    "thinfilm_policy",          # {policy}: prose whose numbers are tabulate.policy's constants
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 exclude_patterns = ["_build", "_generated"]   # _generated: benchmark tables, shown by {generated}

@@ -1,4 +1,4 @@
-"""Write the shared parameter rows into the plugins' doc blocks (issue 40, "doc blocks").
+"""Write the shared parameter rows into the plugins' doc blocks.
 
     python scripts/compose_docblocks.py          # rewrite the doc blocks that differ
     python scripts/compose_docblocks.py --check  # list them and exit 1, change nothing
@@ -17,26 +17,13 @@ from __future__ import annotations
 
 import argparse
 import ast
-import importlib.util
 import re
 import sys
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-
-
-def _doc_rows():
-    """:mod:`thinfilm_mi.render.doc_rows`, read by its path (it imports nothing of the
-    package, so composing needs neither Mitsuba nor a package that imports)."""
-    spec = importlib.util.spec_from_file_location("thinfilm_doc_rows", REPO / "thinfilm_mi" / "render" / "doc_rows.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules[spec.name] = module          # dataclasses look their module up by name
-    spec.loader.exec_module(module)
-    return module
-
-
-_ROWS = _doc_rows()
-SHARED_NAMES, shared_rows = _ROWS.SHARED_NAMES, _ROWS.shared_rows
+sys.path.insert(0, str(REPO))   # this checkout's package, not an installed one
+from thinfilm_mi.render.doc_rows import SHARED_NAMES, shared_rows  # noqa: E402
 
 __all__ = ["MARKER", "composed", "family_of", "plugin_paths", "main"]
 

@@ -1,23 +1,28 @@
-"""The plugins' shared parameter rows are written once (issue 40, "doc blocks").
+"""The plugins' shared parameter rows are written once, and quote the ``tabulate`` policy.
 
 The rows of ``thickness``, ``tabulate``, ``table_error``, ``spectral_resolution`` and
 ``coherence_thickness`` live in :mod:`thinfilm_mi.render.doc_rows`;
 ``scripts/compose_docblocks.py`` writes them into each doc block that names its family
 (``.. shared-rows: FAMILY``). Here: every BSDF of :data:`thinfilm_mi.plugins.PLUGINS` that
 reads one of those properties has all five rows, and each equals the composition, so a
-row edited in one doc block and not in the module (or the other way round) fails.
+row edited in one doc block and not in the module (or the other way round) fails. And no
+number of the ``tabulate`` policy is written as a literal, in the rows' templates or in the
+``{policy}`` blocks of the docs: each is a ``{policy.NAME}`` filled from
+:mod:`thinfilm_mi.tabulate.policy`, so tuning a constant cannot leave the prose wrong.
 """
 from __future__ import annotations
 
 import ast
 import importlib.util
+import re
 import sys
 from pathlib import Path
 
 import pytest
 
 from thinfilm_mi.plugins import PLUGINS
-from thinfilm_mi.render.doc_rows import FAMILIES, SHARED_NAMES, shared_rows
+from thinfilm_mi.render.doc_rows import FAMILIES, SHARED_NAMES, shared_rows, templates
+from thinfilm_mi.tabulate import policy
 
 REPO = Path(__file__).resolve().parents[2]
 _spec = importlib.util.spec_from_file_location("compose_docblocks", REPO / "scripts" / "compose_docblocks.py")
@@ -82,3 +87,45 @@ def test_a_doc_block_listing_shared_rows_without_a_family_is_refused():
     source = path.read_text(encoding="utf-8").replace(".. shared-rows: conductor\n", "", 1)
     with pytest.raises(ValueError, match="names no family"):
         compose.composed(source, path)
+
+
+#: a number the policy could own, as prose writes one: films, a size, a time, a factor, 2^N
+POLICY_NUMBER = re.compile(r"\d+(?:\.\d+)?\s*(?:films?|MiB|texels|floats|s|x|×)(?![\w-])|\d+\s*\^\s*\d+")
+#: a ``{policy}`` block of a docs page (docs/_ext/thinfilm_policy.py fills it)
+POLICY_BLOCK = re.compile(r"^```\{policy\}\n(.*?)^```", re.M | re.S)
+
+
+def _literals(template: str) -> list[str]:
+    """The policy-like numbers of ``template`` that are not placeholders."""
+    return POLICY_NUMBER.findall(policy.PLACEHOLDER.sub("", template))
+
+
+def _policy_blocks() -> dict[str, list[str]]:
+    """docs page -> the contents of its ``{policy}`` blocks."""
+    pages = sorted((REPO / "docs").rglob("*.md"))
+    return {p.relative_to(REPO).as_posix(): POLICY_BLOCK.findall(p.read_text(encoding="utf-8")) for p in pages}
+
+
+def test_the_rows_write_no_number_of_the_policy_as_a_literal():
+    found = {t[:60]: _literals(t) for t in templates() if _literals(t)}
+    assert not found, f"write these as {{policy.NAME}} (thinfilm_mi/tabulate/policy.py): {found}"
+
+
+def test_the_docs_policy_blocks_write_no_number_as_a_literal():
+    blocks = _policy_blocks()
+    assert blocks["docs/guides/tables.md"], "the tables guide has lost its {policy} block"
+    found = {page: _literals(b) for page, bs in blocks.items() for b in bs if _literals(b)}
+    assert not found, f"write these as {{policy.NAME}} (thinfilm_mi/tabulate/policy.py): {found}"
+    for bs in blocks.values():
+        for b in bs:
+            policy.fill(b)   # every placeholder names a constant (an unknown one raises)
+
+
+def test_the_literal_check_sees_the_numbers_the_placeholders_become():
+    # filled, the templates carry the policy's numbers, and the check finds them: a number
+    # hard-coded where a placeholder stands would be found the same way
+    guide = _policy_blocks()["docs/guides/tables.md"][0]
+    assert len(_literals(policy.fill(guide))) >= 10
+    assert any(_literals(policy.fill(t)) for t in templates())
+    assert _literals("from 4 films within 2^19 texels, 8 MiB, ~2 s, 10x") == [
+        "4 films", "2^19", "8 MiB", "2 s", "10x"]

@@ -3,7 +3,7 @@ equivalence with no films and loading from XML, for thinfilm_conductor and
 thinfilm_dielectric alike; and deep stacks and edits under the build budget (issue 32).
 
 * A stack whose table cannot repay its build is evaluated exactly at once: the
-  budget (``tabulate.base.MAX_BUILD_WORK``) is decided before the work, so a
+  budget (``tabulate.policy.MAX_BUILD_WORK``) is decided before the work, so a
   100-film stack spends no exact evaluation on a band-limited table, a 300-film one
   none on the exact probe either.
 * A thickness that carries gradients reads every film exactly, so planning builds
@@ -62,8 +62,7 @@ def test_load_from_xml_and_to_string(tmp_path):
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from tests.support.stacks import benchmark_layers, sphere_scene
 from thinfilm_mi.render import kernel as K
-from thinfilm_mi.render import tabulation
-from thinfilm_mi.tabulate import base as tabulate_base
+from thinfilm_mi.tabulate import policy
 
 
 @pytest.fixture(autouse=True)
@@ -131,11 +130,11 @@ def test_a_table_asked_for_may_take_longer_than_auto_waits():
     auto = mi.load_dict(_bsdf(70))
     report = auto.stack.plan[False].build_report
     assert auto.stack.mode() == "exact" and report["result"] == "over budget (expected)"
-    assert report["expected_work"] > tabulate_base.MAX_BUILD_WORK and report["points"] == 0
+    assert report["expected_work"] > policy.MAX_BUILD_WORK and report["points"] == 0
     asked = mi.load_dict(dict(_bsdf(70), tabulate=True))
     report = asked.stack.plan[False].build_report
     assert asked.stack.mode() == "table" and report["result"] == "table"
-    assert report["expected_work"] <= tabulation.REQUESTED_BUDGET_SCALE * tabulate_base.MAX_BUILD_WORK
+    assert report["expected_work"] <= policy.REQUESTED_BUDGET_SCALE * policy.MAX_BUILD_WORK
     table = asked.stack.plan[False].table
     assert table.error <= 1e-3 and table.resolution == 1.0 and table.shear is not None
     K.TABLE_CACHE.clear()

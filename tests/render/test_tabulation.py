@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from thinfilm_mi.render import tabulation
+from thinfilm_mi.tabulate import policy
 
 
 def test_tabulate_values_and_their_options():
@@ -25,7 +26,7 @@ def test_tabulate_values_and_their_options():
     assert (tabulation.AUTO.builds, tabulation.AUTO.selective, tabulation.AUTO.required) \
         == (True, True, False)
     assert (tabulation.ALWAYS.builds, tabulation.ALWAYS.required) == (True, True)
-    assert tabulation.ALWAYS.budget_scale == tabulation.REQUESTED_BUDGET_SCALE
+    assert tabulation.ALWAYS.budget_scale == policy.REQUESTED_BUDGET_SCALE
     assert not tabulation.NEVER.builds and not tabulation.NEVER.required
 
 

@@ -15,7 +15,7 @@ from tests.support.tables import F32, STACK, f32, random_points, ref_R
 from thinfilm_mi.optics import unpolarized
 from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
-from thinfilm_mi.tabulate import axes, quantities
+from thinfilm_mi.tabulate import axes, policy, quantities
 
 pytestmark = pytest.mark.usefixtures("llvm")
 
@@ -75,7 +75,7 @@ def test_dielectric_tables_both_sides_with_tir(inside, layers):
 
 def test_auto_mode_and_what_prevents_a_table():
     one = mi.load_dict({"type": "thinfilm_conductor", "layers": "1.46 300"})
-    assert quantities.AUTO_MIN_FILMS == 1 and one.stack.mode() == "table"     # one film is enough
+    assert policy.AUTO_MIN_FILMS == 1 and one.stack.mode() == "table"     # one film is enough
     exact = mi.load_dict({"type": "thinfilm_conductor", "layers": "1.46 300", "tabulate": False})
     assert exact.stack.mode() == "exact"
     three = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu"})
@@ -291,9 +291,8 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     stack no table of the exact values within the budgets resolves -- 30 random
     films on Al, with cavity resonances ~0.1 nm wide -- is rejected by the probe
     alone, for a small fraction of the evaluations a failing build used to spend
-    (up to tabulate_base.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
+    (up to policy.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
     table is tried after it; tests/tabulate/test_band.py covers those.)"""
-    from thinfilm_mi.tabulate import base as tabulate_base
     K.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
@@ -309,7 +308,7 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     report = deep.stack.plan[False].build_report
     assert report["result"] == "rejected by the probe"
     assert report["rounds"] == 0
-    assert report["points"] < 0.05 * tabulate_base.MAX_BUILD_POINTS
+    assert report["points"] < 0.05 * policy.MAX_BUILD_POINTS
 
 
 def test_auto_keeps_only_tables_that_fit_the_cache():
@@ -319,13 +318,12 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     ``auto`` then renders exactly; by default it tabulates ``R_σ`` instead, which
     fits the cache (the 1 nm resolution damps the fringes of these 3 µm of optical
     thickness by exp(-2 π² (σ_ν 2 Σ n d)²) < 1 %, yet the table is 160x824)."""
-    from thinfilm_mi.tabulate import base as tabulate_base
     layers = "2.3 800; 1.46 800"
     K.TABLE_CACHE.clear()
     big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                         "tabulate": True})
     table = big.stack.plan[False].table
-    assert table is not None and quantities.AUTO_MAX_TEXELS < table.texels <= tabulate_base.MAX_TEXELS
+    assert table is not None and policy.AUTO_MAX_TEXELS < table.texels <= policy.MAX_TEXELS
     assert table.resolution == 0.0
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                          "spectral_resolution": 0.0})
@@ -334,7 +332,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
     table = auto.stack.plan[False].table
     assert table is not None and table.resolution == K.DEFAULT_SPECTRAL_RESOLUTION
-    assert table.texels <= quantities.AUTO_MAX_TEXELS and table.error <= 1e-3
+    assert table.texels <= policy.AUTO_MAX_TEXELS and table.error <= 1e-3
 
 
 def test_a_table_build_does_not_import_scipy():

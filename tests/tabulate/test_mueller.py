@@ -22,7 +22,9 @@ from thinfilm_mi.render.amplitudes import polarized_response
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR
 from thinfilm_mi.tabulate import axes, band
 from thinfilm_mi.tabulate import base as tabulate_base
-from thinfilm_mi.tabulate.mueller import AUTO_MAX_FLOATS, AUTO_MIN_FILMS, MUELLER
+from thinfilm_mi.tabulate.mueller import MUELLER
+from thinfilm_mi.tabulate.policy import MUELLER_AUTO_MAX_FLOATS as AUTO_MAX_FLOATS
+from thinfilm_mi.tabulate.policy import MUELLER_AUTO_MIN_FILMS as AUTO_MIN_FILMS
 
 # A float32 kernel value against float64: rounding below 3e-5 for these stacks
 # (tests/tabulate/test_exact.py, the same recursion and lookups).

@@ -22,13 +22,11 @@ from thinfilm_mi.optics.core import (
 
 __all__ = ["LOOP_MIN_FILMS", "unpolarized_rt", "unpolarized_powers", "unpolarized_rt_loop"]
 
-#: Exact evaluation of a side with at least this many films runs the recursion
-#: as a symbolic Dr.Jit loop over buffers of the films (the render kernel's film loop,
-#: :func:`unpolarized_rt_loop` in table builds):
-#: one loop body in the kernel whatever the depth, so the kernel compiles as fast
-#: for 30 films as for 3, and each hit is cheaper from 4 films on (measurements in
-#: benchmarks/SPEED.md). Below it the films are unrolled, which lets literal
-#: indices specialise the code.
+#: Exact evaluation of a side with at least this many films runs the recursion as a
+#: symbolic Dr.Jit loop over buffers of the films (the render kernel's film loop,
+#: :func:`unpolarized_rt_loop` in table builds): one loop body whatever the depth, so the
+#: kernel compiles as fast for deep stacks as for thin ones and each hit is cheaper; below
+#: it the films are unrolled, which lets literal indices specialise the code.
 LOOP_MIN_FILMS = 4
 
 

@@ -40,35 +40,22 @@ Thin-film coated smooth conductor (:monosp:`thinfilm_conductor`)
      its range, read at load.
  * - tabulate
    - |string| or |bool|
-   - ``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and
-     ``T`` where needed) is read from a verified table over (angle, wavelength) instead
-     of the recursion (a cubic B-spline, split at the critical angle where the exit
-     medium can totally reflect; in spectral variants resampled finer and read
-     bilinearly where that takes at most 8 MiB): its cost does not grow with the number
-     of films. ``auto`` tabulates every stack with films in vectorised variants, unless
-     a ``thickness`` texture is given, gradients are tracked, or the target cannot be
-     met within 2^19 texels (a table that still fits the cache), by a table of the exact
-     values or one of the band-limited values (``spectral_resolution``) (then: exact),
-     or in a build of ~2 s (70 films or more on a metal: not started); ``true`` waits up
-     to 10x longer (100 films: ~2.5 s). Built tables are kept on disk (the table store).
-     In ``*_spectral_polarized`` variants a table holds each lobe's Mueller components
-     (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; ``T`` likewise), each within
-     ``table_error``, and ``auto`` tabulates from 40 films (fewer are as cheap exact)
-     within 2^21 floats.
+   - ``auto`` (default), ``true`` or ``false``: whether ``R`` (and ``T``) is read from a
+     verified table over (angle, wavelength), whose cost does not grow with the films,
+     instead of the recursion. ``auto`` tabulates every stack with films in vectorised
+     variants, without a ``thickness`` texture or gradients, where a table within budget
+     meets ``table_error``; ``true`` tabulates every stack it can, with 10x the build
+     budget. When and why: :ref:`the tables guide <tabulate-policy>`.
  * - table_error
    - |float|
    - Target max abs error of a table in ``R`` and ``T`` (default: 0.001).
  * - spectral_resolution
    - |float|
-   - Spectral resolution (nm) tables may assume, for stacks whose exact values no table
-     resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide): their ``R``
-     and ``T`` are tabulated convolved with a Gaussian in wavenumber whose standard
-     deviation is this at 560 nm (0.41x at 360 nm, 2.2x at 830 nm), i.e. light of
-     coherence length ``1/(2π σ_ν)``, ~50 µm at 1 nm. Such a table is verified within
-     ``table_error`` against the convolved values and kept only if the colours of the
-     exact and the convolved values under D65, A and F11 differ by ΔE2000 <= 0.5
-     (default: 1; 0: tables of the exact values only). Under lasers or line-spectrum
-     emitters narrower than the resolution pass 0, or ``tabulate=false``.
+   - Spectral resolution (nm) tables may assume where no table resolves the exact values
+     (deep stacks on a metal): ``R`` and ``T`` are then tabulated convolved with a
+     Gaussian in wavenumber of this standard deviation at 560 nm, if that keeps the
+     colour (default: 1; 0: exact values only). Under lasers or line spectra narrower
+     than this pass 0; see :ref:`the tables guide <tabulate-policy>`.
  * - coherence_thickness
    - |float|
    - Films thicker than this (nm) are averaged incoherently, as tmm's ``inc_tmm`` does,

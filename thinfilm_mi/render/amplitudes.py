@@ -2,7 +2,7 @@
 
 Polarized variants need the stack's Mueller matrices, not only its powers. A side
 planned with a table (:mod:`thinfilm_mi.tabulate.mueller`: ``tabulate`` true, or
-``"auto"`` from :data:`~thinfilm_mi.tabulate.mueller.AUTO_MIN_FILMS` films) reads its
+``"auto"`` from :data:`~thinfilm_mi.tabulate.policy.MUELLER_AUTO_MIN_FILMS` films) reads its
 Mueller components from it (:func:`table_response`); otherwise it is evaluated
 exactly from the complex amplitudes ``r_s, r_p, t_s, t_p`` at ``si.wavelengths``
 (:func:`optics.stack_amplitudes`, films unrolled, their indices gathered from the

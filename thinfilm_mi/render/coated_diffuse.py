@@ -35,7 +35,6 @@ from thinfilm_mi.render.colour_variants import (
     prepare_gradients,
 )
 from thinfilm_mi.render.diffuse import (
-    COATING_RT_MIN_FILMS,
     DiffuseFactors,
     ExactFactors,
     IndexGradients,
@@ -52,6 +51,7 @@ from thinfilm_mi.render.textures import mitsuba_module, scalar
 from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.base import opaque_float
 from thinfilm_mi.tabulate.hemispherical import DerivativeTable
+from thinfilm_mi.tabulate.policy import COATING_RT_MIN_FILMS
 
 __all__ = ["DiffuseModel", "Exact", "Single", "Multiple", "DIFFUSE_MODELS", "diffuse_model",
            "CoatedDiffuse"]

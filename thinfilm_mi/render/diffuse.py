@@ -67,7 +67,7 @@ from thinfilm_mi.tabulate.hemispherical import (
 )
 from thinfilm_mi.tabulate.store import default_store
 
-__all__ = ["COATING_RT_MIN_FILMS", "DiffuseFactors", "ExactFactors", "SpectralTerms",
+__all__ = ["DiffuseFactors", "ExactFactors", "SpectralTerms",
            "IndexGradients", "with_derivatives", "factor_table", "factor_table_key", "colour_diffuse",
            "constant_albedo", "scale_bounds", "texture_gradients_refused", "absorbs",
            "reflectance_from_props", "grid_spectrum", "side_rt"]
@@ -230,14 +230,6 @@ class SpectralTerms:
         if dr.grad_enabled(scale):
             r_dh = r_dh + out[2] * (scale - dr.detach(scale))
         return r_dh, out[1]
-
-
-#: ``tabulate="auto"`` tabulates a coating's side of ``R`` and ``T`` from this many films
-#: (:class:`~thinfilm_mi.render.coated_diffuse.CoatedDiffuse`), not from
-#: :data:`~thinfilm_mi.tabulate.quantities.RT_AUTO_MIN_FILMS` (4): :func:`factor_table`
-#: stands in for the coating's tables in spectral JIT variants, which serve only where it
-#: cannot be built; a 4-film coating's table would be built at load and not read.
-COATING_RT_MIN_FILMS = 5
 
 
 def factor_table(factors, coating: KernelStack, texture, media):

@@ -12,14 +12,18 @@ block's rows differ from :func:`shared_rows`.
 Two rows say what differs between the plugin families (:data:`FAMILIES`), which each doc
 block names in a comment before its table, ``.. shared-rows: FAMILY`` (a comment renders
 to nothing): when ``tabulate="auto"`` builds a table, and what a ``thickness`` texture
-does to the tables. The module imports nothing of the package, so that the script can
-read it by its path while the package is mid-edit.
+does to the tables. A number of the ``tabulate`` policy is written as a placeholder,
+``{policy.NAME}``, filled from :mod:`thinfilm_mi.tabulate.policy`
+(``tests/cross/test_docblocks.py`` fails on a literal); the policy itself is explained in
+the tables guide, which the rows link to.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["FAMILIES", "SHARED_NAMES", "Family", "shared_rows"]
+from thinfilm_mi.tabulate.policy import fill
+
+__all__ = ["FAMILIES", "SHARED_NAMES", "Family", "shared_rows", "templates"]
 
 #: the properties whose rows are shared, in the order of the tables
 SHARED_NAMES = ("thickness", "tabulate", "table_error", "spectral_resolution", "coherence_thickness")
@@ -29,7 +33,7 @@ SHARED_NAMES = ("thickness", "tabulate", "table_error", "spectral_resolution", "
 class Family:
     """What the shared rows of one plugin family say differently."""
 
-    #: when ``tabulate="auto"`` builds a table (the words after "``auto`` tabulates")
+    #: what ``tabulate="auto"`` tabulates (the words after "``auto`` tabulates")
     auto: str
     #: what a ``thickness`` texture does to the tables
     thickness: str
@@ -41,50 +45,41 @@ _SPECULAR_THICKNESS = ("In spectral variants the stack is then evaluated exactly
 #: family name -> :class:`Family`; a doc block names its family in ``.. shared-rows: NAME``
 FAMILIES = {
     "conductor": Family(
-        auto="every stack with films in vectorised variants,",
+        auto="every stack with films",
         thickness=_SPECULAR_THICKNESS),
     "dielectric": Family(
-        auto="in vectorised variants by measured cost: absorbing films from 4 films, "
-             "non-absorbing ones between constant indices from 4 (both sides are then one "
-             "exact recursion at the Snell-mapped angle), other non-absorbing ones from 1,",
+        auto="stacks of absorbing films from {policy.RT_AUTO_MIN_FILMS} films, of other films from "
+             "{policy.AUTO_MIN_FILMS} ({policy.MIRROR_AUTO_MIN_FILMS} between media of constant index)",
         thickness=_SPECULAR_THICKNESS),
     "diffuse": Family(
-        auto="in vectorised variants by measured cost (``R`` alone of films that do not absorb "
-             "from 1 film, ``R`` and ``T`` from 5),",
+        auto="a coating from {policy.COATING_RT_MIN_FILMS} films (films that do not absorb, "
+             "whose table holds ``R`` alone, from {policy.AUTO_MIN_FILMS})",
         thickness="``R_dh``, ``T_hemi`` (RGB/mono: the integrated diffuse term) are tabulated "
                   "over its range, read at load."),
 }
 
-#: the rows, each ``(name, type, description)``; ``{auto}`` and ``{thickness}`` are the family's
+#: where the policy and its numbers are explained (a label of ``docs/guides/tables.md``)
+_GUIDE = ":ref:`the tables guide <tabulate-policy>`"
+
+#: the rows, each ``(name, type, description)``; ``{auto}`` and ``{thickness}`` are the
+#: family's, ``{policy.NAME}`` a constant of :mod:`thinfilm_mi.tabulate.policy`
 _ROWS = (
     ("thickness", "|float| or |texture|",
      "Optional scale on every film's thickness at the hit, e.g. a ``bitmap`` with ``raw=\"true\"`` "
      "(clamped to >= 0; default: 1). {thickness}"),
     ("tabulate", "|string| or |bool|",
-     "``auto`` (default), ``true`` or ``false``. With a table the stack's ``R`` (and ``T`` where "
-     "needed) is read from a verified table over (angle, wavelength) instead of the recursion (a "
-     "cubic B-spline, split at the critical angle where the exit medium can totally reflect; in "
-     "spectral variants resampled finer and read bilinearly where that takes at most 8 MiB): its "
-     "cost does not grow with the number of films. ``auto`` tabulates {auto} unless a "
-     "``thickness`` texture is given, gradients are tracked, or the target cannot be met within "
-     "2^19 texels (a table that still fits the cache), by a table of the exact values or one of "
-     "the band-limited values (``spectral_resolution``) (then: exact), or in a build of ~2 s (70 "
-     "films or more on a metal: not started); ``true`` waits up to 10x longer (100 films: ~2.5 s). "
-     "Built tables are kept on disk (the table store). In ``*_spectral_polarized`` variants a "
-     "table holds each lobe's Mueller components (``R``, ``(R_s - R_p)/2``, ``r_s conj(r_p)``; "
-     "``T`` likewise), each within ``table_error``, and ``auto`` tabulates from 40 films (fewer "
-     "are as cheap exact) within 2^21 floats."),
+     "``auto`` (default), ``true`` or ``false``: whether ``R`` (and ``T``) is read from a verified "
+     "table over (angle, wavelength), whose cost does not grow with the films, instead of the "
+     "recursion. ``auto`` tabulates {auto} in vectorised variants, without a ``thickness`` texture "
+     "or gradients, where a table within budget meets ``table_error``; ``true`` tabulates every "
+     "stack it can, with {policy.REQUESTED_BUDGET_SCALE}x the build budget. When and why: " + _GUIDE + "."),
     ("table_error", "|float|",
      "Target max abs error of a table in ``R`` and ``T`` (default: 0.001)."),
     ("spectral_resolution", "|float|",
-     "Spectral resolution (nm) tables may assume, for stacks whose exact values no table resolves "
-     "(10 films or more on a metal: cavity resonances ~0.1 nm wide): their ``R`` and ``T`` are "
-     "tabulated convolved with a Gaussian in wavenumber whose standard deviation is this at 560 nm "
-     "(0.41x at 360 nm, 2.2x at 830 nm), i.e. light of coherence length ``1/(2π σ_ν)``, ~50 µm at "
-     "1 nm. Such a table is verified within ``table_error`` against the convolved values and kept "
-     "only if the colours of the exact and the convolved values under D65, A and F11 differ by "
-     "ΔE2000 <= 0.5 (default: 1; 0: tables of the exact values only). Under lasers or "
-     "line-spectrum emitters narrower than the resolution pass 0, or ``tabulate=false``."),
+     "Spectral resolution (nm) tables may assume where no table resolves the exact values (deep "
+     "stacks on a metal): ``R`` and ``T`` are then tabulated convolved with a Gaussian in "
+     "wavenumber of this standard deviation at 560 nm, if that keeps the colour (default: 1; 0: "
+     "exact values only). Under lasers or line spectra narrower than this pass 0; see " + _GUIDE + "."),
     ("coherence_thickness", "|float|",
      "Films thicker than this (nm) are averaged incoherently, as tmm's ``inc_tmm`` does, instead "
      "of showing ~1 nm fringes no broadband light shows (default: 5000)."),
@@ -111,10 +106,17 @@ def shared_rows(family: str) -> dict[str, str]:
     doc blocks' layout: ``" * - NAME"``, ``"   - TYPE"``, ``"   - DESCRIPTION"`` wrapped)."""
     if family not in FAMILIES:
         raise ValueError(f"shared_rows: family={family!r} is not one of {sorted(FAMILIES)}")
-    words = {"auto": FAMILIES[family].auto, "thickness": FAMILIES[family].thickness}
+    words = {"auto": fill(FAMILIES[family].auto), "thickness": fill(FAMILIES[family].thickness)}
     rows = {}
     for name, kind, description in _ROWS:
-        text = _wrap(description.format(**words), "     ")
+        text = _wrap(fill(description).format(**words), "     ")
         text[0] = "   - " + text[0][5:]
         rows[name] = "\n".join([f" * - {name}", f"   - {kind}", *text])
     return rows
+
+
+def templates() -> list[str]:
+    """Every text the rows are composed from, placeholders unfilled (the rows' descriptions and
+    the families' words): where a number of the policy must be a ``{policy.NAME}``."""
+    words = [text for family in FAMILIES.values() for text in (family.auto, family.thickness)]
+    return [description for _, _, description in _ROWS] + words

@@ -33,8 +33,9 @@ from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.tabulation import Route, table_key, tabulate_option
 from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
 from thinfilm_mi.tabulate import band
-from thinfilm_mi.tabulate.base import MAX_TEXELS, BuildReport, SideData, TableCache, opaque_float
+from thinfilm_mi.tabulate.base import BuildReport, SideData, TableCache, opaque_float
 from thinfilm_mi.tabulate.mueller import MUELLER
+from thinfilm_mi.tabulate.policy import MAX_TEXELS, MIRROR_AUTO_MIN_FILMS
 from thinfilm_mi.tabulate.quantities import POWERS
 from thinfilm_mi.tabulate.store import default_store
 
@@ -46,24 +47,19 @@ __all__ = ["DEFAULT_COHERENCE_THICKNESS", "DEFAULT_SPECTRAL_RESOLUTION", "DEFAUL
 DEFAULT_COHERENCE_THICKNESS = 5000.0
 #: Default target for the tables: max abs error in R and T.
 DEFAULT_TABLE_ERROR = 1e-3
-#: Default ``spectral_resolution`` (nm): a stack whose exact ``R`` and ``T`` no
-#: table resolves (10 films or more on a metal: cavity resonances ~0.1 nm wide)
-#: gets a table of them convolved with a Gaussian in wavenumber of this standard
-#: deviation at 560 nm (:mod:`thinfilm_mi.tabulate.band`; ``0``: exact values
-#: only). 1 nm changes the colour of the 30-film benchmark stack by ΔE2000 <=
-#: 0.009 under D65 (0.2 under the line spectrum F11) and makes its table
-#: 385x824 texels, built in 1-1.6 s; a render of it then costs 1.09x Mitsuba's
-#: ``conductor`` instead of 1.35x (benchmarks/SPEED.md, issue 21).
+#: Default ``spectral_resolution`` (nm): a stack whose exact ``R`` and ``T`` no table
+#: resolves (cavity resonances ~0.1 nm wide) gets a table of them convolved with a Gaussian
+#: in wavenumber of this standard deviation at 560 nm (:mod:`thinfilm_mi.tabulate.band`),
+#: narrow enough that broadband light shows no difference in colour.
 DEFAULT_SPECTRAL_RESOLUTION = 1.0
 #: A film is optically opaque when the amplitude of light crossing it once,
 #: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
 #: is below this: what lies beneath then changes r by less than ~1e-9.
 OPAQUE_AMPLITUDE = 1e-9
 #: Exact sides of this many films read their films from buffers (:class:`LoopFilms`: one
-#: index search per wavelength for all films, a gather per film), unrolled below
-#: :data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films and as a loop from it;
-#: in every variant that evaluates films in kernels (issue 44: "SiO2 500; Au 20; Al 10"
-#: on glass, spectral, 3.67x ``dielectric`` from the index textures, 2.36x as a loop).
+#: index search per wavelength for all films, a gather per film; unrolled below
+#: :data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films, a loop from it), in every
+#: variant that evaluates films in kernels: cheaper than reading each film's index textures.
 BUFFERED_MIN_FILMS = 1
 
 
@@ -231,7 +227,7 @@ class KernelStack:
 
         def few(side):   # "auto": fewer films than a table of this side pays for
             if self.mirrored and mirror.exact_mirrors(self.ambient, self.substrate):
-                return len(side.films) < mirror.AUTO_MIN_FILMS
+                return len(side.films) < MIRROR_AUTO_MIN_FILMS
             rt = side.transmission and not side.opaque
             if rt and self.rt_min_films is not None:
                 return len(side.films) < self.rt_min_films
@@ -252,9 +248,8 @@ class KernelStack:
                 side.table = _tables_cache(self, side, quantity)
                 if side.table is None:
                     self.table_failed.append(inside)
-                    # "auto" does not retry after every parameter edit: a failed
-                    # build may cost up to the budget (tabulate.base.MAX_BUILD_WORK,
-                    # ~2 s) where the rejection cannot be predicted before the work.
+                    # "auto" does not retry after every parameter edit: a failed build
+                    # may spend the whole budget where its rejection cannot be predicted.
                     self._gave_up.add(inside)
         if option.required and self.table_failed:
             import warnings

@@ -4,7 +4,7 @@ one symbolic Dr.Jit loop visits, so the kernel and its compile time do not grow 
 the number of films. A side of fewer than
 :data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films reads the same buffers
 film by film, unrolled (no loop state to carry, each film's code scheduled with its
-neighbours'; issue 44).
+neighbours').
 """
 from __future__ import annotations
 

@@ -30,22 +30,9 @@ import numpy as np
 
 from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
 
-__all__ = ["AUTO_MIN_FILMS", "branches", "either_side", "exact_mirrors", "literal_outside",
+__all__ = ["branches", "either_side", "exact_mirrors", "literal_outside",
            "mirror_applies", "mirrored_rt", "real_on_grid"]
 
-#: ``tabulate="auto"`` tabulates a mirrored stack between media of constant index
-#: (exactly: one evaluation of real amplitudes per lane, no branch) from this many films. A
-#: cubic lookup costs a dielectric's render about what ~5 films do there (issue 44,
-#: the sphere of benchmarks/plugin_bench.py against Mitsuba's ``dielectric``, one run:
-#: 1 film 0.93x exact against 1.63x tabulated; 3 films 1.37x against 1.54x; 10 films
-#: 1.98x against 1.90x; 30 films 3.69x against 2.06x), so this was 10. Read bilinearly
-#: (:mod:`~thinfilm_mi.tabulate.bilinear`) a table is as cheap at 3 films and wins from
-#: 5 (the benchmark stacks of benchmarks/render_bench.py on glass 1.6, sphere of
-#: benchmarks/timing.py, one process, 7 rounds, tabulated / exact: 3 films 1.35x / 1.37x,
-#: 5 films 1.41x / 1.64x, 7 films 1.50x / 1.84x; on the rough dielectric 3 films 1.34x /
-#: 1.41x, 5 films 1.44x / 1.72x; "SiO2 500" 1.22x / 1.10x: the Airy form): from 4, as
-#: sides of ``R`` and ``T`` (:data:`~thinfilm_mi.tabulate.quantities.RT_AUTO_MIN_FILMS`).
-AUTO_MIN_FILMS = 4
 
 
 def real_on_grid(index) -> bool:

@@ -7,8 +7,8 @@ stack takes (:class:`Route`), and the key under which a built table is shared
   itself (enough films, vectorised variants, no ``thickness`` texture), within the
   budget of a load-time build; a side whose build failed is not tried again.
 * :data:`ALWAYS` (``true``): every side with films is tabulated, with
-  :data:`REQUESTED_BUDGET_SCALE` times the build budget; a side that cannot be is
-  evaluated exactly, with a warning.
+  :data:`~thinfilm_mi.tabulate.policy.REQUESTED_BUDGET_SCALE` times the build budget;
+  a side that cannot be is evaluated exactly, with a warning.
 * :data:`NEVER` (``false``): every side is evaluated exactly.
 """
 from __future__ import annotations
@@ -17,17 +17,10 @@ import enum
 import hashlib
 
 from thinfilm_mi.render.textures import scalar
+from thinfilm_mi.tabulate.policy import REQUESTED_BUDGET_SCALE
 
-__all__ = ["ALWAYS", "AUTO", "NEVER", "REQUESTED_BUDGET_SCALE", "TABULATE_OPTIONS", "Route",
+__all__ = ["ALWAYS", "AUTO", "NEVER", "TABULATE_OPTIONS", "Route",
            "TabulateOption", "table_key", "tabulate_option"]
-
-#: ``tabulate=true`` lets a build spend this many times the evaluations and work
-#: ``"auto"`` allows (``tabulate.base.MAX_BUILD_WORK``, ~2 s): a table asked for
-#: is worth a longer wait, paid once with the table store. A 70-film stack's
-#: band-limited table (``auto`` expects 2e8 film units and does not start it)
-#: then builds in ~1.2 s, a 100-film one in ~2.5 s; a 300-film one is refused after
-#: its first rows (~3 s; the whole build took 175 s before the sheared axis).
-REQUESTED_BUDGET_SCALE = 10.0
 
 
 class TabulateOption:

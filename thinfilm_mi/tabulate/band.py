@@ -115,7 +115,6 @@ from thinfilm_mi.tabulate import exact
 from thinfilm_mi.tabulate.axes import BAND, GHOST, AngleAxis, axis_for, band_cos
 from thinfilm_mi.tabulate.base import (
     GRAZING_COS,
-    MAX_TEXELS,
     MAX_U,
     MAX_V,
     SIGMA_MAX,
@@ -134,6 +133,7 @@ from thinfilm_mi.tabulate.base import (
     with_ghosts,
 )
 from thinfilm_mi.tabulate.bilinear import SPLINE_SHARE, resample
+from thinfilm_mi.tabulate.policy import MAX_TEXELS
 from thinfilm_mi.tabulate.refine import Budget, convergence_factor, optical_thickness, power_of_two_step
 
 __all__ = ["COLOUR_TOLERANCE", "EXPECTED_TOTAL", "FIRST_NU", "FIRST_ORDER", "GRADING",
@@ -884,18 +884,15 @@ COLOUR_TOLERANCE = 0.5
 FIRST_NU = 65
 #: Convergence order assumed for the first refinement of the angle axis (then
 #: the order observed between rounds): ``R_σ``'s resonances are still sharp at
-#: the first round's spacing, so the cubic's h^4 is not reached yet (measured
-#: ~3.4 from 65 to 254 nodes for the 10-film benchmark stack).
+#: the first round's spacing, so the cubic's h^4 is not reached yet.
 FIRST_ORDER = 3.5
 #: Rounds after the first (each sized from the last's error).
 MAX_ROUNDS = 4
 #: A build's expected exact evaluations over a lower bound of its first round's
-#: (its rows' first-level samples): the adaptive panels and the later rounds.
-#: Measured on the sheared axis (one round up to 60 films): 1.5 for the 10-film,
-#: 2.3 for the 30-film, 3.0 for the 60-film and 7.9 for the 100-film benchmark
-#: stack (two rounds). A build whose expected total exceeds
-#: :data:`~thinfilm_mi.tabulate.base.MAX_BUILD_WORK` is not started (milliseconds
-#: instead of seconds for 70-1000 films); one that passes is checked again on
+#: (its rows' first-level samples): the adaptive panels and the later rounds, a bound
+#: for the benchmark stacks up to 60 films. A build whose expected total exceeds
+#: :data:`~thinfilm_mi.tabulate.policy.MAX_BUILD_WORK` is not started (milliseconds
+#: instead of seconds); one that passes is checked again on
 #: :data:`SAMPLE_ROWS` rows before the rest of its first round.
 EXPECTED_TOTAL = 4.0
 #: Rows of the first round computed first, to measure the cost per row.
@@ -947,7 +944,8 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
                      budget_scale: float = 1.0) -> Table | None:
     """A verified table of ``R_σ`` (see the module), or ``None`` if the colour
     check fails or the target needs more than ``max_texels`` texels,
-    :data:`MAX_BUILD_POINTS` exact evaluations or :data:`MAX_BUILD_WORK` (the
+    :data:`~thinfilm_mi.tabulate.policy.MAX_BUILD_POINTS` exact evaluations or
+    :data:`~thinfilm_mi.tabulate.policy.MAX_BUILD_WORK` (the
     expected total, :data:`EXPECTED_TOTAL`, checked before any evaluation; then
     each round's before it runs), both times ``budget_scale``. Writes its account
     into ``report``.

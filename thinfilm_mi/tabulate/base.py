@@ -38,8 +38,8 @@ from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.tabulate.axes import GHOST, AngleAxis, GhostEnd
 
 __all__ = ["BILINEAR", "BUILD_LOOP_MIN_FILMS", "BuildReport", "CUBIC", "Bilinear", "CubicSpline",
-           "GRAZING_COS", "INTERPOLATIONS", "MAX_BUILD_POINTS",
-           "MAX_BUILD_WORK", "MAX_ROUNDS", "MAX_TEXELS", "MAX_U", "MAX_V", "MIN_U", "MIN_V",
+           "GRAZING_COS", "INTERPOLATIONS",
+           "MAX_ROUNDS", "MAX_U", "MAX_V", "MIN_U", "MIN_V",
            "POINT_WORK", "REFINE_SHARE", "SIGMA_MAX", "SIGMA_MIN", "SideData", "Table",
            "TableCache", "bspline_at", "bspline_coefficients", "bspline_weights", "bspline_midpoints", "build_work",
            "evaluate_side", "film_gather", "grid_coordinate", "linear_texture", "opaque_float",
@@ -48,8 +48,6 @@ __all__ = ["BILINEAR", "BUILD_LOOP_MIN_FILMS", "BuildReport", "CUBIC", "Bilinear
 SIGMA_MAX = 1.0 / SPECTRAL_RANGE[0]   # 1/nm at 360 nm
 SIGMA_MIN = 1.0 / SPECTRAL_RANGE[1]   # 1/nm at 830 nm
 
-#: Largest table (texels per channel) built; beyond it a stack is evaluated exactly.
-MAX_TEXELS = 1 << 22
 MIN_U, MIN_V = 16, 16
 MAX_U, MAX_V = 4096, 8192
 #: The verification ignores incidence within ~1.1 degrees of grazing
@@ -60,23 +58,10 @@ MAX_U, MAX_V = 4096, 8192
 #: contribution to an image is a sliver at silhouettes. Tables interpolate
 #: there too; benchmarks/speed_vs_error.py reports the error including it.
 GRAZING_COS = 0.02
-#: Exact evaluations a build may spend (probe, and all rounds' nodes and
-#: checks), up to ~1 s for 30 films on two cores: a stack that needs more
-#: (sharp resonances, such as the surface plasmon of a metal film seen from
-#: inside glass, or the high-Q cavity modes of a deep random stack on a metal)
-#: is evaluated exactly. (fig8b's table lit from inside glass needs ~2e5.)
-MAX_BUILD_POINTS = 3_000_000   # one budget for every build, exact (~1 s) or band-limited (~2 s)
 #: An exact evaluation's cost grows with the films (the recursion visits each):
 #: :func:`build_work` weighs a point by its films plus this share of its own
 #: (indices, angle, Fresnel terms, numpy bookkeeping).
 POINT_WORK = 4
-#: :func:`build_work` a build may spend, decided before the work where it can be
-#: predicted (the exact probe, the band-limited build's first round and its
-#: expected total; then before every round): ~2 s on two cores (the 30-film
-#: benchmark stack's band-limited table, 1.6e6 points of 34 film units, took
-#: 0.7-1.3 s). Deeper stacks are evaluated exactly at once instead of spending
-#: seconds on a table the budget then rejects.
-MAX_BUILD_WORK = 100_000_000
 
 
 def build_work(side: "SideData", points: float) -> float:
@@ -86,8 +71,8 @@ def build_work(side: "SideData", points: float) -> float:
 
 
 #: Builds evaluate stacks of this many films or more as a loop over the films: its
-#: float64 kernel is compiled once for every depth (the unrolled kernel of 30
-#: films took ~0.9 s to compile, once per depth with an empty kernel cache).
+#: float64 kernel is compiled once for every depth, where an unrolled one compiles anew
+#: (for most of a second) for each.
 BUILD_LOOP_MIN_FILMS = 4
 #: Refinement rounds after the first estimate.
 MAX_ROUNDS = 6

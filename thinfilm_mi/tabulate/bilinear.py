@@ -3,9 +3,7 @@
 A cubic lookup (:class:`~thinfilm_mi.tabulate.base.CubicSpline`) reads 16 texels per
 wavelength, a bilinear one 4: in a spectral render (4 wavelengths a lookup, at
 random wavelengths) a side's table of ``R`` [, ``T``] costs about a third as much read
-bilinearly (issue 44: a thin-film conductor 1.03-1.08x Mitsuba's ``conductor``
-with the spline, 0.89-0.94x bilinear; the 10-film benchmark stack on glass 1.87-2.15x
-against 1.57-1.61x). Linear interpolation needs more nodes for the same error (its
+bilinearly (render times: the generated benchmark pages). Linear interpolation needs more nodes for the same error (its
 error falls as h^2, the spline's as h^4), so the table is made from the spline, not
 from more exact evaluations:
 

@@ -46,14 +46,14 @@ find the sharpest features), each subsampled by 2, 4, 8, ... into 1-D tables
 whose interpolation error is then known exactly. That gives each axis's error
 as a function of its number of nodes; the target is split between the axes so
 that the table has the fewest texels. A stack that would need more than
-:data:`MAX_TEXELS` texels even with the whole target on each axis (deep stacks
+:data:`~thinfilm_mi.tabulate.policy.MAX_TEXELS` texels even with the whole target on each axis (deep stacks
 on metals, with cavity resonances ~0.1 nm wide) is rejected at this point, for
 ~5·10^4 evaluations. The table is then *verified*: the exact values at the
 midpoints between nodes along each axis are compared with the interpolated
 ones, and the axis whose error is too large is refined until the sum of both
 axes' maximum errors is within the target (default 1e-3 in ``R`` and ``T``).
-A stack that would need more than :data:`MAX_TEXELS` texels, or more than
-:data:`MAX_BUILD_POINTS` exact evaluations, is not tabulated.
+A stack that would need more than :data:`~thinfilm_mi.tabulate.policy.MAX_TEXELS` texels, or more than
+:data:`~thinfilm_mi.tabulate.policy.MAX_BUILD_POINTS` exact evaluations, is not tabulated.
 
 The lookup's scale and offset constants are opaque JIT variables, so a new
 table of another shape (a thickness sweep) reuses the compiled render kernel.
@@ -67,9 +67,7 @@ import numpy as np
 from thinfilm_mi.tabulate.axes import GHOST, HALF_PI, AngleAxis, axis_for
 from thinfilm_mi.tabulate.base import (
     GRAZING_COS,
-    MAX_BUILD_WORK,
     MAX_ROUNDS,
-    MAX_TEXELS,
     MAX_U,
     MAX_V,
     MIN_U,
@@ -90,6 +88,7 @@ from thinfilm_mi.tabulate.base import (
     v_texel,
     with_ghosts,
 )
+from thinfilm_mi.tabulate.policy import MAX_BUILD_WORK, MAX_TEXELS
 from thinfilm_mi.tabulate.refine import Budget, convergence_factor
 
 __all__ = ["MAX_PROBE_WORK", "PROBE_HOT_LINES", "PROBE_POINTS", "PROBE_SHARE", "PROBE_U",
@@ -187,13 +186,12 @@ PROBE_HOT_LINES = 4
 PROBE_SHARE = 0.4
 #: Nodes of the reference axis on which the probe's columns and rows are placed.
 _REF = 1001
-#: Exact evaluations of a probe (measured 5.6e4 on a plain axis, its lines with
-#: their ghosts; more where a line is probed again finer).
+#: Exact evaluations of a probe: its lines with their ghosts on a plain axis, with a
+#: margin for lines probed again finer.
 PROBE_POINTS = 60_000
 #: The probe runs only where :data:`PROBE_POINTS` cost at most this
-#: (:func:`~thinfilm_mi.tabulate.base.build_work`): ~0.2 s on two cores, ~160
-#: films. A deeper stack is not probed (no exact table resolves its fringes: its
-#: optical thickness is tens of microns); its band-limited build decides alone.
+#: (:func:`~thinfilm_mi.tabulate.base.build_work`): a deeper stack is not probed, as no
+#: exact table resolves its fringes; its band-limited build decides alone.
 MAX_PROBE_WORK = MAX_BUILD_WORK // 10
 
 
@@ -377,7 +375,8 @@ def build_exact_table(side: SideData, error: float, wavelengths: np.ndarray,
                 budget_scale: float = 1.0) -> Table | None:
     """Build and verify a table of the exact values of one side, or ``None`` if
     the target cannot be met within ``max_texels`` texels,
-    :data:`MAX_BUILD_POINTS` evaluations and :data:`MAX_BUILD_WORK` (or the exit
+    :data:`~thinfilm_mi.tabulate.policy.MAX_BUILD_POINTS` evaluations and
+    :data:`~thinfilm_mi.tabulate.policy.MAX_BUILD_WORK` (or the exit
     medium's critical angle depends on λ; or the probe alone would cost more than
     :data:`MAX_PROBE_WORK`: then nothing is evaluated). (Band-limited tables, for stacks this rejects:
     :func:`thinfilm_mi.tabulate.band.build_table`.)

@@ -42,30 +42,10 @@ from thinfilm_mi.optics.mueller import (
     mueller_rt_loop,
 )
 from thinfilm_mi.tabulate.base import SideData, evaluate_side
+from thinfilm_mi.tabulate.policy import MUELLER_AUTO_MAX_FLOATS, MUELLER_AUTO_MIN_FILMS
 
-__all__ = ["MUELLER", "MuellerQuantity", "AUTO_MIN_FILMS", "AUTO_MAX_FLOATS"]
+__all__ = ["MUELLER", "MuellerQuantity"]
 
-#: ``tabulate="auto"`` gives a polarized stack a table from this many films on
-#: (after the skips). A lookup of 4 channels at 4 wavelengths (64 texels each)
-#: costs about what the exact amplitudes of ~25 films cost: measured with
-#: the sphere scene of the former benchmarks/polarized_bench.py (since folded into
-#: render_bench.py's ``llvm_ad_spectral_polarized`` table; process CPU time, medians of 9-15
-#: round-robin rounds in 4-6 processes, ratio to Mitsuba's polarized
-#: ``conductor``), exact 1.11x / 1.25x / 1.58-1.75x and tables 1.01-1.36x /
-#: 1.14-1.84x / 1.27-1.75x for 3 / 10 / 30 films (a lookup's cost varies from
-#: process to process with where its texels land in the caches; the exact
-#: path's does not). At 30 films a table saves ~10 % per render on average
-#: and its build costs ~4 s (~25 renders of the benchmark); the exact loop's
-#: first image is 1.35x ``conductor``'s. From 40 films the exact cost (~1 +
-#: 0.024 per film) clearly exceeds a lookup's.
-AUTO_MIN_FILMS = 40
-#: ``tabulate="auto"`` keeps Mueller tables of at most this many floats (texels x
-#: channels, 8 MiB): a lookup slows with the table's size (a 1.5 MiB table
-#: 1.01-1.36x, a 6.2 MiB one 1.27-1.75x, above), but the exact amplitudes of the
-#: deep stacks that need such tables cost more (the powers' budget,
-#: :data:`thinfilm_mi.tabulate.quantities.AUTO_MAX_TEXELS`, 2 MiB, would refuse the
-#: band-limited tables of the benchmark's 10- and 30-film stacks).
-AUTO_MAX_FLOATS = 1 << 21
 #: :meth:`MuellerQuantity.smooth_terms` rescales the amplitudes by smooth factors
 #: only (``|N|``, ``|D|`` grow by at most ~2.8 per film: within float64 to ~600
 #: films); deeper sides are divided by ``|Re D| + |Im D|`` after every film instead.
@@ -113,20 +93,15 @@ class MuellerQuantity:
     """What a Mueller table holds and how its builds evaluate it (see the module)."""
 
     name = "mueller"
-    auto_max_floats = AUTO_MAX_FLOATS
-    #: Mueller tables stay splines (not measured resampled): ``"auto"`` tabulates from
-    #: :data:`AUTO_MIN_FILMS` films, whose spline tables of 4 channels or more take
-    #: 1.5-8 MiB; resampled (16-25x the texels) they would exceed what a bilinear lookup
-    #: gains by (:data:`~thinfilm_mi.tabulate.quantities.LINEAR_MAX_FLOATS`)
+    auto_max_floats = MUELLER_AUTO_MAX_FLOATS
+    #: Mueller tables stay splines: resampled for bilinear lookups (16-25x the texels), the
+    #: tables ``auto`` builds would exceed :data:`~thinfilm_mi.tabulate.policy.LINEAR_MAX_FLOATS`
     linear_max_floats = 0
     #: channels 8-9 of :meth:`smooth_terms` are amplitudes (``T``), not their squares
     squared_terms = False
-    #: First v-node spacing of band-limited tables (in σ_ν; the powers' is
-    #: ``band.V_SPACING`` = 0.6): the cross term ``C`` interpolates ~3.5x worse
-    #: along v than ``R`` (measured at 0.6 on the 10- and 30-film benchmark stacks:
-    #: 5.8e-4 and 6.7e-4 against R's 1.6e-4 and 3.2e-4), over the half of a 1e-3
-    #: target at which the build makes v finer and computes every row again; at 0.5
-    #: (h^4: 0.48x) it fits the first time.
+    #: First v-node spacing of band-limited tables (in σ_ν), finer than the powers'
+    #: (``band.V_SPACING``): the cross term ``C`` interpolates worse along v than ``R``, and
+    #: at this spacing it meets the target the first time instead of after a finer round.
     v_spacing = 0.5
 
     @staticmethod
@@ -136,7 +111,7 @@ class MuellerQuantity:
     @staticmethod
     def auto_min_films(transmission: bool) -> int:
         """Films from which ``tabulate="auto"`` tabulates a side (either way)."""
-        return AUTO_MIN_FILMS
+        return MUELLER_AUTO_MIN_FILMS
 
     @staticmethod
     def rt(incoherent: list):

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from thinfilm_mi.tabulate.axes import PLAIN, AngleAxis
-from thinfilm_mi.tabulate.base import MAX_BUILD_POINTS, MAX_BUILD_WORK, MAX_TEXELS
+from thinfilm_mi.tabulate.policy import MAX_BUILD_POINTS, MAX_BUILD_WORK, MAX_TEXELS
 
 __all__ = ["Budget", "LinearAxis", "convergence_factor", "interleave", "linear_error", "midpoints4",
            "optical_thickness", "power_of_two_step", "subdivide"]
