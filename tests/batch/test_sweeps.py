@@ -94,7 +94,7 @@ def test_sweep_arguments_are_checked(scene, tmp_path):
 # on a LocalCluster of 2 worker processes
 
 
-def test_every_frame_has_outputs_and_a_manifest_row(scene, tmp_path, client):
+def test_every_frame_has_outputs_and_a_manifest_row(scene, tmp_path, client, llvm):
     out = tmp_path / "grid"
     result = _run(scene, out, client, {"material": "Au,Ag"}, {THICKNESS: "150:450:150"})
     assert [r["status"] for r in result] == ["ok"] * 6, result.failed
