@@ -1,6 +1,6 @@
-"""The GC guard (thinfilm_mi.render.gc_guard): the loop that crashed renders, on the main thread and on worker threads, and the guard's cost.
+"""The GC guard (thinfilm_mi.render.gc_guard): the loop that crashed renders, on any thread, and its cost.
 
-    python benchmarks/gc_guard_bench.py [--iterations 60] [--skip-matrix] [--skip-cost]
+    python benchmarks/gc_guard_bench.py [--iterations 15] [--skip-matrix] [--skip-cost]
                                         [--repeats 9]
 
 1. The matrix: ``tests/support/gc_guard_child.py`` in a fresh process per (variant, collector
@@ -62,7 +62,7 @@ def matrix(iterations):
             ("llvm_ad_rgb", "1", "plain+guard", "worker", iterations)]
     runs += [(v, g, "thinfilm", where, iterations) for v in VARIANTS for g in ("default", "1")
              for where in ("main", "worker")]
-    runs += [("llvm_ad_rgb", g, "thinfilm", "workers", max(iterations // 10, 1)) for g in ("default", "1")]
+    runs += [("llvm_ad_rgb", g, "thinfilm", "workers", max(iterations // 3, 2)) for g in ("default", "1")]
     for variant, threshold, kind, where, n in runs:
         rc, last, seconds = _child(variant, n, threshold, kind, where)
         print(f"{variant:28s} {threshold:8s} {kind:18s} {where:8s} {rc:6d}  "
@@ -147,7 +147,7 @@ def cost(repeats):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--iterations", type=int, default=60)
+    ap.add_argument("--iterations", type=int, default=15)
     ap.add_argument("--repeats", type=int, default=9)
     ap.add_argument("--skip-matrix", action="store_true")
     ap.add_argument("--skip-cost", action="store_true")
