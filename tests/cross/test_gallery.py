@@ -87,6 +87,22 @@ def test_an_edited_scene_or_doc_block_changes_the_digest(monkeypatch):
     assert gallery.digest("thinfilm_conductor", params) != before
 
 
+@pytest.mark.parametrize("plugin", PLUGINS)
+def test_each_page_shows_its_row_after_the_parameter_table(plugin):
+    sys.path.insert(0, str(ROOT / "docs" / "_ext"))
+    try:
+        import thinfilm_plugins as ext
+    finally:
+        sys.path.pop(0)
+    doc = ext.doc_block(ROOT / "thinfilm_mi" / "plugins" / f"{plugin}.py")
+    lines = ext.with_gallery(doc).splitlines()
+    at = lines.index(".. plugingallery::")
+    table = lines.index(".. pluginparameters::")
+    assert table < at and lines[at + 2:] == doc.splitlines()[at:], plugin   # inserted, nothing lost
+    assert all(not line.strip() or line[:1].isspace() for line in lines[table + 1:at]), plugin
+    assert lines[at + 2].strip() and not lines[at + 2][:1].isspace(), plugin   # the text after the table
+
+
 def test_every_gallery_scene_loads_at_every_picture():
     import mitsuba as mi
 
