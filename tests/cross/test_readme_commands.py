@@ -230,11 +230,16 @@ def check_make_docs(proc, root, command):
     finally:
         sys.path.pop(0)
     html = root / "docs" / "_build" / "html"
+    gallery = json.loads(ext.GALLERY_MANIFEST.read_text(encoding="utf-8"))
     for path in ext.plugin_files():
         page = (html / "plugins" / f"{path.stem}.html").read_text(encoding="utf-8")
         for name in ext.documented_parameters(ext.doc_block(path)):
             assert f'id="{path.stem}-{name}"'.replace("_", "-") in page, (path.stem, name)
         assert "XML (scene file)" in page and "Python (dictionary for mi.load_dict)" in page, path.stem
+        # its gallery row (scripts/make_gallery.py), every picture copied beside the page
+        for entry in gallery[path.stem]:
+            assert f'src="../_images/{entry["png"]}"' in page, entry["png"]
+            assert (html / "_images" / entry["png"]).is_file(), entry["png"]
     api = (html / "api.html").read_text(encoding="utf-8")
     for name in ("thinfilm_mi.Stack", "thinfilm_mi.resolve_material", "thinfilm_mi.colour.report.colour_report",
                  "thinfilm_mi.design.design", "thinfilm_mi.design.fit", "thinfilm_mi.batch.sweeps.sweep"):
