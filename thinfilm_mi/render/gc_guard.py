@@ -102,22 +102,21 @@ class _Guard:
 
     # -- the gc.callbacks hook -------------------------------------------------
     def __call__(self, phase: str, info: dict) -> None:
-        me = threading.get_ident()
         if phase != "start":
             self.passing = None
             if self.pass_held:
                 self.pass_held = False
                 self.pass_lock.release()
             return
-        self.passing = me
+        self.passing = me = threading.get_ident()
         self.pass_held = self.pass_lock.acquire(blocking=False)
         if self.flag(self.symbolic):
             self.join(me)
-        elif me in self.tracing:
+        elif self.tracing and me in self.tracing:
             self.tracing.discard(me)   # outside its trace (its profile function was taken)
-        if self.busy():
+        if self.tracing or self.scoped:
             self._forget_dead_threads()
-        if self.busy():
+        if self.tracing or self.scoped:
             gc.freeze()
             self.frozen = True
             self.deferred += 1
