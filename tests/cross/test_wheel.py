@@ -195,3 +195,78 @@ def test_installed_wheel_renders_every_plugin_outside_the_checkout(installed):
     # finite and not black: the sky lights the background and the spheres (at 1 spp a path kept
     # inside a glass sphere past max_depth leaves its pixel black, so not every pixel)
     assert out["finite"] and out["mean"] > 0 and out["lit"] > 0.75, out
+
+
+def test_installed_commands_run_outside_the_checkout(installed):
+    script = installed.venv / "bin" / "thinfilm-render"
+    assert script.exists(), "the wheel installs no thinfilm-render console script"
+    assert script.read_text().splitlines()[0] == f"#!{installed.python}"
+    res = installed.run("thinfilm-render", "--help")
+    _check(res, "thinfilm-render --help")
+    assert res.stdout.startswith("usage: thinfilm-render")
+    res = installed.run("python", "-m", "thinfilm_mi", "materials")
+    _check(res, "python -m thinfilm_mi materials")
+    # the table reads the shipped catalogue: a page per name, BK7's the SCHOTT one
+    assert "main/Au/Johnson" in res.stdout and "specs/SCHOTT-optical/N-BK7" in res.stdout, res.stdout
+
+
+#: What Mitsuba 3.10 does with the "mitsuba" entry-point group (mitsuba.detail.load_plugins,
+#: mitsuba3 PR 1943): it imports each named module when a variant first becomes active and
+#: reloads it after every later variant change. Here by hand on 3.9, thinfilm_mi not imported before.
+ENTRY_POINT = textwrap.dedent("""
+    import gc, importlib, importlib.metadata, json, sys
+    import mitsuba as mi
+
+    PROPS = {"thinfilm_coating": {"bsdf": {"type": "diffuse"}}, "thinfilm_blackbody": {"temperature": 3000.0}}
+
+    def loads():
+        out = {}
+        for name in sorted(thinfilm_mi.PLUGINS) + ["thinfilm_blackbody"]:
+            obj = mi.load_dict({"type": name, **PROPS.get(name, {})})
+            out[name] = isinstance(obj, (mi.BSDF, mi.Texture))
+        return out
+
+    ours = [(ep.name, ep.value) for ep in importlib.metadata.entry_points(group="mitsuba")
+            if ep.dist.name == "thinfilm-mi"]
+    mi.set_variant("scalar_rgb")
+    try:
+        mi.load_dict({"type": "thinfilm_diffuse"})
+        unknown_before = False
+    except Exception:
+        unknown_before = True
+    module = importlib.import_module(ours[0][1])
+    import thinfilm_mi
+    report = {"entry_points": ours, "unknown_before": unknown_before, "module": module.__name__,
+              "loads": {"scalar_rgb": loads()}}
+    for variant in ("scalar_spectral", "llvm_ad_rgb"):
+        mi.set_variant(variant)
+        importlib.reload(module)
+        importlib.reload(module)          # twice: harmless
+        report["loads"][variant] = loads()
+
+    calls = []
+    register_current = thinfilm_mi.plugins._register_current
+    thinfilm_mi.plugins._register_current = lambda: calls.append(1) or register_current()
+    mi.set_variant("llvm_ad_spectral")    # the variant callback runs once, whatever the reloads
+    report["callback_runs"] = len(calls)
+    report["gc_guards"] = sum(type(cb).__module__ == "thinfilm_mi.render.gc_guard" for cb in gc.callbacks)
+    report["render_wraps"] = [getattr(f, "__wrapped_by_gc_guard__", False) for f in (mi.render, mi.render.__wrapped__)]
+    print(json.dumps(report))
+""")
+
+
+def test_mitsuba_entry_point_registers_the_plugins_and_is_harmless_twice(installed):
+    script = installed.outside / "entry_point.py"
+    script.write_text(ENTRY_POINT)
+    res = installed.run(str(installed.python), str(script))
+    _check(res, "the mitsuba entry point, imported and reloaded as Mitsuba 3.10 does")
+    out = json.loads(res.stdout.strip().splitlines()[-1])
+    # one entry point naming a module (3.10 calls importlib.import_module on its value, so no ":attr");
+    # that module, thinfilm_mi, registers the plugins on import through thinfilm_mi.register
+    assert out["entry_points"] == [["thinfilm_mi", "thinfilm_mi"]] and out["module"] == "thinfilm_mi"
+    assert out["unknown_before"], "the plugins were registered before the entry point's module was imported"
+    every = {name: True for name in ["thinfilm_blackbody", "thinfilm_coating", "thinfilm_conductor",
+                                     "thinfilm_dielectric", "thinfilm_diffuse", "thinfilm_roughconductor",
+                                     "thinfilm_roughdielectric"]}
+    assert out["loads"] == {v: every for v in ("scalar_rgb", "scalar_spectral", "llvm_ad_rgb")}
+    assert out["callback_runs"] == 1 and out["gc_guards"] == 1 and out["render_wraps"] == [True, False], out
