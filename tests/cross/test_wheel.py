@@ -37,9 +37,9 @@ pytestmark = pytest.mark.slow
 ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "thinfilm_mi" / "data"
 
-#: what a user's clean checkout would not hold (build outputs, caches, environments)
+#: what a clean clone would not hold (build outputs, caches, environments), where git cannot say
 NOT_SOURCE = (".git", ".venv", "*.egg-info", "build", "dist", "out", "__pycache__", "_build",
-              ".pytest_cache", ".hypothesis", ".ipynb_checkpoints")
+              ".pytest_cache", ".hypothesis", ".ipynb_checkpoints", ".import_linter_cache")
 #: this environment's site-packages entries that belong to the checkout's editable install
 OURS = ("thinfilm_mi", "thinfilm-mi", "__editable__")
 
@@ -66,10 +66,27 @@ def _check(res: subprocess.CompletedProcess, what: str) -> None:
     assert res.returncode == 0, f"{what} failed (exit {res.returncode}):\n{res.stdout[-3000:]}\n{res.stderr[-4000:]}"
 
 
+def _copy_checkout(src: Path) -> None:
+    """The checkout's files as a clean clone holds them: git's tracked and not ignored files (a copy
+    without :data:`NOT_SOURCE` outside git). The build then writes its egg-info into the copy."""
+    try:
+        res = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+                             cwd=ROOT, capture_output=True, timeout=60)
+    except FileNotFoundError:
+        res = None
+    if res is None or res.returncode != 0:
+        shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(*NOT_SOURCE), symlinks=True)
+        return
+    for name in filter(None, res.stdout.decode().split("\0")):
+        if (ROOT / name).is_file():     # not a tracked file deleted from the worktree
+            (src / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, src / name)
+
+
 def _build(work: Path) -> tuple[Path, Path]:
-    """The sdist and the wheel of a copy of the checkout (a build writes egg-info beside the sources)."""
+    """The sdist and the wheel of a copy of the checkout, the wheel built from the sdist."""
     src = work / "src"
-    shutil.copytree(ROOT, src, ignore=shutil.ignore_patterns(*NOT_SOURCE), symlinks=True)
+    _copy_checkout(src)
     dist = work / "dist"
     try:
         import build  # noqa: F401
