@@ -12,8 +12,8 @@ editable finder and metadata), so Mitsuba, Dr.Jit and numpy are this suite's and
 downloaded; pip, run from here with ``--python`` and ``--no-index``, still checks that they meet
 the wheel's requirements.
 
-Cost: the build and install take ~8 s of one worker, once per run (the pytest-xdist workers share
-them through a lock file); the render ~6 s, the commands and the entry-point check ~2-4 s each.
+Cost: the build and install take ~10-12 s of one worker, once per run (the pytest-xdist workers share
+them through a lock file); the render 5-8 s, the commands and the entry-point check 2-4 s each.
 """
 from __future__ import annotations
 
