@@ -75,6 +75,9 @@ TRACED_METHODS = ("sample", "eval", "pdf", "eval_pdf", "eval_pdf_sample", "eval_
                   "mean")
 
 _lock = threading.Lock()
+#: seconds a render waits at most for a pass another thread began (a finalizer of that
+#: pass waiting for a lock this thread holds must not hang both)
+PASS_WAIT = 5.0
 
 
 class _Guard:
@@ -222,9 +225,8 @@ def rendering():
     install()
     guard, me = _guard, threading.get_ident()
     guard.scoped[me] = guard.scoped.get(me, 0) + 1
-    if guard.passing not in (None, me):
-        with guard.pass_lock:
-            pass
+    if guard.passing not in (None, me) and guard.pass_lock.acquire(timeout=PASS_WAIT):
+        guard.pass_lock.release()
     try:
         yield
     finally:
