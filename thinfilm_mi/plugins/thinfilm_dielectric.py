@@ -117,10 +117,10 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.render import modes
+from thinfilm_mi.render.lobe_choice import chosen_weight, reflection_probability
 from thinfilm_mi.render.media import DEFAULT_INT_IOR, real_index
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
-from thinfilm_mi.render.lobe_choice import chosen_weight, reflection_probability
 from thinfilm_mi.render.variant import check_variant
 
 __all__ = ["NAME", "ThinFilmDielectric"]
