@@ -37,10 +37,6 @@ MAX_FUNCTION_LINES = 80
 #: Functions allowed over MAX_FUNCTION_LINES lines ("path:qualified name" -> why). The
 #: test fails when an entry is no longer needed, so the list cannot go stale.
 LONG_FUNCTIONS = {
-    "tabulate/diffuse.py:ScaledColourDiffuse.__init__":
-        "to split: a constructor that runs a whole build (build in a function that returns it)",
-    "tabulate/diffuse.py:ColourDiffuse.__init__":
-        "to split: a constructor that runs a whole build (build in a function that returns it)",
     "tabulate/factors.py:FactorTable.__init__":
         "to split: a constructor that runs a whole build (build in a function that returns it)",
 }
