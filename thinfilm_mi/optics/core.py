@@ -44,6 +44,24 @@ same for ``t``), which flips the sign of the s-p phase difference and hence of
 it on bare interfaces (a conductor, glass from both sides, TIR) against
 ``mueller.specular_reflection`` and ``specular_transmission``.
 
+The recursion comes in the forms that its callers need, each written once; they share
+:func:`rouard_step`, the root choice and the guard of ``q = 0``, and differ in what the
+arithmetic must carry:
+
+* :func:`rouard_recursion`, the films unrolled at trace time (specialised on literal
+  indices and :class:`FilmBounds`): complex amplitudes ``r, t`` for
+  :func:`stack_amplitudes` (polarized paths), or the power form (``|T|^2`` only, no phase
+  of ``t``) for :func:`stack_rt`;
+* :func:`stack_loop_terms` (:func:`stack_rt_loop`), a Dr.Jit loop over any films, kernel
+  size independent of their number: the power form, rescaled by exact powers of two (and
+  the smooth scaling the band-limited tables sample);
+* :func:`stack_rt_loop_real`, the same loop for lossless films above the ambient: real
+  Fresnel amplitudes, about half the work per film;
+* :func:`thinfilm_mi.optics.mueller.amplitude_loop`, the loop with complex ``t`` (the
+  Mueller cross terms need the phase of ``t_s conj(t_p)``), rescaled by ``1 / (|Re D| +
+  |Im D|)``. Folding it into :func:`stack_loop_terms` would change one of the two
+  rescalings, and so their float32 bits; the two share :class:`LoopIncidence` instead.
+
 Reference: H. Hirayama, K. Kaneda, H. Yamashita, Y. Monden, "Visualization of
 optical phenomena of objects coated with multilayer films" (eq. 1-6 and
 appendix A), and M. Born, E. Wolf, *Principles of Optics*, sec. 1.6.
