@@ -7,6 +7,8 @@
   public (no leading underscore) and documented.
 * No module is over :data:`MAX_LINES` lines, but for those in :data:`ALGORITHMS`,
   each one algorithm that reads best in one file.
+* No function is over :data:`MAX_FUNCTION_LINES` lines (``def`` to its last line), but
+  for those in :data:`LONG_FUNCTIONS`, each with the reason it is not split yet.
 * ruff (pyflakes, pycodestyle, import order; ``[tool.ruff]`` in ``pyproject.toml``)
   finds nothing in the package, tests, benchmarks and scripts.
 * Every module lists its public names in ``__all__`` (each one defined or imported
@@ -29,6 +31,14 @@ MAX_LINES = 600
 ALGORITHMS = {
     "optics/core.py": "the optics core: Fresnel terms, the Rouard recursion and its loop",
     "tabulate/band.py": "the band-limited table: its sheared axis, rows, their amplitudes, the build",
+}
+
+MAX_FUNCTION_LINES = 80
+#: Functions allowed over MAX_FUNCTION_LINES lines ("path:qualified name" -> why). The
+#: test fails when an entry is no longer needed, so the list cannot go stale.
+LONG_FUNCTIONS = {
+    "tabulate/factors.py:FactorTable.__init__":
+        "to split: a constructor that runs a whole build (build in a function that returns it)",
 }
 
 #: Subpackages whose modules may still lack ``__all__`` (none: every module has one). The
@@ -114,6 +124,46 @@ def test_modules_are_short_or_one_algorithm():
         if n > MAX_LINES and rel not in ALGORITHMS:
             long.append(f"{rel}: {n} lines")
     assert not long, "\n".join(long)
+
+
+def _function_lengths(source: str) -> dict[str, int]:
+    """``{qualified name: lines}`` of every function in ``source``, nested ones and
+    methods included (``Class.method``, ``outer.inner``), from ``def`` to its last line."""
+    lengths = {}
+
+    def visit(node, prefix: str) -> None:
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lengths[prefix + child.name] = child.end_lineno - child.lineno + 1
+                visit(child, f"{prefix}{child.name}.")
+            elif isinstance(child, ast.ClassDef):
+                visit(child, f"{prefix}{child.name}.")
+            else:
+                visit(child, prefix)
+    visit(ast.parse(source), "")
+    return lengths
+
+
+def test_functions_are_short():
+    lengths = {}
+    for path in _modules():
+        rel = path.relative_to(PACKAGE).as_posix()
+        for name, n in _function_lengths(path.read_text(encoding="utf-8")).items():
+            lengths[f"{rel}:{name}"] = n
+    long = [f"{key}: {n} lines" for key, n in lengths.items()
+            if n > MAX_FUNCTION_LINES and key not in LONG_FUNCTIONS]
+    stale = [key for key in LONG_FUNCTIONS if lengths.get(key, 0) <= MAX_FUNCTION_LINES]
+    assert not long, "split along the algorithm's steps:\n" + "\n".join(long)
+    assert not stale, f"no longer over {MAX_FUNCTION_LINES} lines: drop from LONG_FUNCTIONS: {stale}"
+
+
+def test_the_function_length_count_is_not_vacuous():
+    """Methods and nested functions are counted, from ``def`` to the last line."""
+    body = "".join(f"        x{i} = {i}\n" for i in range(MAX_FUNCTION_LINES))
+    source = f"class A:\n    def long(self):\n{body}\n    def short(self):\n        def inner():\n" \
+        "            return 1\n        return inner\n"
+    lengths = _function_lengths(source)
+    assert lengths == {"A.long": MAX_FUNCTION_LINES + 1, "A.short": 4, "A.short.inner": 2}
 
 
 def test_a_lower_layer_importing_a_higher_one_breaks_the_contract(tmp_path):

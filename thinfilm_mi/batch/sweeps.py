@@ -290,6 +290,54 @@ def grid_variant(scene: Path, frames: Sequence[Frame], variant: str) -> tuple[st
     return variant, None
 
 
+def _checked_arguments(scene_file: Path, *, client, scheduler, workers, spp, threads,
+                       frames_per_task, sensor, max_pass_samples, seed, timeout, size, variant,
+                       contact_sheet) -> tuple[int, int] | None:
+    """Raise :class:`~thinfilm_mi.errors.UsageError` for a bad argument of :func:`sweep`
+    (before anything is rendered); returns ``size`` as ``(width, height)`` or ``None``."""
+    if not scene_file.is_file():
+        raise UsageError(f"scene file not found: {scene_file}")
+    if sum(x is not None for x in (client, scheduler, workers)) > 1:
+        raise UsageError("give at most one of workers, scheduler and client")
+    if workers is not None and (isinstance(workers, bool) or int(workers) != workers or workers < 1):
+        raise UsageError(f"--workers must be an integer >= 1, got {workers!r}")
+    for name, value, low in (("spp", spp, 1), ("threads", threads, 1),
+                             ("frames_per_task", frames_per_task, 1), ("sensor", sensor, 0),
+                             ("max_pass_samples", max_pass_samples, 1)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < low):
+            raise UsageError(f"{name} must be an integer >= {low}, got {value!r}")
+    if isinstance(seed, bool) or not isinstance(seed, int):
+        raise UsageError(f"seed must be an integer, got {seed!r}")
+    if timeout is not None and not (isinstance(timeout, (int, float)) and timeout > 0):
+        raise UsageError(f"timeout must be a number of seconds > 0, got {timeout!r}")
+    if isinstance(size, str):
+        size = parse_size(size)
+    elif size is not None:
+        try:
+            size = parse_size("x".join(str(int(v)) for v in size))
+        except (TypeError, ValueError):
+            raise UsageError(f"size {size!r}: expected (width, height)") from None
+    if not isinstance(variant, str) or not re.fullmatch(r"[a-z]+(_[a-z0-9]+)+", variant):
+        raise UsageError(f"--variant {variant!r}: not a Mitsuba variant name (e.g. {DEFAULT_VARIANT})")
+    if contact_sheet:  # say so now, not after the frames are rendered
+        require_extra("matplotlib", "plot",
+                      "the contact sheet (skip it: --no-contact-sheet, contact_sheet=False)")
+    return size
+
+
+def _local_workers(variant: str, n_frames: int, workers: int | None, threads: int | None, *,
+                   external: bool) -> tuple[int, int | None]:
+    """``(workers, threads)`` of :func:`sweep`: a local cluster's processes (one per GPU for
+    ``cuda_*``, else one per core, at most one per frame) and the Dr.Jit threads of each
+    (the cores divided among them; an ``external`` cluster's own unless given)."""
+    if variant.startswith("cuda_") and workers is None and not external:
+        workers = len(gpu_worker_envs(visible_gpus()))
+    local_workers = workers or min(_cpu_count(), n_frames)
+    if threads is None and not external:
+        threads = max(1, _cpu_count() // local_workers)
+    return local_workers, threads
+
+
 def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] | None = None,
           parameters: Mapping[str, Any] | Sequence[str] | None = None,
           out_dir: str | os.PathLike = DEFAULT_OUT_DIR, *,
@@ -326,35 +374,12 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
         if stream is not None or verbose:
             tqdm.write(f"{PROG}: {msg}", file=stream or sys.stderr)  # above a progress bar
 
-    # ---- arguments
     scene_file = Path(scene)
-    if not scene_file.is_file():
-        raise UsageError(f"scene file not found: {scene_file}")
-    if sum(x is not None for x in (client, scheduler, workers)) > 1:
-        raise UsageError("give at most one of workers, scheduler and client")
-    if workers is not None and (isinstance(workers, bool) or int(workers) != workers or workers < 1):
-        raise UsageError(f"--workers must be an integer >= 1, got {workers!r}")
-    for name, value, low in (("spp", spp, 1), ("threads", threads, 1),
-                             ("frames_per_task", frames_per_task, 1), ("sensor", sensor, 0),
-                             ("max_pass_samples", max_pass_samples, 1)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < low):
-            raise UsageError(f"{name} must be an integer >= {low}, got {value!r}")
-    if isinstance(seed, bool) or not isinstance(seed, int):
-        raise UsageError(f"seed must be an integer, got {seed!r}")
-    if timeout is not None and not (isinstance(timeout, (int, float)) and timeout > 0):
-        raise UsageError(f"timeout must be a number of seconds > 0, got {timeout!r}")
-    if isinstance(size, str):
-        size = parse_size(size)
-    elif size is not None:
-        try:
-            size = parse_size("x".join(str(int(v)) for v in size))
-        except (TypeError, ValueError):
-            raise UsageError(f"size {size!r}: expected (width, height)") from None
-    if not isinstance(variant, str) or not re.fullmatch(r"[a-z]+(_[a-z0-9]+)+", variant):
-        raise UsageError(f"--variant {variant!r}: not a Mitsuba variant name (e.g. {DEFAULT_VARIANT})")
-    if contact_sheet:  # say so now, not after the frames are rendered
-        require_extra("matplotlib", "plot",
-                      "the contact sheet (skip it: --no-contact-sheet, contact_sheet=False)")
+    size = _checked_arguments(scene_file, client=client, scheduler=scheduler, workers=workers,
+                              spp=spp, threads=threads, frames_per_task=frames_per_task,
+                              sensor=sensor, max_pass_samples=max_pass_samples, seed=seed,
+                              timeout=timeout, size=size, variant=variant,
+                              contact_sheet=contact_sheet)
     axes = parse_axes(defines, DEFINE) + parse_axes(parameters, TRAVERSE)
     frames = build_frames(axes)
     variant, notice = grid_variant(scene_file, frames, variant)
@@ -364,11 +389,8 @@ def sweep(scene: str | os.PathLike, defines: Mapping[str, Any] | Sequence[str] |
     out = Path(out_dir).resolve()
     (out / FRAMES_DIR).mkdir(parents=True, exist_ok=True)
 
-    if variant.startswith("cuda_") and workers is None and client is None and scheduler is None:
-        workers = len(gpu_worker_envs(visible_gpus()))
-    local_workers = workers or min(_cpu_count(), len(frames))
-    if threads is None and client is None and scheduler is None:
-        threads = max(1, _cpu_count() // local_workers)
+    local_workers, threads = _local_workers(variant, len(frames), workers, threads,
+                                            external=client is not None or scheduler is not None)
     job = Job(scene=str(scene_file.resolve()), out_dir=str(out), variant=variant, spp=spp,
               size=size, seed=seed, sensor=sensor, max_pass_samples=max_pass_samples,
               threads=threads, verbose=verbose)

@@ -482,11 +482,14 @@ def _label(pol: str, qty: str) -> str:
     return POLARIZATIONS[pol].label(qty)
 
 
+#: The line style of each quantity, ``(polarisation, R or T)``, in every panel.
+_STYLES = {("unpolarized", "R"): "-", ("unpolarized", "T"): "--", ("s", "R"): "-",
+           ("s", "T"): "--", ("p", "R"): ":", ("p", "T"): "-."}
+
+
 def _report_figure(report: ColourReport):
-    import colour
     from matplotlib import colormaps
     from matplotlib.figure import Figure
-    from matplotlib.lines import Line2D
 
     fig = Figure(figsize=(13, 6.4), dpi=110)
     grid = fig.add_gridspec(2, 3, width_ratios=[1.6, 1, 1], height_ratios=[3.2, 1])
@@ -494,19 +497,27 @@ def _report_figure(report: ColourReport):
     ax_c = fig.add_subplot(grid[0, 1])
     ax_z = fig.add_subplot(grid[0, 2])
     ax_w = fig.add_subplot(grid[1, :])
-    keys = list(report.spectra)
     n = len(report.angles)
     colors = colormaps["viridis"](np.linspace(0.0, 0.85, n))
-    styles = {("unpolarized", "R"): "-", ("unpolarized", "T"): "--", ("s", "R"): "-", ("s", "T"): "--",
-              ("p", "R"): ":", ("p", "T"): "-."}
-    markers = dict(zip(keys, "os^vDP"))
+    step = max(1, n // 8)
+    _plot_spectra(ax_s, report, colors, step)
+    _plot_chromaticity(ax_c, ax_z, report)
+    _plot_swatches(ax_w, report, step)
+    fig.tight_layout()
+    return fig
 
-    # spectra, one colour per angle, one line style per quantity
+
+def _plot_spectra(ax_s, report: ColourReport, colors, step: int) -> None:
+    """The spectra, one colour per angle (every ``step``-th in the legend), one line style
+    per quantity."""
+    from matplotlib.lines import Line2D
+
+    keys = list(report.spectra)
+    n = len(report.angles)
     for key in keys:
         for j in range(n):
-            ax_s.plot(report.wavelengths, report.spectra[key][j], ls=styles[key], color=colors[j], lw=1.1)
-    handles = [Line2D([], [], color="k", ls=styles[k], label=_label(*k)) for k in keys]
-    step = max(1, n // 8)
+            ax_s.plot(report.wavelengths, report.spectra[key][j], ls=_STYLES[key], color=colors[j], lw=1.1)
+    handles = [Line2D([], [], color="k", ls=_STYLES[k], label=_label(*k)) for k in keys]
     handles += [Line2D([], [], color=colors[j], label=f"{report.angles[j]:g}°") for j in range(0, n, step)]
     ax_s.legend(handles=handles, fontsize=6, ncol=2)
     ax_s.set_xlabel("wavelength (nm)")
@@ -515,7 +526,14 @@ def _report_figure(report: ColourReport):
     ax_s.grid(alpha=0.3)
     ax_s.set_title(report.describe(), fontsize=8)
 
-    # chromaticity diagram (the observer's spectral locus closed by the purple line) and its zoom
+
+def _plot_chromaticity(ax_c, ax_z, report: ColourReport) -> None:
+    """The chromaticity diagram (the observer's spectral locus closed by the purple line)
+    with each quantity's path over the angles, and its zoom on the paths."""
+    import colour
+
+    keys = list(report.spectra)
+    markers = dict(zip(keys, "os^vDP"))
     cmfs = colour.MSDS_CMFS[OBSERVERS[report.observer]]
     locus = colour.XYZ_to_xy(cmfs.values)
     ax_c.plot(np.append(locus[:, 0], locus[0, 0]), np.append(locus[:, 1], locus[0, 1]), color="0.3", lw=1)
@@ -528,7 +546,7 @@ def _report_figure(report: ColourReport):
         ax.plot([wx], [wy], marker="+", color="k", ms=9, ls="none", label=f"white ({report.illuminant.name})")
         for key in keys:
             xy = report.colours[key].xy
-            ax.plot(xy[:, 0], xy[:, 1], ls=styles[key], color="0.45", lw=0.8)
+            ax.plot(xy[:, 0], xy[:, 1], ls=_STYLES[key], color="0.45", lw=0.8)
             ax.scatter(xy[:, 0], xy[:, 1], c=report.colours[key].rgb, marker=markers[key], edgecolors="k",
                        linewidths=0.4, s=30 if ax is ax_z else 12, zorder=3, label=_label(*key))
             ax.scatter(xy[:1, 0], xy[:1, 1], facecolors="none", edgecolors="k", s=90 if ax is ax_z else 40,
@@ -551,9 +569,14 @@ def _report_figure(report: ColourReport):
         ax.grid(alpha=0.2)
         ax.tick_params(labelsize=7)
 
-    # swatches: per quantity, the colour as seen and its hue brightened to full scale
+
+def _plot_swatches(ax_w, report: ColourReport, step: int) -> None:
+    """The swatches: per quantity, the colour as seen and its hue brightened to full
+    scale, along the angles (every ``step``-th labelled)."""
+    import colour
+
     rows, labels = [], []
-    for key in keys:
+    for key in report.spectra:
         c = report.colours[key]
         lin = np.clip(c.rgb_linear, 0.0, None)
         peak = lin.max(axis=-1, keepdims=True)
@@ -562,8 +585,7 @@ def _report_figure(report: ColourReport):
         labels += [_label(*key), f"{_label(*key)} hue"]
     ax_w.imshow(np.stack(rows), aspect="auto", interpolation="nearest")
     ax_w.set_yticks(range(len(labels)), labels, fontsize=7)
-    ax_w.set_xticks(range(0, n, step), [f"{a:g}°" for a in report.angles[::step]], fontsize=7)
+    ax_w.set_xticks(range(0, len(report.angles), step), [f"{a:g}°" for a in report.angles[::step]],
+                    fontsize=7)
     ax_w.set_xlabel("angle of incidence")
     ax_w.set_title("sRGB swatches: as seen, and brightened to full scale (hue)", fontsize=8)
-    fig.tight_layout()
-    return fig

@@ -44,6 +44,24 @@ same for ``t``), which flips the sign of the s-p phase difference and hence of
 it on bare interfaces (a conductor, glass from both sides, TIR) against
 ``mueller.specular_reflection`` and ``specular_transmission``.
 
+The recursion comes in the forms that its callers need, each written once; they share
+:func:`rouard_step`, the root choice and the guard of ``q = 0``, and differ in what the
+arithmetic must carry:
+
+* :func:`rouard_recursion`, the films unrolled at trace time (specialised on literal
+  indices and :class:`FilmBounds`): complex amplitudes ``r, t`` for
+  :func:`stack_amplitudes` (polarized paths), or the power form (``|T|^2`` only, no phase
+  of ``t``) for :func:`stack_rt`;
+* :func:`stack_loop_terms` (:func:`stack_rt_loop`), a Dr.Jit loop over any films, kernel
+  size independent of their number: the power form, rescaled by exact powers of two (and
+  the smooth scaling the band-limited tables sample);
+* :func:`stack_rt_loop_real`, the same loop for lossless films above the ambient: real
+  Fresnel amplitudes, about half the work per film;
+* :func:`thinfilm_mi.optics.mueller.amplitude_loop`, the loop with complex ``t`` (the
+  Mueller cross terms need the phase of ``t_s conj(t_p)``), rescaled by ``1 / (|Re D| +
+  |Im D|)``. Folding it into :func:`stack_loop_terms` would change one of the two
+  rescalings, and so their float32 bits; the two share :class:`LoopIncidence` instead.
+
 Reference: H. Hirayama, K. Kaneda, H. Yamashita, Y. Monden, "Visualization of
 optical phenomena of objects coated with multilayer films" (eq. 1-6 and
 appendix A), and M. Born, E. Wolf, *Principles of Optics*, sec. 1.6.
@@ -515,6 +533,42 @@ def exit_admittances(n_exit, beta2, beta2_max):
     return n_ex, q_ex, {"s": q_ex, "p": cmul(q_ex, cinv(n_ex.square()))}
 
 
+class LoopIncidence:
+    """What every general film loop (:func:`stack_loop_terms`,
+    :func:`thinfilm_mi.optics.mueller.amplitude_loop`) derives from the incidence before
+    it visits the films: :func:`incidence`'s ``cos0``, ``beta2`` and ``q0``, the exit
+    medium's :func:`exit_admittances` (``n_ex``, ``q_ex``, ``a_ex``), ``grazing``, and a
+    ``zero`` of the loop state's shape; ``n0_max`` and ``film_n_min`` are the loop's
+    trace-time hints."""
+
+    def __init__(self, n0, cos0, n_exit, wavelength, n0_max: float | None,
+                 film_n_min: float | None):
+        self.cos0, self.beta2, self.q0 = incidence(n0, cos0)
+        self.beta2_max = n0_max * n0_max if n0_max is not None else None
+        self.n2_min = film_n_min * film_n_min if film_n_min is not None else None
+        self.beta = dr.sqrt(self.beta2)
+        self.grazing = self.cos0 <= 0.0
+        self.n_ex, self.q_ex, self.a_ex = exit_admittances(n_exit, self.beta2, self.beta2_max)
+        self.zero = 0.0 * wavelength * self.cos0
+        self.inv_wl = 1.0 / wavelength
+
+    def full(self, z: Cx) -> tuple:
+        """``(re, im)`` of ``z`` broadcast to the loop state's shape."""
+        return (self.zero + z.re, self.zero + z.im)
+
+    def film_admittances(self, m: Cx) -> tuple:
+        """``(q, {pol: admittance})`` of a film of index ``m`` (``q`` guarded off 0,
+        :func:`guard_zero_q`)."""
+        q = guard_zero_q(m, normal_index_bounded(m, self.beta2, self.beta2_max, self.n2_min),
+                         self.beta, self.zero)
+        inv_m2 = 1.0 / (m.re * m.re) if is_zero(m.im) else cinv(m.square())
+        return q, {"s": q, "p": cmul(q, Cx.of(inv_m2))}
+
+    def ambient_admittances(self, n0) -> dict:
+        """``{pol: admittance}`` of the ambient (real)."""
+        return {"s": Cx(self.q0, 0.0), "p": Cx(self.q0 * (1.0 / (n0 * n0)), 0.0)}
+
+
 @dataclass(frozen=True)
 class FilmBounds:
     """What is known at trace time of one film's index over every wavelength and angle
@@ -834,42 +888,28 @@ def stack_loop_terms(n0, cos0, count, film, n_exit, wavelength, *, transmission:
     :func:`thinfilm_mi.tabulate.band.amplitudes`). The power of two is exact,
     so ``R`` and the ratios of neighbouring samples do not depend on it.
     """
-    cos0, beta2, q0 = incidence(n0, cos0)
     if _is_literal(n0):
         n0_max = n0
-    beta2_max = n0_max * n0_max if n0_max is not None else None
-    film_n2_min = film_n_min * film_n_min if film_n_min is not None else None
-    beta = dr.sqrt(beta2)
-    grazing = cos0 <= 0.0
-    n_ex, q_ex, a_ex = exit_admittances(n_exit, beta2, beta2_max)
-    zero = 0.0 * wavelength * cos0
-    one = zero + 1.0
-
-    def full(z: Cx) -> tuple:
-        return (zero + z.re, zero + z.im)
-
-    inv_wl = 1.0 / wavelength
+    inc = LoopIncidence(n0, cos0, n_exit, wavelength, n0_max, film_n_min)
 
     def film_terms(j):
         m, d = film(j)
-        m = Cx.of(m)
-        q = guard_zero_q(m, normal_index_bounded(m, beta2, beta2_max, film_n2_min), beta, zero)
-        u = d * inv_wl
+        q, a = inc.film_admittances(Cx.of(m))
+        u = d * inc.inv_wl
         E = phase_factor(q, u, True)
         mag2 = 1.0 if is_zero(q.im) else dr.exp((-4.0 * math.pi) * (q.im * u))
-        inv_m2 = 1.0 / (m.re * m.re) if is_zero(m.im) else cinv(m.square())
-        return {"s": q, "p": cmul(q, Cx.of(inv_m2))}, E, mag2
+        return a, E, mag2
 
     # State: j, then per polarisation N, D (complex), |T|^2 (a constant 1, not
     # traced, without transmission), the admittance of the medium below, and that
     # medium's phase factor (shared by s and p).
-    t0 = one if transmission else 1.0
+    t0 = inc.zero + 1.0 if transmission else 1.0
     # (with exponents, each polarisation's sum of rescaling exponents follows its T)
-    e0 = (zero,) if exponents else ()
+    e0 = (inc.zero,) if exponents else ()
     state = (count,
-             *full(Cx(0.0)), *full(Cx(1.0)), t0, *e0,
-             *full(Cx(0.0)), *full(Cx(1.0)), t0, *e0,
-             *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
+             *inc.full(Cx(0.0)), *inc.full(Cx(1.0)), t0, *e0,
+             *inc.full(Cx(0.0)), *inc.full(Cx(1.0)), t0, *e0,
+             *inc.full(inc.a_ex["s"]), *inc.full(inc.a_ex["p"]), *inc.full(Cx(0.0)))
     k = 6 if exponents else 5     # state entries per polarisation
 
     def components(st) -> list:
@@ -882,24 +922,13 @@ def stack_loop_terms(n0, cos0, count, film, n_exit, wavelength, *, transmission:
         a, E, mag2 = film_terms(j)
         out = []
         for pol, (Nr, Ni, Dr, Di, T, *e), b in components(st):
-            N, D = rouard_step(a[pol], b, Cx(*st[2 * k + 4:]), Cx(Nr, Ni), Cx(Dr, Di))
-            if smooth:
-                N, D, T = _smooth_scale(a[pol], b, N, D, T if transmission else None, mag2)
-            scale = _rescale_factor(D)
-            if not transmission:
-                T = 1.0
-            elif smooth:
-                T = T * (scale * scale)
-            else:
-                T = T * (4.0 * a[pol].abs2() * mag2) * (scale * scale)
-            out += [N.re * scale, N.im * scale, D.re * scale, D.im * scale, T]
-            if exponents:
-                out.append(e[0] + _exponent_of(scale))
+            out += _loop_step(a[pol], b, Cx(*st[2 * k + 4:]), Cx(Nr, Ni), Cx(Dr, Di), T, e, mag2,
+                              transmission=transmission, smooth=smooth, exponents=exponents)
         return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
 
     _, *st = dr.while_loop(state, films_left, loop_body(step), label=label,
                            max_iterations=max_iterations)
-    a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
+    a0 = inc.ambient_admittances(n0)
     E_top = Cx(*st[2 * k + 4:])
     results = {}
     for pol, (Nr, Ni, Dr, Di, T, *e), b in components(st):
@@ -909,8 +938,30 @@ def stack_loop_terms(n0, cos0, count, film, n_exit, wavelength, *, transmission:
         elif transmission:
             T = T * 4.0 * a0[pol].abs2()
         results[pol] = (N, D, T if transmission else None, *e)
-    fac = power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
-    return results, fac, grazing
+    fac = power_factors(n0, inc.q0, inc.n_ex, inc.q_ex, inc.grazing, 1.0) if transmission else None
+    return results, fac, inc.grazing
+
+
+def _loop_step(a: Cx, b: Cx, E_b: Cx, N: Cx, D: Cx, T, e: list, mag2, *, transmission: bool,
+               smooth: bool, exponents: bool) -> list:
+    """One film of :func:`stack_loop_terms`, one polarisation: the Rouard step from the
+    medium below (admittance ``b``, phase factor ``E_b``) to the film above (``a``, its
+    ``|e^{i delta}|^2 = mag2``), then the rescaling; returns the new state entries ``[N.re,
+    N.im, D.re, D.im, |T|^2]`` (and the exponents' sum, ``e`` holding the old one)."""
+    N, D = rouard_step(a, b, E_b, N, D)
+    if smooth:
+        N, D, T = _smooth_scale(a, b, N, D, T if transmission else None, mag2)
+    scale = _rescale_factor(D)
+    if not transmission:
+        T = 1.0
+    elif smooth:
+        T = T * (scale * scale)
+    else:
+        T = T * (4.0 * a.abs2() * mag2) * (scale * scale)
+    out = [N.re * scale, N.im * scale, D.re * scale, D.im * scale, T]
+    if exponents:
+        out.append(e[0] + _exponent_of(scale))
+    return out
 
 
 #: :func:`stack_rt_loop` uses the real-amplitude loop when every film's index is
@@ -1000,54 +1051,22 @@ def stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissio
     inv_wl = 1.0 / wavelength
     zero = 0.0 * wavelength * cos0
 
-    def admittances(m):
-        n = Cx.of(m).re
-        inv_n2 = 1.0 / (n * n)
-        # n^2 - beta^2 >= n_min^2 - n0_max^2 > 0: the real root, no guard
-        q = dr.sqrt(dr.maximum(dr.fma(n, n, -beta2), 0.0))
-        return q, q * inv_n2
-
     def phase(q, d):
         return phase_factor(Cx(q, 0.0), d * inv_wl, True)
 
-    # The innermost interface, film L-1 | exit medium (complex), without its
-    # division: (N, D) = (a - a_exit, a + a_exit), |T|^2 = 4 a^2 (gamma = r and
-    # |T / D|^2 = |t|^2 = |1 + r|^2); later steps are linear in (N, D) and T.
-    # Without films (count = 0) the "innermost film" is the ambient itself, 0 nm
-    # thick: the ambient step below is then transparent (r = 0, E = 1).
-    some = count > 0
-    j_last = dr.maximum(count, 1) - 1
-    m_last, d_last = film(j_last)
-    n_last = dr.select(some, Cx.of(m_last).re, n0)
-    d_last = dr.select(some, d_last, 0.0)
-    q_b, ap_b = admittances(n_last)
-    state = [j_last]
-    for pol, a_b in (("s", q_b), ("p", ap_b)):
-        a_x = a_ex[pol]
-        t = (zero + 4.0 * a_b * a_b) if transmission else 1.0
-        state += [zero + (a_b - a_x.re), zero - a_x.im, zero + (a_b + a_x.re), zero + a_x.im, t]
-    state += [q_b, ap_b, d_last]
+    state = _real_loop_start(n0, count, film, a_ex, beta2, zero, transmission)
     every = real_loop_rescale(n0_max, film_n_min, film_n_max)
     in_loop_rescale = films_max is None or films_max > every
 
     def step(N: Cx, D: Cx, T, r, E: Cx, rescale: bool = True):
-        X = cmul(E, N)
-        N, D = Cx(dr.fma(r, D.re, X.re), dr.fma(r, D.im, X.im)), \
-            Cx(dr.fma(r, X.re, D.re), dr.fma(r, X.im, D.im))
-        if transmission:
-            T = T * dr.square(1.0 + r)
-        if rescale and in_loop_rescale:
-            scale = _rescale_factor(D)
-            N, D = N * scale, D * scale
-            if transmission:
-                T = T * (scale * scale)
-        return N, D, T
+        return _real_step(N, D, T, r, E, transmission=transmission,
+                          rescale=rescale and in_loop_rescale)
 
     def body(j, Nsr, Nsi, Dsr, Dsi, Ts, Npr, Npi, Dpr, Dpi, Tp, q_b, ap_b, d_b):
         j = j - 1
         E = phase(q_b, d_b)                 # the film below the interface
         m_a, d_a = film(j)                  # the film above it
-        q_a, ap_a = admittances(m_a)
+        q_a, ap_a = _real_admittances(Cx.of(m_a).re, beta2)
         r_s = (q_a - q_b) / (q_a + q_b)
         r_p = (ap_a - ap_b) / (ap_a + ap_b)
         Ns, Ds, Ts = step(Cx(Nsr, Nsi), Cx(Dsr, Dsi), Ts, r_s, E)
@@ -1067,6 +1086,54 @@ def stack_rt_loop_real(n0, cos0, count, film, n_exit, wavelength, *, transmissio
         results[pol] = (N, D, T if transmission else None)
     fac = power_factors(n0, q0, n_ex, q_ex, grazing, 1.0) if transmission else None
     return _powers(results, fac, grazing)
+
+
+def _real_admittances(n, beta2):
+    """``(q, q / n^2)`` of a film of real index ``n`` above the ambient's in
+    :func:`stack_rt_loop_real`: ``n^2 - beta^2 >= n_min^2 - n0_max^2 > 0``, the real root,
+    no guard."""
+    inv_n2 = 1.0 / (n * n)
+    q = dr.sqrt(dr.maximum(dr.fma(n, n, -beta2), 0.0))
+    return q, q * inv_n2
+
+
+def _real_loop_start(n0, count, film, a_ex: dict, beta2, zero, transmission: bool) -> list:
+    """The state :func:`stack_rt_loop_real` enters its loop with: the innermost
+    interface, film L-1 | exit medium (complex), without its division: ``(N, D) = (a -
+    a_exit, a + a_exit)``, ``|T|^2 = 4 a^2`` (``gamma = r`` and ``|T / D|^2 = |t|^2 = |1 +
+    r|^2``; later steps are linear in ``(N, D)`` and ``T``), then that film's ``q``,
+    ``a_p`` and thickness. Without films (``count = 0``) the "innermost film" is the
+    ambient itself, 0 nm thick: the ambient step is then transparent (``r = 0``, ``E =
+    1``)."""
+    some = count > 0
+    j_last = dr.maximum(count, 1) - 1
+    m_last, d_last = film(j_last)
+    n_last = dr.select(some, Cx.of(m_last).re, n0)
+    d_last = dr.select(some, d_last, 0.0)
+    q_b, ap_b = _real_admittances(n_last, beta2)
+    state = [j_last]
+    for pol, a_b in (("s", q_b), ("p", ap_b)):
+        a_x = a_ex[pol]
+        t = (zero + 4.0 * a_b * a_b) if transmission else 1.0
+        state += [zero + (a_b - a_x.re), zero - a_x.im, zero + (a_b + a_x.re), zero + a_x.im, t]
+    return state + [q_b, ap_b, d_last]
+
+
+def _real_step(N: Cx, D: Cx, T, r, E: Cx, *, transmission: bool, rescale: bool):
+    """One interface of :func:`stack_rt_loop_real`, real Fresnel amplitude ``r``, the
+    medium below's phase factor ``E``: ``N' = r D + E N``, ``D' = D + r E N``, ``|T'|^2 =
+    (1 + r)^2 |T|^2``, then (``rescale``) the exact power-of-two rescaling."""
+    X = cmul(E, N)
+    N, D = Cx(dr.fma(r, D.re, X.re), dr.fma(r, D.im, X.im)), \
+        Cx(dr.fma(r, X.re, D.re), dr.fma(r, X.im, D.im))
+    if transmission:
+        T = T * dr.square(1.0 + r)
+    if rescale:
+        scale = _rescale_factor(D)
+        N, D = N * scale, D * scale
+        if transmission:
+            T = T * (scale * scale)
+    return N, D, T
 
 
 def clip_transmittance(T, R):

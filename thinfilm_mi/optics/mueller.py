@@ -50,16 +50,12 @@ import drjit as dr
 from thinfilm_mi.optics.core import (
     COMPONENTS,
     Cx,
+    LoopIncidence,
     StackAmplitudes,
     cinv,
     cmul,
-    exit_admittances,
     films_left,
-    guard_zero_q,
-    incidence,
-    is_zero,
     loop_body,
-    normal_index_bounded,
     phase_factor,
     rouard_step,
     stack_amplitudes,
@@ -133,76 +129,69 @@ def amplitude_loop(n0, cos0, count, film, n_exit, wavelength, *, transmission: b
     smooth function of the wavelength (then every amplitude is analytic in λ
     without the resonant ``1 / D``: what a band-limited build samples; within
     float64 to a few hundred films)."""
-    cos0, beta2, q0 = incidence(n0, cos0)
-    beta2_max = n0_max * n0_max if n0_max is not None else None
-    n2_min = film_n_min * film_n_min if film_n_min is not None else None
-    beta = dr.sqrt(beta2)
-    grazing = cos0 <= 0.0
-    n_ex, q_ex, a_ex = exit_admittances(n_exit, beta2, beta2_max)
-    zero = 0.0 * wavelength * cos0
-    inv_wl = 1.0 / wavelength
-
-    def full(z: Cx) -> tuple:
-        return (zero + z.re, zero + z.im)
+    inc = LoopIncidence(n0, cos0, n_exit, wavelength, n0_max, film_n_min)
 
     def film_terms(j):
         m, d = film(j)
-        m = Cx.of(m)
-        q = guard_zero_q(m, normal_index_bounded(m, beta2, beta2_max, n2_min), beta, zero)
-        e1 = phase_factor(q, d * inv_wl, False)
-        inv_m2 = 1.0 / (m.re * m.re) if is_zero(m.im) else cinv(m.square())
-        return {"s": q, "p": cmul(q, Cx.of(inv_m2))}, e1
+        q, a = inc.film_admittances(Cx.of(m))
+        return a, phase_factor(q, d * inc.inv_wl, False)
 
-    def step(a: Cx, b: Cx, E: Cx, e1, N: Cx, D: Cx, T: Cx | None, last: bool = False):
-        N, D = rouard_step(a, b, E, N, D)
-        if T is not None:
-            T = cmul(a, T) * 2.0 if e1 is None else cmul(cmul(a, e1), T) * 2.0
-        if last:
-            return N, D, T
-        if smooth:
-            scale = dr.rsqrt(a.abs2() + b.abs2())
-        else:
-            scale = 1.0 / (dr.abs(D.re) + dr.abs(D.im))
-        N, D = N * scale, D * scale
-        return N, D, (None if T is None else T * scale)
-
-    t0 = full(Cx(1.0)) if transmission else ()
-    state = (count, *full(Cx(0.0)), *full(Cx(1.0)), *t0, *full(Cx(0.0)), *full(Cx(1.0)), *t0,
-             *full(a_ex["s"]), *full(a_ex["p"]), *full(Cx(0.0)))
+    t0 = inc.full(Cx(1.0)) if transmission else ()
+    state = (count, *inc.full(Cx(0.0)), *inc.full(Cx(1.0)), *t0,
+             *inc.full(Cx(0.0)), *inc.full(Cx(1.0)), *t0,
+             *inc.full(inc.a_ex["s"]), *inc.full(inc.a_ex["p"]), *inc.full(Cx(0.0)))
     k = 6 if transmission else 4
 
     def unpack(st):
-        out = {}
+        """``({pol: (N, D, T)}, {pol: admittance below}, phase factor below)`` of the state."""
+        cur = {}
         for i, pol in enumerate(COMPONENTS):
             v = st[i * k:(i + 1) * k]
-            out[pol] = (Cx(v[0], v[1]), Cx(v[2], v[3]), Cx(v[4], v[5]) if transmission else None)
-        return out
+            cur[pol] = (Cx(v[0], v[1]), Cx(v[2], v[3]), Cx(v[4], v[5]) if transmission else None)
+        below = {"s": Cx(st[2 * k], st[2 * k + 1]), "p": Cx(st[2 * k + 2], st[2 * k + 3])}
+        return cur, below, Cx(st[2 * k + 4], st[2 * k + 5])
 
     def body(j, *st):
         j = j - 1
         a, e1 = film_terms(j)
         E = cmul(e1, e1)
-        cur = unpack(st)
-        below = {"s": Cx(st[2 * k], st[2 * k + 1]), "p": Cx(st[2 * k + 2], st[2 * k + 3])}
-        E_b = Cx(st[2 * k + 4], st[2 * k + 5])
+        cur, below, E_b = unpack(st)
         out = []
         for pol in COMPONENTS:
-            N, D, T = step(a[pol], below[pol], E_b, e1, *cur[pol])
+            N, D, T = _amplitude_step(a[pol], below[pol], E_b, e1, *cur[pol], smooth=smooth)
             out += [N.re, N.im, D.re, D.im] + ([T.re, T.im] if transmission else [])
         return (j, *out, a["s"].re, a["s"].im, a["p"].re, a["p"].im, E.re, E.im)
 
-    st = dr.while_loop(state, films_left, loop_body(body), label=label)[1:]
-    cur = unpack(st)
-    below = {"s": Cx(st[2 * k], st[2 * k + 1]), "p": Cx(st[2 * k + 2], st[2 * k + 3])}
-    E_b = Cx(st[2 * k + 4], st[2 * k + 5])
-    a0 = {"s": Cx(q0, 0.0), "p": Cx(q0 * (1.0 / (n0 * n0)), 0.0)}
-    out = {"q0": q0, "q_exit": q_ex, "n_exit": n_ex, "grazing": grazing}
+    cur, below, E_b = unpack(dr.while_loop(state, films_left, loop_body(body), label=label)[1:])
+    a0 = inc.ambient_admittances(n0)
+    out = {"q0": inc.q0, "q_exit": inc.q_ex, "n_exit": inc.n_ex, "grazing": inc.grazing}
     # t_p carries the telescoped product n0 / n_exit of the p admittances q / n^2
-    t_scale = {"s": lambda T: T, "p": lambda T: cmul(T, cinv(n_ex) * n0)}
+    t_scale = {"s": lambda T: T, "p": lambda T: cmul(T, cinv(inc.n_ex) * n0)}
     for pol in COMPONENTS:
-        N, D, T = step(a0[pol], below[pol], E_b, None, *cur[pol], last=True)
+        N, D, T = _amplitude_step(a0[pol], below[pol], E_b, None, *cur[pol], smooth=smooth,
+                                  last=True)
         out[pol] = (N, D, T if T is None else t_scale[pol](T))
     return out
+
+
+def _amplitude_step(a: Cx, b: Cx, E: Cx, e1, N: Cx, D: Cx, T: Cx | None, *, smooth: bool,
+                    last: bool = False):
+    """One interface of :func:`amplitude_loop`: the Rouard step from the medium below
+    (admittance ``b``, phase factor ``E``) to the one above (``a``, its ``exp(i delta)``
+    ``e1``; ``None`` for the ambient), ``T <- 2 a e1 T``, then (but for the ``last``) the
+    rescaling: by ``1 / (|Re D| + |Im D|)``, or with ``smooth`` by ``1 / sqrt(|a|² +
+    |b|²)``."""
+    N, D = rouard_step(a, b, E, N, D)
+    if T is not None:
+        T = cmul(a, T) * 2.0 if e1 is None else cmul(cmul(a, e1), T) * 2.0
+    if last:
+        return N, D, T
+    if smooth:
+        scale = dr.rsqrt(a.abs2() + b.abs2())
+    else:
+        scale = 1.0 / (dr.abs(D.re) + dr.abs(D.im))
+    N, D = N * scale, D * scale
+    return N, D, (None if T is None else T * scale)
 
 
 def loop_components(amps: dict, transmission: bool) -> tuple:

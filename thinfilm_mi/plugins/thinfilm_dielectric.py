@@ -117,10 +117,11 @@ import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.render import modes
+from thinfilm_mi.render.lobe_choice import chosen_weight, reflection_probability
 from thinfilm_mi.render.media import DEFAULT_INT_IOR, real_index
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
-from thinfilm_mi.render.variant import check_variant, spectral_mean
+from thinfilm_mi.render.variant import check_variant
 
 __all__ = ["NAME", "ThinFilmDielectric"]
 
@@ -167,17 +168,14 @@ class ThinFilmDielectric(mi.BSDF):
             T = dr.select(tir, 0.0, resp.T)
 
         if has_r and has_t:
-            pr, pt = spectral_mean(R), spectral_mean(T)
-            total = pr + pt
-            prob_r = dr.select(total > 0, pr / dr.select(total > 0, total, 1.0), 1.0)
+            prob_r = reflection_probability(R, T)
             selected_r = (sample1 <= prob_r) & active
             # The choice is a detached sampling decision: its probability divides
             # the weight as a constant, so the weight's gradient is dR/p (dT/(1-p))
             # per wavelength and its expectation d(R + T).
             prob_r = dr.detach(prob_r)
             bs.pdf = dr.select(selected_r, prob_r, 1.0 - prob_r)
-            weight = dr.select(selected_r, R / dr.select(prob_r > 0, prob_r, 1.0),
-                               T / dr.select(prob_r < 1, 1.0 - prob_r, 1.0))
+            weight = chosen_weight(selected_r, prob_r, R, T)
         elif has_r:
             selected_r = mi.Bool(True) & active
             bs.pdf = 1.0

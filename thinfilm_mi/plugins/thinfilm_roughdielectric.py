@@ -132,11 +132,12 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render import modes
+from thinfilm_mi.render.lobe_choice import chosen_weight, reflection_probability
 from thinfilm_mi.render.media import DEFAULT_INT_IOR, real_index
 from thinfilm_mi.render.microfacet import Microfacet, rough_bsdf_base
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
-from thinfilm_mi.render.variant import check_variant, spectral_mean
+from thinfilm_mi.render.variant import check_variant
 
 __all__ = ["NAME", "GLOSSY_R", "GLOSSY_T", "ThinFilmRoughDielectric"]
 
@@ -191,13 +192,6 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         _, cos_t, _, _ = mi.fresnel(dot_wi_m, mi.Float(self.eta))
         return resp.R, dr.select(cos_t == 0, 0.0, resp.T), resp
 
-    @staticmethod
-    def _prob_r(R, T):
-        """Probability of choosing reflection: spectral-mean R over mean R + T."""
-        pr, pt = spectral_mean(R), spectral_mean(T)
-        total = pr + pt
-        return dr.select(total > 0, pr / dr.select(total > 0, total, 1.0), 1.0)
-
     def _factor(self, name, si, active):
         tex = getattr(self, name)
         return 1.0 if tex is None else tex.eval(si, active)
@@ -222,12 +216,11 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
         if has_r and has_t:
             # detached: a sampling decision divides the weight as a constant
             # (see thinfilm_dielectric)
-            prob_r = dr.detach(self._prob_r(R, T))
+            prob_r = dr.detach(reflection_probability(R, T))
             selected_r = (sample1 <= prob_r) & active
             selected_t = (sample1 > prob_r) & active
             bs.pdf *= dr.select(selected_r, prob_r, 1.0 - prob_r)
-            weight = dr.select(selected_r, R / dr.select(prob_r > 0, prob_r, 1.0),
-                               T / dr.select(prob_r < 1, 1.0 - prob_r, 1.0))
+            weight = chosen_weight(selected_r, prob_r, R, T)
         elif has_r:
             selected_r, selected_t = active, active & False
             weight = R
@@ -297,7 +290,7 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
             return None, dr.select(active, pdf, 0.0)
         R, T, resp = self._rt(si, dot_wi_m, cos_i, active, transmission=has_t)
         if has_r and has_t:
-            prob_r = self._prob_r(R, T)
+            prob_r = reflection_probability(R, T)
             pdf *= dr.select(reflect, prob_r, 1.0 - prob_r)
         pdf = dr.select(active, pdf, 0.0)
         if not want_value:

@@ -970,12 +970,7 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
     split = axis.split
     # a quantity whose channels vary faster along v (tabulate.mueller) starts finer
     spacing = side.quantity.v_spacing
-    # lit from the ambient (rows that do not depend on the indices): the v axis
-    # follows the films' fringes (Shear)
-    shear = None
-    if not axis.needs_n_exit:
-        shear = Shear.of([side.films[i] for i in side.fringe_films],
-                         complex(np.asarray(side.n0(np.array([SHEAR_WAVELENGTH])))[0]))
+    shear = _fringe_shear(side, axis)
     rows = _rows(side, axis, resolution, spacing, shear)
     nu = 2 * FIRST_NU if split else FIRST_NU
     budget = Budget.scaled(budget_scale, texels=max_texels, point_work=build_work(side, 1))
@@ -1003,11 +998,7 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
         table, err_u, err_v = (_round(rows, axis, nu) if shear is None
                                else _round_sheared(rows, shear, nu, nv))
         per_row = max(per_row, rows.points / rows.computed)
-        stats["rounds"] += 1
-        stats["points"] = budget.spent + rows.points
-        stats["colour_error"] = rows.colour_error
-        stats["colour_errors"] = dict(zip(ILLUMINANTS, rows.colour_errors.tolist()))
-        stats["errors"].append((nu, nv, err_u, err_v))
+        _account_round(stats, budget, rows, (nu, nv, err_u, err_v))
         if rows.colour_error > COLOUR_TOLERANCE:
             stats["result"] = "colour check failed"
             return None
@@ -1022,21 +1013,46 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
                 budget.spend(rows.points)
                 rows = Rows(side, axis, resolution, spacing)
         if err_u > 0.5 * error or err_u + min(err_v, 0.5 * error) > error:
-            goal = 0.8 * error - min(err_v, 0.4 * error)
-            factor = convergence_factor(nu, err_u, goal, last, FIRST_ORDER, margin=1.1, cap=6.0,
-                                        highest=4.0)
-            last = (nu, err_u)
-            if not split and factor <= 2.0:
-                # halving the spacing reuses every row computed (the nodes and the
-                # midpoints): 2 (nu - 1) new rows, never more than a smaller factor
-                # would compute afresh
-                factor = 2.0
-            if split:
-                nu = 2 * (int(math.ceil((nu // 2 - 1) * factor)) + 1)
-            else:
-                nu = int(math.ceil((nu - 1) * factor)) + 1
+            nu, last = _refined_nu(nu, err_u, err_v, error, last, split)
     stats["result"] = "over budget"
     return None
+
+
+def _fringe_shear(side: SideData, axis) -> Shear | None:
+    """The :class:`Shear` of :func:`build_band_table`'s v axis for a side lit from the
+    ambient (rows that do not depend on the indices: the v axis follows the films'
+    fringes); ``None`` where the axis needs the exit medium's index."""
+    if axis.needs_n_exit:
+        return None
+    return Shear.of([side.films[i] for i in side.fringe_films],
+                    complex(np.asarray(side.n0(np.array([SHEAR_WAVELENGTH])))[0]))
+
+
+def _account_round(stats: BuildReport, budget: Budget, rows, errors: tuple) -> None:
+    """Write one round of :func:`build_band_table` into its report: the evaluations so
+    far, the colour check's errors and ``errors = (nu, nv, err_u, err_v)``."""
+    stats["rounds"] += 1
+    stats["points"] = budget.spent + rows.points
+    stats["colour_error"] = rows.colour_error
+    stats["colour_errors"] = dict(zip(ILLUMINANTS, rows.colour_errors.tolist()))
+    stats["errors"].append(errors)
+
+
+def _refined_nu(nu: int, err_u: float, err_v: float, error: float, last, split: bool):
+    """``(nu, last)``: :func:`build_band_table`'s next number of angle nodes, by the factor
+    the error's convergence order predicts (``last``: the previous ``(nu, err_u)``), so
+    that ``err_u`` reaches what ``err_v`` leaves of the target."""
+    goal = 0.8 * error - min(err_v, 0.4 * error)
+    factor = convergence_factor(nu, err_u, goal, last, FIRST_ORDER, margin=1.1, cap=6.0,
+                                highest=4.0)
+    if not split and factor <= 2.0:
+        # halving the spacing reuses every row computed (the nodes and the
+        # midpoints): 2 (nu - 1) new rows, never more than a smaller factor
+        # would compute afresh
+        factor = 2.0
+    if split:
+        return 2 * (int(math.ceil((nu // 2 - 1) * factor)) + 1), (nu, err_u)
+    return int(math.ceil((nu - 1) * factor)) + 1, (nu, err_u)
 
 
 def _sheared_nv(shear: Shear, sigma: float, spacing: float) -> int:

@@ -207,6 +207,41 @@ def integrate(t, w, r_dh, t_hemi, model, kd=None, nodes=None):
     return M, A, nodes
 
 
+class _Levels:
+    """The wavelength levels of a :class:`ColourDiffuse` build: each level's wavelengths,
+    normalised weights ``(C, n)`` and hemispherical factors (a finer level evaluates only
+    its new wavelengths), and the transmittances ``t``, counted into ``report``."""
+
+    def __init__(self, factors, channels: str, report: BuildReport):
+        self.factors, self.channels, self.report = factors, channels, report
+        self.levels = {}
+
+    def data(self, level: int):
+        """``(wavelengths, weights, R_dh, T_hemi)`` of ``level``."""
+        levels = self.levels
+        if level not in levels:
+            wl, w = level_weights(level, self.channels)
+            if level - 1 in levels:     # the coarser level's wavelengths are every other one
+                _, _, r_c, t_c = levels[level - 1]
+                r_new, t_new = self.factors.hemispherical(wl[1::2])
+                r_dh, t_hemi = np.empty(wl.size), np.empty(wl.size)
+                r_dh[0::2], r_dh[1::2], t_hemi[0::2], t_hemi[1::2] = r_c, r_new, t_c, t_new
+            else:
+                r_dh, t_hemi = self.factors.hemispherical(wl)
+            levels[level] = (wl, w, r_dh, t_hemi)
+        return levels[level]
+
+    def t(self, cos, wl):
+        """The transmittance factor ``t`` at the angles ``cos`` and wavelengths ``wl``."""
+        self.report["points"] += cos.size * wl.size
+        return self.factors.t(cos, wl)
+
+    def tables(self, level: int, t, model, kd):
+        """:func:`integrate`'s ``(M, A, nodes)`` of ``t`` on ``level``'s wavelengths."""
+        _, w, r_dh, t_hemi = self.data(level)
+        return integrate(t, w, r_dh, t_hemi, model, kd)
+
+
 class ColourDiffuse:
     """The integrated diffuse term and albedo estimate of one ``thinfilm_diffuse``
     (``factors``: a :class:`~thinfilm_mi.render.diffuse.DiffuseFactors`; ``model``: the
@@ -221,81 +256,26 @@ class ColourDiffuse:
     def __init__(self, factors, model, channels: str,
                  kd: np.ndarray | None = None):
         self.model = model
-        C = level_weights(0, channels)[1].shape[0]     # the channels' count (colour's fact)
-        self.C = C
+        self.C = level_weights(0, channels)[1].shape[0]     # the channels' count (colour's fact)
         self.fixed = kd is not None
         #: whether the lookups read a thickness scale (a table over it)
         self.scaled = False
-        axis = LinearAxis()
-        levels = {}
-
-        def level_data(level):
-            """Wavelengths, normalised weights ``(C, n)`` and the hemispherical factors."""
-            if level not in levels:
-                wl, w = level_weights(level, channels)
-                if level - 1 in levels:     # the coarser level's wavelengths are every other one
-                    _, _, r_c, t_c = levels[level - 1]
-                    r_new, t_new = factors.hemispherical(wl[1::2])
-                    r_dh, t_hemi = np.empty(wl.size), np.empty(wl.size)
-                    r_dh[0::2], r_dh[1::2], t_hemi[0::2], t_hemi[1::2] = r_c, r_new, t_c, t_new
-                else:
-                    r_dh, t_hemi = factors.hemispherical(wl)
-                levels[level] = (wl, w, r_dh, t_hemi)
-            return levels[level]
-
-        def tables(level, t):
-            _, w, r_dh, t_hemi = level_data(level)
-            return integrate(t, w, r_dh, t_hemi, model, kd)
-
         #: what the build did: ``points`` (values of ``t`` evaluated), the wavelength
         #: ``level``, the angle ``nodes`` and the table's ``texels`` (floats)
         self.report = BuildReport(kind="plain", points=0, result="table")
-
-        def t_at(cos, wl):
-            self.report["points"] += cos.size * wl.size
-            return factors.t(cos, wl)
-
-        level, nu = 0, FIRST_NODES
-        cos = axis.cos(nu)
-        t = t_at(cos, level_data(level)[0])
-        M, A, nodes = tables(level, t)
-        # wavelengths: halve the step until the table (of the single-scattering
-        # term, G = k_d = 1, and of the series at k_d = 1) stops changing
-        while level < MAX_LEVEL:
-            t2 = t_at(cos, level_data(level + 1)[0])
-            M2, A2, nodes2 = tables(level + 1, t2)
-            same = self._close(M, nodes, M2, nodes2)
-            level, t, M, A, nodes = level + 1, t2, M2, A2, nodes2
-            if same:
-                break
-        # angles: double until the 4-point rule predicts the midpoints (t at the
-        # new nodes only)
-        wl = level_data(level)[0]
-        while nu < MAX_NODES:
-            t = interleave(t, t_at(axis.midpoints(nu), wl), 0)
-            M2, A2, nodes2 = tables(level, t)
-            pred = subdivide(subdivide(M, 0, True), 1, True)
-            same = self._close(pred, nodes, M2, nodes2)
-            nu, M, A, nodes = 2 * nu - 1, M2, A2, nodes2
-            if same:
-                break
+        levels = _Levels(factors, channels, self.report)
+        level, nu, t, M, A, nodes = self._refine_wavelengths(levels, model, kd)
+        nu, M, A, nodes = self._refine_angles(levels, model, kd, level, nu, t, M, A, nodes)
         #: the wavelength level and the angle nodes computed exactly (before the
         #: linear subdivision), for :class:`ScaledColourDiffuse`
         self.level, self.exact_nodes = level, nu
-        # texels for the linear lookup (judged on the values at k_d = 1)
-        budget = Budget(points=0, texels=MAX_TABLE_FLOATS)
-        while nu < 4 * MAX_NODES and budget.allows(texels=(2 * nu - 1) ** 2 * M.shape[2] * C):
-            m = self.at_one(M, nodes)
-            if max(float(np.max(np.abs(linear_error(m, ax, True)))) for ax in (0, 1)) <= LINEAR_ABS:
-                break
-            M, A = subdivide(subdivide(M, 0, True), 1, True), subdivide(A, 0, True)
-            nu = 2 * nu - 1
+        nu, M, A = self._linear_texels(nu, M, A, nodes)
         self.nodes = nodes
         self.nu = nu
         self.report.update(level=level, nodes=nu, texels=M.size + A.size)
         self.values = M                       # (nu, nu, K, C): for tests
         self.albedo_values = A                # (nu, K, C)
-        K = nodes.size
+        K, C = nodes.size, self.C
         self.nbytes = (M.size + A.size) * 4
         self._M = linear_texture(M.reshape(nu, nu, K * C))
         self._A = linear_texture(A.reshape(nu, K * C))
@@ -304,8 +284,53 @@ class ColourDiffuse:
         self._r = [opaque_float(float(r)) for r in nodes]
         #: R_dh on the 1 nm grid, for the gradient estimate (its derivatives are the
         #: plugin's DerivativeTable, on the same grid)
-        r_dh = level_data(0)[2]
+        r_dh = levels.data(0)[2]
         self._r_dh = linear_texture(r_dh[:, None])
+
+    def _refine_wavelengths(self, levels: "_Levels", model, kd):
+        """``(level, nu, t, M, A, nodes)`` on :data:`FIRST_NODES` angles: the wavelength
+        step halved until the table (of the single-scattering term, ``G = k_d = 1``, and
+        of the series at ``k_d = 1``) stops changing."""
+        level, nu = 0, FIRST_NODES
+        cos = LinearAxis().cos(nu)
+        t = levels.t(cos, levels.data(level)[0])
+        M, A, nodes = levels.tables(level, t, model, kd)
+        while level < MAX_LEVEL:
+            t2 = levels.t(cos, levels.data(level + 1)[0])
+            M2, A2, nodes2 = levels.tables(level + 1, t2, model, kd)
+            same = self._close(M, nodes, M2, nodes2)
+            level, t, M, A, nodes = level + 1, t2, M2, A2, nodes2
+            if same:
+                break
+        return level, nu, t, M, A, nodes
+
+    def _refine_angles(self, levels: "_Levels", model, kd, level: int, nu: int, t, M, A, nodes):
+        """``(nu, M, A, nodes)``: the angle nodes doubled until the 4-point rule predicts
+        the midpoints (``t`` at the new nodes only)."""
+        axis = LinearAxis()
+        wl = levels.data(level)[0]
+        while nu < MAX_NODES:
+            t = interleave(t, levels.t(axis.midpoints(nu), wl), 0)
+            M2, A2, nodes2 = levels.tables(level, t, model, kd)
+            pred = subdivide(subdivide(M, 0, True), 1, True)
+            same = self._close(pred, nodes, M2, nodes2)
+            nu, M, A, nodes = 2 * nu - 1, M2, A2, nodes2
+            if same:
+                break
+        return nu, M, A, nodes
+
+    def _linear_texels(self, nu: int, M, A, nodes):
+        """``(nu, M, A)`` subdivided by the 4-point rule until a linear lookup is within
+        :data:`LINEAR_ABS` (judged on the values at ``k_d = 1``) or the texels reach
+        :data:`MAX_TABLE_FLOATS`."""
+        budget = Budget(points=0, texels=MAX_TABLE_FLOATS)
+        while nu < 4 * MAX_NODES and budget.allows(texels=(2 * nu - 1) ** 2 * M.shape[2] * self.C):
+            m = self.at_one(M, nodes)
+            if max(float(np.max(np.abs(linear_error(m, ax, True)))) for ax in (0, 1)) <= LINEAR_ABS:
+                break
+            M, A = subdivide(subdivide(M, 0, True), 1, True), subdivide(A, 0, True)
+            nu = 2 * nu - 1
+        return nu, M, A
 
     def at_one(self, M, nodes):
         """``π f`` at ``k_d = 1`` (the series) and the single term (the ``ℓ_j`` sum
@@ -379,6 +404,55 @@ class ColourDiffuse:
         return self.combine(self._A.eval(mi.Point1f(self.coordinate(cos_i)), active), kd)
 
 
+def _refusal(plugin: str, s_max: float):
+    """The error a :class:`ScaledColourDiffuse` build raises when the scale range up to
+    ``s_max`` needs more than its budget, ``why`` saying what."""
+    def refused(why: str) -> ThinFilmError:
+        return ThinFilmError(f"{plugin}: 'thickness': a texture reaching {s_max:g} {why} "
+                             f"(at most {MAX_SCALED_FLOATS} floats and {MAX_SCALE_NODES} "
+                             "scale nodes); lower its maximum, or use a spectral variant")
+    return refused
+
+
+class _ScaleSlices:
+    """The slices of a :class:`ScaledColourDiffuse` build: ``(M, A)`` of the thickness
+    scales asked for, on the wavelengths of ``level`` and the ``nu`` exact angle nodes,
+    with the Chebyshev nodes in ``R_dh`` (``nodes``; ``None`` for a fixed ``kd``) widened
+    whenever a scale's ``R_dh`` leaves their range; evaluations counted into ``report``."""
+
+    def __init__(self, factors, model, channels: str, kd, level: int, nu: int,
+                 report: BuildReport):
+        self.factors, self.model, self.kd, self.report = factors, model, kd, report
+        self.wl, self.w = level_weights(level, channels)
+        self.cos = LinearAxis().cos(nu)
+        self.nodes, self.range = None, None
+
+    def widen(self, r_dh) -> None:
+        """Widen the nodes' range to hold ``r_dh`` (with :data:`RANGE_MARGIN`)."""
+        lo, hi = float(r_dh.min()), float(r_dh.max())
+        if self.range is not None:
+            lo, hi = min(lo, self.range[0]), max(hi, self.range[1])
+        pad = RANGE_MARGIN * (hi - lo) + 1e-3
+        self.range = (max(lo - pad, 0.0), min(hi + pad, 0.5 * (1.0 + hi)))
+        self.nodes = series_nodes(*self.range, self.model)
+
+    def build(self, s):
+        """``(M, A)`` at the scales ``s``: ``(ns, nu, nu, K, C)``, ``(ns, nu, K, C)``; the
+        Chebyshev nodes widened first where ``R_dh`` there leaves their range."""
+        r_dh, t_hemi = self.factors.hemispherical_scales(self.wl, s)
+        if self.kd is None and (self.range is None or r_dh.min() < self.range[0]
+                                or r_dh.max() > self.range[1]):
+            self.widen(r_dh)
+        Ms, As = [], []
+        for k, sk in enumerate(s):
+            t = self.factors.at_scale(float(sk)).t(self.cos, self.wl)
+            self.report["points"] += t.size
+            M, A, _ = integrate(t, self.w, r_dh[k], t_hemi[k], self.model, self.kd, self.nodes)
+            Ms.append(M)
+            As.append(A)
+        return np.stack(Ms), np.stack(As)
+
+
 class ScaledColourDiffuse(ColourDiffuse):
     """:class:`~thinfilm_mi.tabulate.diffuse.ColourDiffuse` over the thickness scale
     ``s`` in ``[s_min, s_max]`` (module docstring): ``factors`` (a
@@ -392,7 +466,6 @@ class ScaledColourDiffuse(ColourDiffuse):
         s_max = max(float(s_max), 0.0)
         s_lo = min(max(float(s_min), 0.0), s_max)
         span = s_max - s_lo
-
         # nodes uniform in sqrt(s / s_max) (thin metal films curve most near s = 0)
         q_lo = float(np.sqrt(s_lo / s_max)) if s_max > 0 else 0.0
 
@@ -402,73 +475,12 @@ class ScaledColourDiffuse(ColourDiffuse):
         self.model, self.C, self.fixed, self.scaled = model, top.C, top.fixed, True
         level = top.level
         nu = nu0 = top.exact_nodes     # the exact angle nodes; texels are added at the end
-        wl, w = level_weights(level, channels)
-        cos = LinearAxis().cos(nu0)
         report = BuildReport(kind="plain", points=top.report["points"], result="table")
-        budget = Budget(points=0, texels=MAX_SCALED_FLOATS)
-        state = {"nodes": None, "range": None}
-
-        def refused(why):
-            return ThinFilmError(f"{plugin}: 'thickness': a texture reaching {s_max:g} {why} "
-                                 f"(at most {MAX_SCALED_FLOATS} floats and {MAX_SCALE_NODES} "
-                                 "scale nodes); lower its maximum, or use a spectral variant")
-
-        def widen(r_dh):
-            lo, hi = float(r_dh.min()), float(r_dh.max())
-            if state["range"] is not None:
-                lo, hi = min(lo, state["range"][0]), max(hi, state["range"][1])
-            pad = RANGE_MARGIN * (hi - lo) + 1e-3
-            state["range"] = (max(lo - pad, 0.0), min(hi + pad, 0.5 * (1.0 + hi)))
-            state["nodes"] = series_nodes(*state["range"], model)
-
-        def build(s):
-            """``(M, A)`` at the scales ``s``: ``(ns, nu, nu, K, C)``, ``(ns, nu, K, C)``; the
-            Chebyshev nodes widened first where ``R_dh`` there leaves their range."""
-            r_dh, t_hemi = factors.hemispherical_scales(wl, s)
-            if not self.fixed and (state["range"] is None or r_dh.min() < state["range"][0]
-                                   or r_dh.max() > state["range"][1]):
-                widen(r_dh)
-            Ms, As = [], []
-            for k, sk in enumerate(s):
-                t = factors.at_scale(float(sk)).t(cos, wl)
-                report["points"] += t.size
-                M, A, _ = integrate(t, w, r_dh[k], t_hemi[k], model, kd, state["nodes"])
-                Ms.append(M)
-                As.append(A)
-            return np.stack(Ms), np.stack(As)
-
+        slices = _ScaleSlices(factors, model, channels, kd, level, nu0, report)
         u = np.linspace(0.0, 1.0, FIRST_SCALE_NODES) if span > 0.0 else np.zeros(1)
-        if not self.fixed:      # the Chebyshev nodes first: a table too large is refused before the work
-            widen(factors.hemispherical_scales(wl, at(u))[0])
-        if not budget.allows(texels=u.size * nu * (nu + 1) * (1 if self.fixed else state["nodes"].size) * self.C):
-            raise refused("needs more floats than the budget allows")
-        M, A = build(at(u))
-        while u.size > 1:
-            if 2 * u.size - 1 > MAX_SCALE_NODES or not budget.allows(
-                    texels=(2 * u.size - 1) * nu * (nu + 1) * M.shape[3] * self.C):
-                raise refused("needs more scale nodes than the budget allows")
-            mid = 0.5 * (u[:-1] + u[1:])
-            nodes = state["nodes"]
-            M_mid, A_mid = build(at(mid))
-            if nodes is not state["nodes"]:      # the range widened: rebuild the nodes' slices
-                M, A = build(at(u))
-            nodes = state["nodes"]
-            err = max(float(np.max(np.abs(self.at_one(cubic_midpoints(M) - M_mid, nodes)))),
-                      float(np.max(np.abs(self.at_one(cubic_midpoints(A) - A_mid, nodes)))))
-            report["scale_error"] = err
-            if err <= SCALE_ABS:     # the lookup (cubic in u) is verified on these nodes
-                break
-            u, M, A = interleave(u, mid, 0), interleave(M, M_mid, 0), interleave(A, A_mid, 0)
-        # the angle axis, checked at every scale node
-        while True:
-            m = self.at_one(M, state["nodes"] if not self.fixed else np.zeros(1))
-            err = max(float(np.max(np.abs(linear_error(m, ax, True)))) for ax in (1, 2))
-            report["angle_error"] = err
-            if err <= LINEAR_ABS or u.size * (2 * nu - 1) * (2 * nu) * M.shape[3] * self.C > MAX_ANGLE_FLOATS:
-                break     # (as ColourDiffuse: the texels the budget allows)
-            M, A = subdivide(subdivide(M, 1, True), 2, True), subdivide(A, 1, True)
-            nu = 2 * nu - 1
-        nodes = np.zeros(1) if self.fixed else state["nodes"]
+        u, M, A = self._refine_scales(slices, at, u, nu, _refusal(plugin, s_max))
+        nu, M, A = self._angle_texels(M, A, u.size, nu, slices.nodes, report)
+        nodes = np.zeros(1) if self.fixed else slices.nodes
         K, C, ns = nodes.size, self.C, u.size
         self.nodes, self.nu, self.level, self.exact_nodes = nodes, nu, level, nu0
         self.scales = at(u)
@@ -493,6 +505,47 @@ class ScaledColourDiffuse(ColourDiffuse):
         #: models without interreflection only, where it drops out (the others refuse film-parameter
         #: gradients together with a texture)
         self._r_dh = top._r_dh
+
+    def _refine_scales(self, slices: "_ScaleSlices", at, u, nu: int, refused):
+        """``(u, M, A)``: the scale nodes ``u`` (in ``[0, 1]``, scales ``at(u)``) doubled
+        until the cubic lookup over the scale predicts the midpoints' slices within
+        :data:`SCALE_ABS`; ``refused(why)`` is the error raised past the budget."""
+        budget = Budget(points=0, texels=MAX_SCALED_FLOATS)
+        if not self.fixed:      # the Chebyshev nodes first: a table too large is refused before the work
+            slices.widen(slices.factors.hemispherical_scales(slices.wl, at(u))[0])
+        if not budget.allows(texels=u.size * nu * (nu + 1) * (1 if self.fixed else slices.nodes.size) * self.C):
+            raise refused("needs more floats than the budget allows")
+        M, A = slices.build(at(u))
+        while u.size > 1:
+            if 2 * u.size - 1 > MAX_SCALE_NODES or not budget.allows(
+                    texels=(2 * u.size - 1) * nu * (nu + 1) * M.shape[3] * self.C):
+                raise refused("needs more scale nodes than the budget allows")
+            mid = 0.5 * (u[:-1] + u[1:])
+            nodes = slices.nodes
+            M_mid, A_mid = slices.build(at(mid))
+            if nodes is not slices.nodes:      # the range widened: rebuild the nodes' slices
+                M, A = slices.build(at(u))
+            nodes = slices.nodes
+            err = max(float(np.max(np.abs(self.at_one(cubic_midpoints(M) - M_mid, nodes)))),
+                      float(np.max(np.abs(self.at_one(cubic_midpoints(A) - A_mid, nodes)))))
+            slices.report["scale_error"] = err
+            if err <= SCALE_ABS:     # the lookup (cubic in u) is verified on these nodes
+                break
+            u, M, A = interleave(u, mid, 0), interleave(M, M_mid, 0), interleave(A, A_mid, 0)
+        return u, M, A
+
+    def _angle_texels(self, M, A, ns: int, nu: int, nodes, report: BuildReport):
+        """``(nu, M, A)`` subdivided along the angles, checked at every scale node, until a
+        linear lookup is within :data:`LINEAR_ABS` or the texels reach
+        :data:`MAX_ANGLE_FLOATS` (as :class:`ColourDiffuse`: the texels the budget allows)."""
+        while True:
+            m = self.at_one(M, nodes if not self.fixed else np.zeros(1))
+            err = max(float(np.max(np.abs(linear_error(m, ax, True)))) for ax in (1, 2))
+            report["angle_error"] = err
+            if err <= LINEAR_ABS or ns * (2 * nu - 1) * (2 * nu) * M.shape[3] * self.C > MAX_ANGLE_FLOATS:
+                return nu, M, A
+            M, A = subdivide(subdivide(M, 1, True), 2, True), subdivide(A, 1, True)
+            nu = 2 * nu - 1
 
     def _slices(self, scale):
         """``[(k, w_k)]``: the slices a lookup at ``scale`` reads and their weights

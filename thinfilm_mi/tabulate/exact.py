@@ -404,8 +404,44 @@ def build_exact_table(side: SideData, error: float, wavelengths: np.ndarray,
                   "resolution": 0.0})
     if axis is None:
         return None
-    g, order = GHOST, 4
+    g = GHOST
     split = axis.split
+    first = _first_resolution(side, axis, error, wavelengths, max_texels, budget_scale, stats)
+    if first is None:
+        return None
+    nu, nv, budget = first
+    stats["result"] = "over budget"
+    history = {}
+    for _ in range(MAX_ROUNDS + 1):
+        if split:
+            nu += nu % 2
+        # the nodes (a split axis's ghosts are not evaluated), and the checks
+        points = (nu + (0 if split else 2 * g)) * (nv + 2 * g) + nu * nv \
+            + len(side.kinks) * (nu // 2)
+        if nu > MAX_U or nv > MAX_V or not budget.allows(points, nu * nv):
+            return None
+        budget.spend(points)
+        stats["points"] = budget.spent
+        stats["rounds"] += 1
+        nodes, coeffs, err_u, err_v = _fit_and_check(side, axis, nu, nv)
+        stats.setdefault("errors", []).append((nu, nv, err_u, err_v))
+        if err_u + err_v <= error:
+            stats["result"] = "table"
+            return Table(coeffs, axis, err_u + err_v, nodes.shape[-1])
+        factors = _refinement(nu, nv, err_u, err_v, error, history)
+        if not budget.allows(texels=nu * nv * factors["u"] * factors["v"] / 4):
+            return None   # hopeless within the budget: do not spend the time
+        nu = int(math.ceil((nu - 1) * factors["u"])) + 1
+        nv = int(math.ceil((nv - 1) * factors["v"])) + 1
+    return None
+
+
+def _first_resolution(side: SideData, axis, error: float, wavelengths: np.ndarray,
+                      max_texels: int, budget_scale: float, stats: BuildReport):
+    """``(nu, nv, budget)`` of :func:`build_exact_table`'s first round: the larger of
+    :func:`table_resolution`'s and the probe's resolutions, and the budget with the
+    probe's evaluations spent; ``None`` where the probe would cost too much or rejects
+    the stack (``stats["result"]`` says which)."""
     side.set_absorbing(wavelengths)
     if build_work(side, PROBE_POINTS) > MAX_PROBE_WORK * budget_scale:
         stats["result"] = "probe over budget"
@@ -420,81 +456,79 @@ def build_exact_table(side: SideData, error: float, wavelengths: np.ndarray,
         return None
     nu = min(max(nu, int(math.ceil(1.05 * pu))), MAX_U)
     nv = min(max(nv, int(math.ceil(1.05 * pv))), MAX_V)
-    stats["result"] = "over budget"
-    history = {}
-    for _ in range(MAX_ROUNDS + 1):
-        if split:
-            nu += nu % 2
-        # the nodes (a split axis's ghosts are not evaluated), and the checks
-        points = (nu + (0 if split else 2 * g)) * (nv + 2 * g) + nu * nv \
-            + len(side.kinks) * (nu // 2)
-        if nu > MAX_U or nv > MAX_V or not budget.allows(points, nu * nv):
-            return None
-        budget.spend(points)
-        stats["points"] = budget.spent
-        stats["rounds"] += 1
-        m = nu // 2
-        su = np.arange(0 if split else -g, nu + (0 if split else g), dtype=np.float64)
-        tv = np.arange(-g, nv + g, dtype=np.float64)
-        mu = np.arange(nu - 1) + 0.5
-        if split:
-            mu = mu[mu != m - 0.5]
-        rows = np.arange(0, nv, 2) + g      # every other real v row (index into tv)
-        cols = np.arange(0, nu, 2)          # every other real u node
-        # Where an index's slope jumps (tabulated data) the spline errs most
-        # beside, not between, the nodes: check there too.
-        kinks = v_texel(side.kinks, nv)
-        pts = _Points(side, axis)
-        pts.add(su, tv, nu, nv)
-        pts.add(mu, tv[rows], nu, nv)
-        pts.add(cols.astype(np.float64), np.concatenate([np.arange(nv - 1) + 0.5, kinks]),
-                nu, nv)
-        (nodes, _), (mid_u, cos_u), (mid_v, cos_v) = pts.evaluate()
-        # Spline coefficients along u, per segment with its ghosts, then along v.
-        if split:
-            segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *ends), 0, 1)
-                    for part, ends in zip((nodes[:, :m], nodes[:, m:]), axis.ends)]
-            cu = [bspline_coefficients(seg, axis=1) for seg in segs]
-            approx_u = np.concatenate([bspline_midpoints(c[rows], 1, g, m) for c in cu],
-                                      axis=1)
-            cu = np.concatenate(cu, axis=1)
-            texel = cols + g + np.where(cols >= m, 2 * g, 0)
-        else:
-            cu = bspline_coefficients(nodes, axis=1)
-            approx_u = bspline_midpoints(cu[rows], 1, g, nu)
-            texel = cols + g
-        coeffs = bspline_coefficients(cu, axis=0)
-        # The spline along v through node column j has the coefficients
-        # B_u coeffs (B_u: the u spline's (1, 4, 1) / 6 at its nodes).
-        cv = (coeffs[:, texel - 1] + 4.0 * coeffs[:, texel] + coeffs[:, texel + 1]) / 6.0
-        approx_v = np.concatenate([bspline_midpoints(cv, 0, g, nv), bspline_at(cv, kinks, g)])
-        dev = np.abs(mid_u - approx_u).max(axis=-1)
-        err_u = float(np.max(np.where(cos_u >= GRAZING_COS, dev, 0.0)))
-        dev = np.abs(mid_v - approx_v).max(axis=-1)
-        err_v = float(np.max(np.where(cos_v >= GRAZING_COS, dev, 0.0)))
-        stats.setdefault("errors", []).append((nu, nv, err_u, err_v))
-        if err_u + err_v <= error:
-            stats["result"] = "table"
-            return Table(coeffs, axis, err_u + err_v, nodes.shape[-1])
-        # Refine: aim at REFINE_SHARE of the target; an axis already within
-        # half of that keeps its nodes and leaves the rest to the other.
-        aim = REFINE_SHARE * error
-        if err_u <= 0.5 * aim:
-            goal = {"u": err_u, "v": aim - err_u}
-        elif err_v <= 0.5 * aim:
-            goal = {"u": aim - err_v, "v": err_v}
-        else:
-            goal = {"u": 0.5 * aim, "v": 0.5 * aim}
-        factors = {}
-        for along, n, err in (("u", nu, err_u), ("v", nv, err_v)):
-            if err <= goal[along]:
-                factors[along] = 1.0
-                continue
-            factors[along] = convergence_factor(n, err, goal[along], history.get(along), order,
-                                               margin=1.05, cap=3.0)
-            history[along] = (n, err)
-        if not budget.allows(texels=nu * nv * factors["u"] * factors["v"] / 4):
-            return None   # hopeless within the budget: do not spend the time
-        nu = int(math.ceil((nu - 1) * factors["u"])) + 1
-        nv = int(math.ceil((nv - 1) * factors["v"])) + 1
-    return None
+    return nu, nv, budget
+
+
+def _fit_and_check(side: SideData, axis, nu: int, nv: int):
+    """One round of :func:`build_exact_table` at ``nu x nv`` nodes: the exact values at
+    the nodes and midway between them, the B-spline coefficients through the nodes, and
+    the largest deviations of the spline from the midway values along u and along v
+    (incidence outside the grazing sliver): ``(nodes, coeffs, err_u, err_v)``."""
+    g = GHOST
+    split = axis.split
+    m = nu // 2
+    su = np.arange(0 if split else -g, nu + (0 if split else g), dtype=np.float64)
+    tv = np.arange(-g, nv + g, dtype=np.float64)
+    mu = np.arange(nu - 1) + 0.5
+    if split:
+        mu = mu[mu != m - 0.5]
+    rows = np.arange(0, nv, 2) + g      # every other real v row (index into tv)
+    cols = np.arange(0, nu, 2)          # every other real u node
+    # Where an index's slope jumps (tabulated data) the spline errs most
+    # beside, not between, the nodes: check there too.
+    kinks = v_texel(side.kinks, nv)
+    pts = _Points(side, axis)
+    pts.add(su, tv, nu, nv)
+    pts.add(mu, tv[rows], nu, nv)
+    pts.add(cols.astype(np.float64), np.concatenate([np.arange(nv - 1) + 0.5, kinks]),
+            nu, nv)
+    (nodes, _), (mid_u, cos_u), (mid_v, cos_v) = pts.evaluate()
+    # Spline coefficients along u, per segment with its ghosts, then along v.
+    if split:
+        segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *ends), 0, 1)
+                for part, ends in zip((nodes[:, :m], nodes[:, m:]), axis.ends)]
+        cu = [bspline_coefficients(seg, axis=1) for seg in segs]
+        approx_u = np.concatenate([bspline_midpoints(c[rows], 1, g, m) for c in cu],
+                                  axis=1)
+        cu = np.concatenate(cu, axis=1)
+        texel = cols + g + np.where(cols >= m, 2 * g, 0)
+    else:
+        cu = bspline_coefficients(nodes, axis=1)
+        approx_u = bspline_midpoints(cu[rows], 1, g, nu)
+        texel = cols + g
+    coeffs = bspline_coefficients(cu, axis=0)
+    # The spline along v through node column j has the coefficients
+    # B_u coeffs (B_u: the u spline's (1, 4, 1) / 6 at its nodes).
+    cv = (coeffs[:, texel - 1] + 4.0 * coeffs[:, texel] + coeffs[:, texel + 1]) / 6.0
+    approx_v = np.concatenate([bspline_midpoints(cv, 0, g, nv), bspline_at(cv, kinks, g)])
+    dev = np.abs(mid_u - approx_u).max(axis=-1)
+    err_u = float(np.max(np.where(cos_u >= GRAZING_COS, dev, 0.0)))
+    dev = np.abs(mid_v - approx_v).max(axis=-1)
+    err_v = float(np.max(np.where(cos_v >= GRAZING_COS, dev, 0.0)))
+    return nodes, coeffs, err_u, err_v
+
+
+def _refinement(nu: int, nv: int, err_u: float, err_v: float, error: float,
+                history: dict) -> dict:
+    """``{"u": factor, "v": factor}`` by which :func:`build_exact_table` multiplies its
+    resolution after a round that missed ``error``, at the convergence order observed
+    between rounds (``history``, updated)."""
+    order = 4   # a cubic spline's error falls as h^4
+    # Refine: aim at REFINE_SHARE of the target; an axis already within
+    # half of that keeps its nodes and leaves the rest to the other.
+    aim = REFINE_SHARE * error
+    if err_u <= 0.5 * aim:
+        goal = {"u": err_u, "v": aim - err_u}
+    elif err_v <= 0.5 * aim:
+        goal = {"u": aim - err_v, "v": err_v}
+    else:
+        goal = {"u": 0.5 * aim, "v": 0.5 * aim}
+    factors = {}
+    for along, n, err in (("u", nu, err_u), ("v", nv, err_v)):
+        if err <= goal[along]:
+            factors[along] = 1.0
+            continue
+        factors[along] = convergence_factor(n, err, goal[along], history.get(along), order,
+                                           margin=1.05, cap=3.0)
+        history[along] = (n, err)
+    return factors
