@@ -155,7 +155,7 @@ class _Guard:
 
     def _forget_dead_threads(self) -> None:
         alive = sys._current_frames().keys()
-        self.tracing &= alive
+        self.tracing.intersection_update(alive)   # in place: other threads hold this set
         for ident in list(self.scoped):   # (other threads may run between two lines)
             if ident not in alive:
                 self.scoped.pop(ident, None)
@@ -163,7 +163,7 @@ class _Guard:
     def forget_threads(self) -> None:
         """In a forked child, only the forking thread lives on (and no pass runs)."""
         me = threading.get_ident()
-        self.tracing &= {me}
+        self.tracing.intersection_update({me})
         self.scoped = {i: n for i, n in self.scoped.items() if i == me}
         self.pass_lock, self.pass_held, self.passing = threading.Lock(), False, None
 
