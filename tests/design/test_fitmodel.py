@@ -101,3 +101,37 @@ def test_instrument_quadratures_match_brute_force(tmp_path):
     fine = model(np.tile(wl, theta.size), np.repeat(theta, wl.size)).reshape(theta.size, wl.size)
     # 3 rings x 4 azimuths against a 41 x 60 grid over the cone (whose own error is ~1e-4)
     np.testing.assert_allclose(model(wl, np.full(wl.size, 30.0), cone=half), w @ fine / w.sum(), atol=5e-4)
+
+
+def test_chi2_of_many_stacks_matches_the_residuals(tmp_path):
+    """FitModel.chi2 (S stacks at once, by fitmodel.powers) against the residuals of each stack
+    alone (by matrices.stack_response), with bandwidth, cone, back side, dispersion and a free
+    scale; and powers against stack_response for absorbing films at a steep angle, s and p, lit
+    from either side."""
+    from thinfilm_mi.design.fitmodel import film_matrix, powers
+    from thinfilm_mi.design.matrices import stack_response
+    from thinfilm_mi.optics.polarization import P, S
+
+    _gradient_files(tmp_path)
+    (tmp_path / "m.yml").write_text(GRADIENT_DOC)
+    model = FitModel(load_measurements(tmp_path / "m.yml"))
+    x = model.x0
+    D = model.thicknesses(x)[0][:, None] * np.random.default_rng(0).uniform(0.6, 1.4, (5, 7))
+    each = [model.residuals(np.r_[D[:, i], x[5:]])[0] for i in range(7)]     # with jac: by stack_response
+    assert model.thick_cols == [0, 1, 2, 3, 4]
+    # the same R and T by two products of the same matrices, summed in another order: rounding only
+    np.testing.assert_allclose(model.chi2(x, D), [e @ e for e in each], rtol=1e-12)
+    wl = np.linspace(400.0, 800.0, 9)[:, None]
+    films = [np.full(wl.shape, n) for n in (2.3 + 0.05j, 1.46 + 0j, 0.2 + 3.0j)]
+    d = [np.array([50.0, 120.0]), np.array([200.0, 90.0]), np.array([15.0, 30.0])]
+    n_in, n_out, beta2 = np.ones(wl.shape), np.full(wl.shape, 1.52 + 1e-4j), np.full(wl.shape, 0.7)
+    for pol in (S, P):
+        m11, m12, m21, m22 = film_matrix(films, d, wl, beta2, pol)
+        # both sides from one product: the reverse order swaps its diagonal
+        for a, b in ((powers((m11, m12, m21, m22), n_in, n_out, beta2, pol),
+                      stack_response(n_in, n_out, films, d, wl, beta2, pol, derivatives=False)),
+                     (powers((m22, m12, m21, m11), n_out.real, n_in + 0j, beta2, pol),
+                      stack_response(n_out.real, n_in + 0j, films[::-1], d[::-1], wl, beta2, pol, derivatives=False))):
+            assert a.R.shape == (9, 2)
+            np.testing.assert_allclose(a.R, b.R, atol=1e-14)
+            np.testing.assert_allclose(a.T, b.T, atol=1e-14)

@@ -32,8 +32,8 @@ def cmd_fit(args: argparse.Namespace) -> int:
     def work(tolerance, progress):
         from thinfilm_mi import design as dz
 
-        return dz.fit(args.measurements, starts=args.starts, seed=args.seed, tolerance=tolerance,
-                      tolerance_seed=args.seed or 0, progress=progress)
+        return dz.fit(args.measurements, starts=args.starts, seed=args.seed, global_stage=args.global_stage,
+                      tolerance=tolerance, tolerance_seed=args.seed or 0, progress=progress)
 
     result, status = run_with_progress(PROG, args, "fit", work)
     if result is None:
@@ -56,11 +56,16 @@ def add_parser(sub) -> argparse.ArgumentParser:
         "fit", help="fit a stack's thicknesses and dispersion to measured spectra, with uncertainties",
         description="Fit the free parameters of a measurements file (thicknesses, dispersion models, data "
                     "scale factors) to its measured R and T spectra by weighted least squares from several "
-                    "starts; report values, standard errors, correlations, χ²/dof and residuals. See the "
+                    "starts, some chosen by a global search over the films' thicknesses; report values, "
+                    "standard errors, correlations, χ²/dof (with its p-value) and residuals. See the "
                     "README, 'Fitting measured spectra'.")
     p.add_argument("measurements", metavar="MEASUREMENTS.yml", help="the measurements file")
-    p.add_argument("--starts", type=int, help="starts of the fit (default: the file's, else 8)")
+    p.add_argument("--starts", type=int, help="local descents of the fit: from the nominal stack, the global "
+                                              "stage's best, then random (default: the file's, else 8)")
     p.add_argument("--seed", type=int, help="random seed of the starts and the tolerance draws (default 0)")
+    p.add_argument("--global", dest="global_stage", default="evolve", metavar="STAGE",
+                   help="the search over the films' thicknesses that chooses starts of the local descents: "
+                        "evolve (differential evolution within ±40%% of the nominal ones; the default) or none")
     p.add_argument("--materials", metavar="DIR", help="write fitted dispersive materials as tables into DIR")
     add_output_options(p, "print JSON (layers, χ², parameters with errors and correlations, residuals, ...)",
                        "draw measured against fitted spectra, with residuals",

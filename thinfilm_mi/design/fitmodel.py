@@ -40,10 +40,10 @@ import math
 import numpy as np
 
 from thinfilm_mi.design.fitfile import DATA_SCALE, DISPERSION, QUANTITIES, THICKNESS, Measurement
-from thinfilm_mi.design.matrices import film_index_response, normal_index, stack_response
+from thinfilm_mi.design.matrices import Response, film_index_response, normal_index, stack_response
 from thinfilm_mi.optics.polarization import Component
 
-__all__ = ["FitModel", "BANDWIDTH_NODES", "CONE_RINGS", "CONE_AZIMUTHS"]
+__all__ = ["FitModel", "film_matrix", "powers", "BANDWIDTH_NODES", "CONE_RINGS", "CONE_AZIMUTHS"]
 
 #: Gauss–Hermite wavelengths per point across a Gaussian bandwidth.
 BANDWIDTH_NODES = 7
@@ -76,6 +76,36 @@ def cone_nodes(angle: float, half_angle: float) -> tuple[np.ndarray, np.ndarray]
     theta = np.degrees(np.arccos(np.clip(cos_t, -1.0, 1.0))).ravel()
     weight = np.repeat(w / w.sum(), CONE_AZIMUTHS) / CONE_AZIMUTHS
     return theta, weight
+
+
+def film_matrix(films, d, wl, beta2, pol: Component) -> tuple:
+    """The entries ``(m11, m12, m21, m22)`` of the product ``M_1 ... M_L`` of the
+    films' characteristic matrices (arguments and broadcasting as
+    :func:`.matrices.stack_response`), with the real cosine and sine for a film
+    whose phase is real. The films met in the reverse order have the product with
+    ``m11`` and ``m22`` swapped (each ``M_j = K M_jᵀ K``, ``K`` the exchange
+    matrix, as its diagonal entries are equal)."""
+    k0 = 2.0 * math.pi / wl
+    m11, m12, m21, m22 = np.complex128(1.0), np.complex128(0.0), np.complex128(0.0), np.complex128(1.0)
+    for n, dj in zip(films, d):
+        q = normal_index(n, beta2)
+        eta = pol.admittance(n, q)
+        phase = k0 * (q.real if not np.any(q.imag) else q) * dj
+        c, s = np.cos(phase), np.sin(phase)
+        sa, sb = s * (-1j / eta), s * (-1j * eta)
+        m11, m12, m21, m22 = m11 * c + m12 * sb, m11 * sa + m12 * c, m21 * c + m22 * sb, m21 * sa + m22 * c
+    return m11, m12, m21, m22
+
+
+def powers(m: tuple, n_in, n_out, beta2, pol: Component) -> Response:
+    """R and T of films whose :func:`film_matrix` is ``m``, lit from ``n_in``
+    (real) with ``n_out`` the exit medium: :func:`.matrices.stack_response`'s
+    without the prefix products its derivatives need."""
+    eta0 = pol.admittance(n_in, normal_index(n_in.astype(np.complex128), beta2)).real
+    eta_out = pol.admittance(n_out, normal_index(n_out, beta2))
+    B, C = m[0] + m[1] * eta_out, m[2] + m[3] * eta_out
+    D = eta0 * B + C
+    return Response(np.abs((eta0 * B - C) / D) ** 2, 4.0 * eta0 * eta_out.real / np.abs(D) ** 2)
 
 
 class _Group:
@@ -183,61 +213,69 @@ class FitModel:
         return out
 
     def _group(self, g: _Group, x: np.ndarray, d: np.ndarray, dd: np.ndarray, jac: bool):
-        """{pol: (R, T, dR, dT)} of the group's points."""
+        """{pol: (R, T, dR, dT)} of the group's points; ``d`` (L, B) without ``jac``
+        gives R and T of B stacks at once, (P, B)."""
         films = self._indices(g, x)
-        ns = [n for n, _ in films]
+        pts = (lambda a: a[:, None]) if d.ndim == 2 else (lambda a: a)
+        ns = [pts(n) for n, _ in films]
         L = len(ns)
         n_amb = g.n_amb.astype(np.complex128)
         fitted = jac and any(dn is not None for _, dn in films)
 
-        def response(n_in, n_out, films_, d_):
+        def response(n_in, n_out, reverse):
+            if not jac:         # the films' matrix, once for both sides
+                return powers((m[3], m[1], m[2], m[0]) if reverse else m, pts(n_in), pts(n_out), pts(g.beta2), pol)
+            films_, d_ = (ns[::-1], d[::-1]) if reverse else (ns, d)
             if fitted:
                 return film_index_response(n_in, n_out, films_, d_, g.wl, g.beta2, pol)
-            return stack_response(n_in, n_out, films_, d_, g.wl, g.beta2, pol, derivatives=jac)
+            return stack_response(n_in, n_out, films_, d_, g.wl, g.beta2, pol)
 
         out = {}
         for pol in sorted(g.pols, key=lambda c: c.name):
-            f = response(g.n_amb.real, g.n_sub, ns, d)
+            m = None if jac else film_matrix(ns, list(d), pts(g.wl), pts(g.beta2), pol)
+            f = response(g.n_amb.real, g.n_sub, False)
             R, T = f.R, f.T
             dR, dT = self._chain(f, L, dd, films) if jac else (None, None)
             if self.m.substrate_thickness_mm is not None:
                 if pol not in g.back:
                     b = stack_response(g.n_sub.real, n_amb, [], [], g.wl, g.beta2, pol, derivatives=False)
                     g.back[pol] = (b.R, b.T)
-                R2, T2 = g.back[pol]
-                b = response(g.n_sub.real, n_amb, ns[::-1], d[::-1])
-                Y = R2 * g.P ** 2
+                R2, T2 = map(pts, g.back[pol])
+                P = pts(g.P)
+                b = response(g.n_sub.real, n_amb, True)
+                Y = R2 * P ** 2
                 den = 1.0 - b.R * Y
                 R = f.R + f.T * b.T * Y / den
-                T = f.T * g.P * T2 / den
+                T = f.T * P * T2 / den
                 if jac:
                     dRb, dTb = self._chain(b, L, dd, films, reverse=True)
                     c = (Y / den)[:, None]
                     dden = -Y[:, None] * dRb
                     dR = dR + c * (f.T[:, None] * dTb + b.T[:, None] * dT) \
                         - (f.T * b.T * Y / den ** 2)[:, None] * dden
-                    dT = (g.P * T2 / den)[:, None] * dT - (T / den)[:, None] * dden
+                    dT = (P * T2 / den)[:, None] * dT - (T / den)[:, None] * dden
             out[pol] = (R, T, dR, dT)
         return out
 
     def predict(self, x: np.ndarray, jac: bool = True, d: np.ndarray | None = None
                 ) -> tuple[list[np.ndarray], list[np.ndarray] | None]:
         """Per data set the modelled values (N,) and their Jacobian (N, K); ``d``
-        (nm) overrides the films' thicknesses that ``x`` gives."""
+        (nm) overrides the films' thicknesses that ``x`` gives: (L,), or (L, S)
+        without ``jac`` for S stacks at once (values (N, S))."""
         x = np.asarray(x, dtype=np.float64)
         d_x, dd = self.thicknesses(x)
         d = d_x if d is None else np.asarray(d, dtype=np.float64)
         resp = {k: self._group(g, x, d, dd, jac) for k, g in self.groups.items()}
         values, jacs = [], []
         for ds, terms in zip(self.m.datasets, self.terms):
-            q = np.zeros(ds.value.shape)
+            q = np.zeros(ds.value.shape + d.shape[1:])
             dq = np.zeros(ds.value.shape + (x.size,)) if jac else None
             pols = ds.polarization.components
             what = QUANTITIES.index(ds.quantity)          # R and T, in the order the groups hold them
             for key, idx, w, mask in terms:
                 r = resp[key]
-                val = sum(r[p][what][idx] for p in pols) / len(pols)          # (N, B)
-                q[mask] += val @ w
+                val = sum(r[p][what][idx] for p in pols) / len(pols)          # (N, B[, S])
+                q[mask] += np.einsum("nb...,b->n...", val, w)
                 if jac:
                     der = sum(r[p][2 + what][idx] for p in pols) / len(pols)  # (N, B, K)
                     dq[mask] += np.einsum("nbk,b->nk", der, w)
@@ -257,3 +295,17 @@ class FitModel:
         e = np.concatenate([(v - d.value) / s for v, d, s in zip(values, self.m.datasets, self.sigma)])
         J = np.concatenate([j / s[:, None] for j, s in zip(jacs, self.sigma)]) if jac else None
         return e, J
+
+    def peak_indices(self, x: np.ndarray) -> np.ndarray:
+        """Each film's largest real index over the data's points at the parameters ``x`` (L,)."""
+        out = np.zeros(len(self.m.films))
+        for g in self.groups.values():
+            out = np.maximum(out, [float(np.max(n.real)) for n, _ in self._indices(g, x)])
+        return out
+
+    def chi2(self, x: np.ndarray, d: np.ndarray) -> np.ndarray:
+        """χ² of S stacks at once: the parameters ``x`` with the films' thicknesses
+        ``d`` (L, S) nm in place of those ``x`` gives; (S,)."""
+        values, _ = self.predict(x, jac=False, d=d)
+        return sum(np.sum(((v - ds.value[:, None]) / s[:, None]) ** 2, axis=0)
+                   for v, ds, s in zip(values, self.m.datasets, self.sigma))

@@ -17,7 +17,7 @@ from thinfilm_mi.design.tolerance import ToleranceSpec, draw_thicknesses, parse_
 from thinfilm_mi.materials import save_material
 from thinfilm_mi.materials.stack import format_layers
 
-__all__ = ["FitResult", "Minimum", "CORRELATION_WARNING", "IDENTIFIABILITY_DELTA"]
+__all__ = ["FitResult", "Minimum", "CORRELATION_WARNING", "IDENTIFIABILITY_DELTA", "CHI2_P_WARNING"]
 
 #: A correlation between two parameters above this (in magnitude) is warned about.
 CORRELATION_WARNING = 0.95
@@ -25,16 +25,22 @@ CORRELATION_WARNING = 0.95
 #: residuals' scale, 1 with σ, χ²/dof without) is warned about: the data hardly
 #: prefer the best (Δχ² = 9 is a 3σ likelihood-ratio difference for one parameter).
 IDENTIFIABILITY_DELTA = 9.0
+#: With σ given, a χ² whose p-value (the chance that the right model with the
+#: right σ gives a χ² at least as large) is below this is warned about.
+CHI2_P_WARNING = 1e-3
 
 
 @dataclass
 class Minimum:
-    """A start's local minimum: ``chi2``, the parameters ``x``, the start's number and its evaluations."""
+    """A start's local minimum: ``chi2``, the parameters ``x``, the start's number,
+    its evaluations and where the start came from (``nominal``, ``random`` or the
+    global stage's name)."""
 
     chi2: float
     x: np.ndarray
     start: int
     evaluations: int
+    origin: str
 
 
 def _file_name(prefix: str, name: str) -> str:
@@ -93,11 +99,31 @@ class FitResult:
         return self.chi2 / self.dof
 
     @property
+    def p_value(self) -> float | None:
+        """With σ given, the chance that the right model with the right σ gives a
+        χ² at least this large (χ² distribution of ``dof`` degrees); else ``None``."""
+        if not self.measurement.sigma_given:
+            return None
+        from scipy.stats import chi2
+
+        return float(chi2.sf(self.chi2, self.dof))
+
+    @property
     def next_best(self) -> Minimum | None:
         return self.minima[1] if len(self.minima) > 1 else None
 
     def warnings(self) -> list[str]:
+        """What a reader of the fit should know: an implausible χ² (σ given), strong
+        correlations, undetermined parameters, parameters at a bound, a near minimum."""
         out = []
+        pv = self.p_value
+        if pv is not None and pv < CHI2_P_WARNING:
+            chance = f"{pv:.2g}" if pv > 0 else "below 1e-300"
+            out.append(f"χ²/dof {self.reduced_chi2:.4g} is implausible for the σ given (p-value {chance} for "
+                       f"{self.dof} degrees of freedom): the fit may have ended in a local minimum (start "
+                       "nearer the truth, or bound the thicknesses: the global stage searches within the bounds), "
+                       "the model may be wrong (a missing film, a dispersion not modelled, the substrate's back "
+                       "side), or σ may be too small")
         rho = self.correlation
         names = self.names
         for i in range(len(names)):
@@ -208,11 +234,12 @@ class FitResult:
     def to_dict(self) -> dict:
         nb = self.next_best
         out = {"layers": self.layers, "chi2": float(self.chi2), "dof": int(self.dof),
-               "reduced_chi2": float(self.reduced_chi2), "sigma_given": self.measurement.sigma_given,
+               "reduced_chi2": float(self.reduced_chi2), "p_value": self.p_value,
+               "sigma_given": self.measurement.sigma_given,
                "seconds": float(self.seconds), "parameters": self.parameter_records(),
                "next_best_chi2": None if nb is None else float(nb.chi2),
-               "starts": [{"start": r.start, "chi2": float(r.chi2), "evaluations": r.evaluations}
-                          for r in self.found],
+               "starts": [{"start": r.start, "origin": r.origin, "chi2": float(r.chi2),
+                           "evaluations": r.evaluations} for r in self.found],
                "warnings": self.warnings(),
                "datasets": [{"data": d.index, "file": d.file, "quantity": d.quantity,
                              "polarization": d.polarization.name, "wavelengths": json_list(d.wavelengths),
@@ -229,8 +256,11 @@ class FitResult:
     def table(self) -> str:
         m = self.measurement
         nb = self.next_best
-        unit = "" if m.sigma_given else " (no σ given: errors scaled by χ²/dof)"
-        lines = [f"fit: {len(self.x)} parameters, {self.model.points} points, {len(self.found)} starts, "
+        pv = self.p_value
+        unit = f", p-value {pv:.3g}" if pv is not None else " (no σ given: errors scaled by χ²/dof)"
+        origins = [r.origin for r in sorted(self.found, key=lambda r: r.start)]
+        kinds = ", ".join(f"{origins.count(o)} {o}" for o in dict.fromkeys(origins))
+        lines = [f"fit: {len(self.x)} parameters, {self.model.points} points, {len(self.found)} starts ({kinds}), "
                  f"{self.seconds:.1f} s",
                  f"χ² {self.chi2:.6g}, dof {self.dof}, χ²/dof {self.reduced_chi2:.4g}{unit}",
                  "next-best distinct minimum: " + ("none found" if nb is None else
