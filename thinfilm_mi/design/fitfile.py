@@ -12,7 +12,8 @@ A YAML file (or the same structure as a dict)::
     bounds: {"d[0]": [40, 80], "H.A": [2.0, 2.5]}    # optional, by parameter name
     instrument: {bandwidth_nm: 2.0, cone_half_angle: 3.0}   # optional; default 0 and 0
     starts: 8                       # starts of the fit (default 8), the first the nominal stack
-    spread: 0.1                     # the other starts: every parameter off by up to ±10 % (default)
+    spread: 0.1                     # random starts: every parameter off by up to ±10 % (default;
+                                    # the global stage picks the next starts, random ones fill the rest)
     seed: 0
     data:
       - {file: r0.csv, quantity: R, angle: 0}
