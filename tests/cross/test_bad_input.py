@@ -496,15 +496,16 @@ SWAPPED = {0.0: 1e-9, 1e-9: 0.0, 1e9: 1e30, 1e30: 1e9}
 def test_extreme_thicknesses_render_finite_and_lit_at_load_and_through_edits(variant):
     """Every plugin and table kind, its first film 0, 1e-9, 1e9 and 1e30 nm thick
     (:data:`EXTREME_ROWS`), renders finite and lit tiles, loaded so and after a
-    ``mi.traverse(scene)`` edit that swaps the thicknesses (:data:`SWAPPED`); edited back, the scene renders its loaded image bit for
-    bit. A lossless film beyond ``coherence_thickness`` is averaged incoherently, so the
-    tiles of 1e9 and of 1e30 nm are one BSDF's: the row loaded at 1e9 nm and edited to
-    1e30 renders as loaded (to the rounding its neighbours' 0 <-> 1e-9 nm swap sends
-    over), but in polarized variants, whose exact path keeps such a film coherent in
-    float32. (The factor table rendered 1647 of 1728 values NaN at 1e30 nm, without it
-    R_dh and T_hemi fell silently to 0; a polarized Mueller table took 62 s and 12 GB to
-    fail.) Scalar variants cannot write a Python BSDF's float through ``mi.traverse``
-    (Mitsuba's "not a nanobind type"): loads only."""
+    ``mi.traverse(scene)`` edit that swaps the thicknesses (:data:`SWAPPED`); edited back,
+    the scene renders its loaded image bit for bit. A lossless film beyond
+    ``coherence_thickness`` is averaged incoherently, so the tiles of 1e9 and of 1e30 nm are
+    one BSDF's: the row loaded at 1e9 nm and edited to 1e30 renders as loaded (to the
+    rounding its neighbours' 0 <-> 1e-9 nm swap sends over), but in polarized variants,
+    whose exact path keeps such a film coherent in float32. (The factor table rendered 1647
+    of 1728 values NaN at 1e30 nm, without it R_dh and T_hemi fell silently to 0; a
+    polarized Mueller table took 62 s and 12 GB to fail.) Scalar variants cannot write a
+    Python BSDF's float through ``mi.traverse`` (Mitsuba's "not a nanobind type"): loads
+    only."""
     mi.set_variant(variant)
     columns, extreme = EXTREME_COLUMNS[variant], EXTREME_ROWS[variant]
     scene = mi.load_dict(extreme_scene(columns, extreme))

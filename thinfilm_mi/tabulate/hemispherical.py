@@ -32,8 +32,7 @@ thickness times the lane's scale; deep coatings as a loop over the films):
 
 Films marked incoherent (thicker than the stack's ``coherence_thickness``) are averaged
 as the render kernel averages them (:mod:`thinfilm_mi.optics.incoherent`): their phase
-never enters, which also keeps a film of 1e30 nm finite, where a float64 ``sincos`` of
-its phase is not.
+never enters, and a lossless one's thickness does not matter.
 
 Each uses one Gauss-Legendre rule for both terms, so ``T_hemi + R_dh = 1`` holds to
 rounding for a lossless coating whatever the quadrature error of each, which is what
