@@ -29,6 +29,7 @@ PLUGINS = {
     "thinfilm_roughconductor": {"specular_reflectance": 0.9, "alpha": 0.2, "thickness": 1.0},
     "thinfilm_roughdielectric": {"specular_reflectance": 0.9, "specular_transmittance": 0.8,
                                  "alpha": 0.2, "thickness": 1.0},
+    "thinfilm_coating": {"coat_sigma_a": 0.5, "coat_thickness": 1.0, "bsdf": {"type": "diffuse"}},
 }
 BAD = [
     ("layers.0.eta.value", [NAN, 0.0, INF, -1.5, 1e10, 1e-12]),
@@ -39,6 +40,8 @@ BAD = [
     ("specular_transmittance.value", [NAN, -0.5, INF]),
     ("reflectance.value", [2.0, -1.0, NAN]),
     ("thickness.value", [INF, -1.0, NAN]),
+    ("coat_sigma_a.value", [-1.0, NAN, INF]),
+    ("coat_thickness", [-1.0, NAN, INF]),
 ]
 LAYERS = "1.5 200; 0.4+2.5j 12"
 

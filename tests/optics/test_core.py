@@ -752,3 +752,15 @@ def test_sqrt_decaying_derivative_at_zero_loss():
     # x = 4: q = 2, d Im q / dy = 1/(2 * 2); x = -4 (evanescent): q = 2i, d Re q/dy = 1/4
     np.testing.assert_allclose(np.array(dr.grad(q.im)), [0.25, 0.0], atol=1e-15)
     np.testing.assert_allclose(np.array(dr.grad(q.re)), [0.0, 0.25], atol=1e-15)
+
+
+def test_float64_phase_factor_of_a_phase_of_any_size():
+    """The float64 phase factor (table builds, hemispherical terms) of a phase of many
+    turns, against numpy's ``exp(2πi frac(u))`` of the same float64 ``u``: exact to rounding
+    up to whole-turn phases (1e30: the float64 holds whole turns only, factor 1, as float32
+    from 2^24 turns). Dr.Jit's float64 ``sincos`` of such phases returns values in the 1e100s
+    (a film of 1e12 nm gave NaN terms and a Mueller table build of 12 GB)."""
+    u = np.array([0.3, 2.0 ** 20 + 0.125, 2.0 ** 40 + 0.25, 1e12 + 0.5, 1e30, -(2.0 ** 33) - 0.375])
+    e = optics.phase_factor(Cx(Float64(1.0), 0.0), Float64(u), False)
+    ref = np.exp(2j * np.pi * (u - np.round(u)))
+    np.testing.assert_allclose(np.array(e.re) + 1j * np.array(e.im), ref, rtol=0, atol=1e-15)

@@ -296,23 +296,38 @@ def test_edits_do_not_recompile(extra, edits):
     assert_edits_render_from_cache(scene, mi.traverse(scene), edits)
 
 
-@pytest.mark.parametrize("key,value,message", [
-    ("obj.bsdf.coat_thickness", -1.0, "coat_thickness"),
-    ("obj.bsdf.coat_thickness", float("nan"), "coat_thickness"),
-    ("obj.bsdf.coat_sigma_a.value", -0.5, "coat_sigma_a"),
-    ("obj.bsdf.coat_sigma_a.value", float("inf"), "coat_sigma_a"),
-    ("obj.bsdf.layers.0.thickness", -3.0, "layers.0.thickness"),
+#: The form of every plugin's refused edit (``render.params.check_value``): the plugin, the
+#: key, what the value is, the range, the value, and that the edit was undone.
+REFUSED_EDIT = (r"^thinfilm_coating: '{key}' \((?P<what>.+)\) must be finite and >= 0, "
+                r"got (a texture holding )?{value}; the edit was undone and the BSDF keeps its "
+                r"last valid parameters$")
+
+
+@pytest.mark.parametrize("key,value,what", [
+    ("coat_thickness", -1.0, "the coat medium's thickness"),
+    ("coat_thickness", float("nan"), "the coat medium's thickness"),
+    ("coat_sigma_a.value", -1.0, "an absorption coefficient per unit of 'coat_thickness'"),
+    ("coat_sigma_a.value", float("nan"), "an absorption coefficient per unit of 'coat_thickness'"),
+    ("coat_sigma_a.value", float("inf"), "an absorption coefficient per unit of 'coat_thickness'"),
+    ("layers.0.thickness", -3.0, "a film thickness (nm)"),
 ])
-def test_bad_edits_are_refused_and_undone(key, value, message):
+def test_bad_edits_are_refused_and_undone(key, value, what):
+    """A refused scene edit says what every plugin's does (the plugin, the key, what the
+    parameter is, the range, the value, and that the edit was undone), and is undone."""
+    import re
     scene = mi.load_dict({"type": "scene", "obj": {
         "type": "rectangle", "bsdf": {"type": "thinfilm_coating", "layers": FILMS,
                                       "coat_sigma_a": 0.1, "bsdf": BASES["diffuse"]}}})
     params = mi.traverse(scene)
-    old = np.array(params[key]).copy()
-    params[key] = type(params[key])(value)
-    with pytest.raises(ThinFilmError, match=message):
+    full = f"obj.bsdf.{key}"
+    old = np.array(params[full]).copy()
+    params[full] = type(params[full])(value)
+    with pytest.raises(ThinFilmError) as err:
         params.update()
-    np.testing.assert_array_equal(np.array(mi.traverse(scene)[key]), old)
+    text = str(err.value)
+    form = re.match(REFUSED_EDIT.format(key=re.escape(key), value=re.escape(f"{value:.7g}")), text)
+    assert form and form["what"] == what, text
+    np.testing.assert_array_equal(np.array(mi.traverse(scene)[full]), old)
 
 
 @pytest.mark.parametrize("extra,message", [

@@ -2,6 +2,8 @@
 float64 recursion (tmm-checked in tests/optics) on every angle axis, against the spline
 they come from (the coordinate mapping, the split axis's seam), the caps that keep a
 spline, and what the build reports."""
+import math
+
 import mitsuba as mi
 import numpy as np
 import pytest
@@ -134,3 +136,62 @@ def test_a_resampled_table_keeps_edits_in_one_kernel():
     after = scene.shapes()[0].bsdf().stack.plan[False].table
     assert after.interpolation is BILINEAR and before.interpolation is BILINEAR
     assert (after.factors, after.nu, after.nv) != (before.factors, before.nu, before.nv)
+
+
+#: The random stacks' materials (catalog names): dielectric films, and metal films and substrates
+DIELECTRICS = ("SiO2", "TiO2", "Al2O3", "MgF2", "Si3N4", "ZnS", "Ta2O5")
+METALS = ("Au", "Ag", "Al", "Cu", "Cr", "Ni", "Ti")
+
+
+def random_stacks(count: int, seed: int = 2):
+    """``(layers, substrate)`` of ``count`` stacks of 1-5 films (a fifth metal, 2-30 nm; the
+    others dielectric, 10-500 nm) on a metal."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
+        films = [f"{METALS[rng.integers(len(METALS))]} {rng.uniform(2, 30):.1f}"
+                 if rng.random() < 0.2 else
+                 f"{DIELECTRICS[rng.integers(len(DIELECTRICS))]} {rng.uniform(10, 500):.1f}"
+                 for _ in range(int(rng.integers(1, 6)))]
+        yield "; ".join(films), METALS[rng.integers(len(METALS))]
+
+
+def test_default_tables_against_tmm_on_random_stacks():
+    """``thinfilm_conductor`` at default settings (``tabulate="auto"``: a table of ``R`` from
+    one film on, bilinear where it fits) on 24 random stacks of 1-5 films: the lookup, as a
+    render reads it, against the float64 recursion at 20000 random points outside the
+    grazing sliver, and at the worst point of each stack against tmm. Tables of the exact
+    values stay within ``table_error``, which the spline and the resampling share: the
+    worst (printed with ``-s``) is the figure docs/guides/tables.md gives beside the
+    budget. Stacks whose exact values no table resolves get band-limited tables, whose
+    ``R`` is the convolved one (up to 0.2 from the exact value at resonances narrower than
+    ``spectral_resolution``; tests/tabulate/test_band.py): counted, not compared."""
+    import tmm
+    cos, wls = random_points(20000, seed=5)
+    worst, where, band = 0.0, None, []
+    for layers, metal in random_stacks(24):
+        bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": metal})
+        table = bsdf.stack.plan[False].table
+        assert table is not None, layers
+        if table.resolution > 0:
+            band.append(layers)
+            continue
+        got = np.array(bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)),
+                                              inside=False, transmission=False))
+        ref = tf.Stack(layers, substrate=metal, ambient=media_mod.DEFAULT_EXT_IOR)
+        errors = np.stack([np.abs(got[i] - ref_R(ref, cos, wls[i])) for i in range(4)])
+        i, k = np.unravel_index(np.argmax(errors), errors.shape)
+        wl = float(wls[i][k])
+        n0, films, n_sub = ref.indices(np.array([wl]))
+        n_list = [n0[0]] + [n[0] for n in films] + [n_sub[0]]
+        d_list = [np.inf] + [layer.thickness for layer in ref.layers] + [np.inf]
+        want = np.mean([tmm.coh_tmm(p, n_list, d_list, math.acos(float(cos[k])), wl)["R"]
+                        for p in "sp"])
+        error = abs(float(got[i][k]) - want)
+        # the spline tables' allowance (tests/support/tables.py)
+        assert error <= 1.5 * table.error + F32, (layers, metal, error, table.error)
+        if error > worst:
+            worst, where = error, f"{layers} on {metal}"
+    print(f"\nworst |R - tmm| of {24 - len(band)} tables of exact values: {worst:.2g} ({where}); "
+          f"{len(band)} band-limited")
+    assert worst <= K.DEFAULT_TABLE_ERROR
+    assert len(band) <= 4 and worst > 1e-4   # tables of the exact values, and their error

@@ -129,3 +129,32 @@ def test_paper_terms_over_scales_are_the_terms_of_scaled_films(films):
         t1, r1 = hemispherical_factors(n0, [(n, d * s) for n, d in coating], gold, (gold, 4.0 * s), wl)
         assert np.array_equal(R[k], r1) and np.array_equal(T[k], t1), s
     assert np.all(T[1:] > 0) and np.all(R[1:] > 0)
+
+
+@pytest.mark.parametrize("thickness", [6000.0, 1e9, 1e30])
+def test_incoherent_films_are_averaged_like_tmm_inc_tmm(thickness):
+    """A film marked incoherent (as the kernel marks one beyond ``coherence_thickness``)
+    enters the terms of model "exact" as tmm's ``inc_tmm`` averages it: the terms equal the
+    same rule (:func:`base_rule`) summed over ``inc_tmm``'s ``R`` and ``T`` of the reversed
+    stack lit from the base. Its phase never enters: 1e30 nm gives the terms of 6000 nm
+    (computed coherently, they were up to 1e-2 off at these thicknesses, or NaN)."""
+    import tmm
+
+    from thinfilm_mi.tabulate.hemispherical import base_rule, exact_hemispherical
+    wl = np.array([400.0, 560.0, 760.0])
+    n_amb, n_base, metal = np.ones(wl.size), np.full(wl.size, 1.5), 0.4 + 2.5j
+    # (a film of index above the base's: tmm's inc_tmm gives R < 0 where the light is
+    # evanescent in an incoherent film, which ours sends back whole)
+    films = [(np.full(wl.size, 1.6 + 0j), thickness), (np.full(wl.size, metal), 5.0)]
+    R, T = exact_hemispherical(n_amb, films, n_base, wl, nodes=32, incoherent=[True, False])
+    mu, weight = base_rule(n_amb, n_base, 32)
+    ref = np.zeros((2, wl.size))
+    for k, lam in enumerate(wl):
+        for m, (c, w) in enumerate(zip(mu[k], weight[k])):
+            out = [tmm.inc_tmm(p, [1.5, metal, 1.6, 1.0], [np.inf, 5.0, 6000.0, np.inf],
+                               ["i", "c", "i", "i"], np.arccos(c), lam) for p in "sp"]
+            ref[:, k] += w * 0.5 * np.array([out[0]["R"] + out[1]["R"], out[0]["T"] + out[1]["T"]])
+    assert np.all(np.isfinite(R)) and np.all(np.isfinite(T))
+    # float64 on both sides; tmm's 1e-30 floor on P and our clamps act at rounding level
+    np.testing.assert_allclose(R[0], ref[0], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(T[0], ref[1], rtol=0, atol=1e-10)

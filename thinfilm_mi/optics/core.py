@@ -307,10 +307,13 @@ def _sincos_turns(x):
     Float32 arrays use an exact reduction to the nearest quarter turn (``x -
     round(4x)/4`` is exact) and short polynomials: cheaper than a general
     ``sincos`` and as accurate, because the phase in turns needs no reduction by
-    an inexact ``pi``. Other types (Python floats, float64) use ``dr.sincos``.
+    an inexact ``pi``. Other types (Python floats, float64) use ``dr.sincos`` of the
+    phase reduced to the nearest turn the same way (``x - round(x)`` is exact): Dr.Jit's
+    float64 ``sincos`` returns values far outside [-1, 1] beyond ~1e9 rad, e.g. for a film
+    of 1e12 nm, where float32 already holds the phase as whole turns.
     """
     if not _is_float32(x):
-        return dr.sincos((2.0 * math.pi) * x)
+        return dr.sincos((2.0 * math.pi) * (x - dr.round(x)))
     j = dr.round(4.0 * x)
     g = dr.fma(j, -0.25, x)
     z = g * g

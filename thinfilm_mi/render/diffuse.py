@@ -7,9 +7,10 @@
   wavelength) and its hemispherical terms
   (:mod:`thinfilm_mi.tabulate.hemispherical`), read from the model's
   :class:`~thinfilm_mi.render.kernel.KernelStack` and media.
-* :class:`ExactFactors` — the same for model ``"exact"`` (the whole stack, coherent,
-  over a base medium of index ``base_ior``). The radiance factor ``(n_0/n_b)²`` of a
-  base medium that differs from the ambient is split evenly between the two crossings:
+* :class:`ExactFactors` — the same for model ``"exact"`` (the whole stack, coherent but
+  for the films beyond the coherence thickness, over a base medium of index
+  ``base_ior``). The radiance factor ``(n_0/n_b)²`` of a base medium that differs from
+  the ambient is split evenly between the two crossings:
   ``t = T n_0/n_b`` and ``T_hemi`` (the base's escape fraction) divided by ``n_0/n_b``,
   so that ``k_d t_i t_o S`` is the diffuse term and ``t_i k_d T_hemi S`` its albedo.
 * :class:`SpectralTerms` — ``R_dh`` and ``T_hemi`` in the spectral kernels: ``regular``
@@ -96,7 +97,14 @@ class DiffuseFactors:
         ``(len scales, len wl)`` (:func:`~thinfilm_mi.tabulate.hemispherical.paper_terms`;
         ``nodes``: of its rule, by default as many as the films' fringes need)."""
         n0, coat, n_exit, fn = self.at_scale(1.0)._arguments(wl)
-        return paper_terms(n0, coat, n_exit, fn, wl, scales, nodes)
+        return paper_terms(n0, coat, n_exit, fn, wl, scales, nodes, self.incoherent())
+
+    def incoherent(self) -> list[bool]:
+        """Per film of the coating, whether the kernel averages it incoherently (thicker
+        than the stack's ``coherence_thickness``, whatever the scale): the hemispherical
+        terms average it alike."""
+        c = self.coating
+        return [scalar(d) > c.coherence_thickness for d in c.thickness]
 
     def t(self, cos, wl):
         """``t = k_t k_a`` at every angle ``cos`` and wavelength ``wl``: shape ``(len cos, len wl)``."""
@@ -170,7 +178,7 @@ class ExactFactors(DiffuseFactors):
         films = [(ix.spectral_values(wl), scalar(d)) for ix, d in zip(c.indices, c.thickness)]
         R_dh, T_hemi = exact_hemispherical(c.ambient.spectral_values(wl, real=True), films,
                                            c.substrate.spectral_values(wl, real=True), wl,
-                                           scales)
+                                           scales, incoherent=self.incoherent())
         return R_dh, T_hemi / self._ratio(wl)[None, :]
 
     def r_dh_partials(self, wl):
@@ -281,7 +289,7 @@ def factor_table_key(factors, coating: KernelStack, media) -> str:
     ``factors`` of ``coating`` between ``media`` (:func:`factor_table`): what its values
     depend on, the ``media``'s indices on the 1 nm grid and their kinks, the planned side's
     films (thicknesses, incoherent flags) and its exit and opacity, every film's thickness
-    (the hemispherical terms read them all), film ``N``'s thickness, the thickness scale,
+    and the coherence thickness (the hemispherical terms read them all), film ``N``'s thickness, the thickness scale,
     the factors' kind (:class:`ExactFactors`, or the paper's :class:`DiffuseFactors` of
     models "single" and "multiple", which share them), ``table_error``, the build's
     steps and caps (:mod:`thinfilm_mi.tabulate.factors`), and the variant."""
@@ -291,7 +299,8 @@ def factor_table_key(factors, coating: KernelStack, media) -> str:
     side = coating.plan[False]
     return table_key(arrays, side.films, (
         mitsuba_module().variant(), "factors", type(factors).__name__, side.exit_real, side.opaque,
-        [scalar(d) for d in coating.thickness], factors.film_n_thickness, factors.scale,
+        [scalar(d) for d in coating.thickness], coating.coherence_thickness,
+        factors.film_n_thickness, factors.scale,
         coating.table_error, factor_build.FACTOR_FIRST_NODES, factor_build.FACTOR_STEPS,
         factor_build.FACTOR_MAX_FLOATS, factor_build.FACTOR_ANGLE_SHARE, GRAZING_COS))
 

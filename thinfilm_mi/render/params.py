@@ -48,6 +48,9 @@ RULES = [
     (r"^specular_(reflectance|transmittance)\.", 0.0, False, math.inf, "a factor", False),
     (r"^reflectance\.", 0.0, False, 1.0 + ALBEDO_SLACK, "an albedo", False),
     (r"^thickness\.", 0.0, False, math.inf, "a thickness scale", True),
+    (r"^coat_sigma_a\.", 0.0, False, math.inf,
+     "an absorption coefficient per unit of 'coat_thickness'", False),
+    (r"^coat_thickness$", 0.0, False, math.inf, "the coat medium's thickness", False),
 ]
 
 

@@ -20,8 +20,8 @@ thickness times the lane's scale; deep coatings as a loop over the films):
   film ``N``, the coating reflecting alike from both sides: exact for a lossless coating,
   ``R_up + t <= 1`` otherwise); without one, the coating over a base medium matched to
   the ambient, ``t = T`` and ``R_up`` the exact reflectance of the reversed coating.
-* :func:`exact_hemispherical` — the whole coherent stack over a base medium of index
-  ``n_b`` (model ``"exact"``), in the base medium's own directions, ``R_up`` and ``T_up``
+* :func:`exact_hemispherical` — the whole stack (coherent but for its incoherent films)
+  over a base medium of index ``n_b`` (model ``"exact"``), in the base medium's own directions, ``R_up`` and ``T_up``
   of the reversed stack lit from the base. ``T_hemi`` is the fraction of the base's
   Lambertian exitance that leaves; by reciprocity and the étendue ``n² μ dμ`` it equals
   ``(n_0/n_b)² 2∫ T(μ_0) μ_0 dμ_0`` over the ambient's directions (Mitsuba's ``plastic``
@@ -29,6 +29,10 @@ thickness times the lane's scale; deep coatings as a loop over the films):
   below ``μ_c = sqrt(1 - (n_0/n_b)²)`` (frustrated by absorbing films): the rule
   (:func:`base_rule`) is split there, the escape cone integrated in the ambient cosine
   ``μ_0`` (``μ dμ = (n_0/n_b)² μ_0 dμ_0``, smooth at ``μ_c``).
+
+Films marked incoherent (thicker than the stack's ``coherence_thickness``) are averaged
+as the render kernel averages them (:mod:`thinfilm_mi.optics.incoherent`): their phase
+never enters, and a lossless one's thickness does not matter.
 
 Each uses one Gauss-Legendre rule for both terms, so ``T_hemi + R_dh = 1`` holds to
 rounding for a lossless coating whatever the quadrature error of each, which is what
@@ -62,6 +66,7 @@ from thinfilm_mi.llvm import require_llvm
 from thinfilm_mi.materials.model import GRID  # where the factors are tabulated
 from thinfilm_mi.optics.backend import aligned_array, float64_array
 from thinfilm_mi.optics.core import Cx, film_attenuation
+from thinfilm_mi.optics.incoherent import incoherent_rt
 from thinfilm_mi.optics.unpolarized import LOOP_MIN_FILMS, unpolarized_rt, unpolarized_rt_loop
 from thinfilm_mi.tabulate.base import film_gather, grid_coordinate, linear_texture, opaque_float
 from thinfilm_mi.tabulate.refine import interleave
@@ -122,13 +127,17 @@ def base_rule(n_amb: np.ndarray, n_base: np.ndarray, nodes: int = DEFAULT_NODES)
     return np.concatenate([mu_a, mu_b], axis=1), np.concatenate([w_a, w_b], axis=1)
 
 
-def nodes_for(films: Sequence[tuple[np.ndarray, float]], s_max: float = 1.0) -> int:
+def nodes_for(films: Sequence[tuple[np.ndarray, float]], s_max: float = 1.0,
+              incoherent: Sequence[bool] | None = None) -> int:
     """Gauss-Legendre nodes for the hemispherical terms of ``films`` up to the scale
     ``s_max``: ``8 W + 16`` within ``[32, DEFAULT_NODES]``, with ``W = 2 Σ max(Re n) d
     s_max / 360 nm`` a bound on the fringes over the hemisphere (measured: 32 nodes are
-    within 4e-7 of 128 for SiO2 735 nm; Au 6 nm, W = 6)."""
-    w = 2.0 * s_max * sum(float(np.max(np.real(n))) * float(d) for n, d in films) / 360.0
-    return int(min(DEFAULT_NODES, max(32, 8 * math.ceil(w) + 16)))
+    within 4e-7 of 128 for SiO2 735 nm; Au 6 nm, W = 6), over the films not marked in
+    ``incoherent`` (an incoherent film has no fringes)."""
+    flags = incoherent or [False] * len(films)
+    w = 2.0 * s_max * sum(float(np.max(np.real(n))) * float(d)
+                          for (n, d), inc in zip(films, flags) if not inc) / 360.0
+    return int(min(DEFAULT_NODES, max(32, 8 * math.ceil(min(w, DEFAULT_NODES)) + 16)))
 
 
 def _lanes(values: np.ndarray, ns: int, nm: int) -> np.ndarray:
@@ -137,15 +146,16 @@ def _lanes(values: np.ndarray, ns: int, nm: int) -> np.ndarray:
 
 
 def _over_scales(n_in, mu, films, n_exit, wavelengths, scales, reduce, film_n=None,
-                 transmission: bool = True):
+                 transmission: bool = True, incoherent: Sequence[bool] | None = None):
     """``reduce(R, T, k_a, s)`` per chunk of ``scales`` (``R``, ``T``, ``k_a``: float64
     numpy of shape ``(chunk, nw, nm)``, ``T`` ``None`` without ``transmission``, ``k_a``
     ``None`` without ``film_n``; ``s``: the chunk's scales) for the stack ``films``
     (``[(index over wavelengths, thickness)]`` from the incident medium ``n_in``, real)
     over ``n_exit`` (complex; real: a literal zero imaginary part) at the cosines ``mu``
     ``(nw, nm)``, every thickness times the scale; ``film_n = (index, thickness)``: the
-    attenuation ``k_a`` through that film along the lanes' directions. The results are
-    stacked along the first axis."""
+    attenuation ``k_a`` through that film along the lanes' directions; ``incoherent``: one
+    flag per film of ``films``, those averaged incoherently (unrolled, as the kernel
+    evaluates them). The results are stacked along the first axis."""
     wl = np.asarray(wavelengths, np.float64)
     nw, nm = mu.shape
     scales = np.asarray(scales, np.float64).reshape(-1)
@@ -163,18 +173,21 @@ def _over_scales(n_in, mu, films, n_exit, wavelengths, scales, reduce, film_n=No
         else:
             exit_ = Cx(float64_array(_lanes(n_exit, ns, nm)), 0.0)
         lane_s = float64_array(np.repeat(s, nw * nm))
-        if len(films) >= LOOP_MIN_FILMS:
+        if len(films) >= LOOP_MIN_FILMS and not any(incoherent or ()):
             # deep coatings: a loop over the films, so the kernel does not grow with them
             at = UInt32(np.tile(np.repeat(np.arange(nw, dtype=np.uint32), nm), ns))
             indices = [np.asarray(ix, np.complex128) * np.ones(nw) for ix, _ in films] + [np.zeros(1)]
             film = film_gather(indices, [float(d) for _, d in films] + [0.0], at, nw, False, lane_s)
             rt = unpolarized_rt_loop(n0, cos, UInt32(len(films)), film, exit_, lane_wl, transmission)
         else:
-            # opaque thicknesses: a thickness edit reuses the kernel
+            # opaque thicknesses: a thickness edit reuses the kernel (incoherent films
+            # unrolled, as the render kernel evaluates them: the average has no loop form)
             stack = [(Cx(float64_array(_lanes(np.real(n), ns, nm)),
                          float64_array(_lanes(np.imag(n), ns, nm))),
                       lane_s * dr.opaque(Float64, float(d))) for n, d in films]
-            rt = unpolarized_rt(n0, cos, stack, exit_, lane_wl, transmission)
+            rt = (incoherent_rt(n0, cos, stack, exit_, lane_wl, list(incoherent), transmission)
+                  if any(incoherent or ()) else
+                  unpolarized_rt(n0, cos, stack, exit_, lane_wl, transmission))
         R, T = rt if transmission else (rt, None)
         k_a = None
         if film_n is not None:
@@ -203,7 +216,7 @@ def _hemi(R_up, t, weight):
 def paper_terms(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
                 n_exit: np.ndarray, film_n: tuple[np.ndarray, float] | None,
                 wavelengths: np.ndarray = GRID, scales: Sequence[float] = (1.0,),
-                nodes: int | None = None):
+                nodes: int | None = None, incoherent: Sequence[bool] | None = None):
     """``(R_dh, T_hemi)`` of the paper's models at every thickness scale of ``scales``,
     each of shape ``(len scales, len wavelengths)``, over the ambient's cosines.
 
@@ -212,11 +225,14 @@ def paper_terms(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
     coating's semi-infinite exit medium (``n_exit`` is not read), ``t = k_t k_a``,
     ``R_up = k_a² k_r``; ``None``: the coating over the base medium ``n_exit`` (real),
     ``t = T``, ``R_up`` the reversed coating's reflectance lit from the base medium.
-    ``nodes``: of the rule (default :func:`nodes_for` the films and the largest scale)."""
+    ``nodes``: of the rule (default :func:`nodes_for` the films and the largest scale).
+    ``incoherent``: one flag per film of ``coating``, the films averaged incoherently."""
     require_llvm()
     scales = np.asarray(scales, np.float64).reshape(-1)
     films = list(coating) + ([] if film_n is None else [film_n])
-    nodes = nodes or nodes_for(films, float(np.max(scales, initial=0.0)))
+    flags = list(incoherent) if incoherent is not None else [False] * len(coating)
+    nodes = nodes or nodes_for(films, float(np.max(scales, initial=0.0)),
+                               flags + [False] * (len(films) - len(flags)))
     mu, weight = _rule(nodes)
     nw = np.asarray(wavelengths).size
     mu = np.ascontiguousarray(np.broadcast_to(mu, (nw, mu.size)))
@@ -224,11 +240,13 @@ def paper_terms(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray, float]],
     if film_n is not None:
         return _over_scales(n0, mu, list(coating), np.asarray(film_n[0], np.complex128) * np.ones(nw),
                             wavelengths, scales,
-                            lambda R, T, k_a, s: _hemi(R * k_a * k_a, T * k_a, weight), film_n)
+                            lambda R, T, k_a, s: _hemi(R * k_a * k_a, T * k_a, weight), film_n,
+                            incoherent=flags)
     n_b = np.asarray(n_exit, np.complex128) * np.ones(nw)
-    (t,) = _over_scales(n0, mu, list(coating), n_b, wavelengths, scales, lambda R, T, k_a, s: (T,))
+    (t,) = _over_scales(n0, mu, list(coating), n_b, wavelengths, scales, lambda R, T, k_a, s: (T,),
+                        incoherent=flags)
     (R_up,) = _over_scales(n_b.real, mu, list(coating)[::-1], n0, wavelengths, scales,
-                           lambda R, T, k_a, s: (R,), transmission=False)
+                           lambda R, T, k_a, s: (R,), transmission=False, incoherent=flags[::-1])
     return _hemi(R_up, t, weight)
 
 
@@ -243,19 +261,22 @@ def hemispherical_factors(n_amb: np.ndarray, coating: Sequence[tuple[np.ndarray,
 
 def exact_hemispherical(n_amb: np.ndarray, films: Sequence[tuple[np.ndarray, float]],
                         n_base: np.ndarray, wavelengths: np.ndarray = GRID,
-                        scales: Sequence[float] = (1.0,), nodes: int | None = None):
+                        scales: Sequence[float] = (1.0,), nodes: int | None = None,
+                        incoherent: Sequence[bool] | None = None):
     """``(R_dh, T_hemi)`` of the stack ``films`` (``[(index over wavelengths,
     thickness nm)]``, from the ambient; none: the bare interface) between the ambient
     ``n_amb`` and the base medium ``n_base`` (both real, over ``wavelengths``), every
     thickness times each of ``scales``: float64 arrays of shape ``(len scales, len
-    wavelengths)``. ``nodes``: per part of the rule (default :func:`nodes_for`)."""
+    wavelengths)``. ``nodes``: per part of the rule (default :func:`nodes_for`);
+    ``incoherent``: one flag per film, the films averaged incoherently."""
     require_llvm()
     scales = np.asarray(scales, np.float64).reshape(-1)
-    nodes = nodes or nodes_for(films, float(np.max(scales, initial=0.0)))
+    flags = list(incoherent) if incoherent is not None else [False] * len(films)
+    nodes = nodes or nodes_for(films, float(np.max(scales, initial=0.0)), flags)
     mu, weight = base_rule(n_amb, n_base, nodes)
     return _over_scales(np.asarray(n_base, np.float64), mu, list(films)[::-1],
                         np.asarray(n_amb, np.complex128), wavelengths, scales,
-                        lambda R, T, k_a, s: _hemi(R, T, weight))
+                        lambda R, T, k_a, s: _hemi(R, T, weight), incoherent=flags[::-1])
 
 
 #: Parameters per film in :func:`r_dh_partials`: thickness (nm), Re n, Im n.
