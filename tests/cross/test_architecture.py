@@ -31,6 +31,7 @@ MAX_LINES = 600
 ALGORITHMS = {
     "optics/core.py": "the optics core: Fresnel terms, the Rouard recursion and its loop",
     "tabulate/band.py": "the band-limited table: its sheared axis, rows, their amplitudes, the build",
+    "tabulate/diffuse.py": "the RGB/mono coated-diffuse colour tables: their levels, slices and refinement",
 }
 
 MAX_FUNCTION_LINES = 80
