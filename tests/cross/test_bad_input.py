@@ -404,10 +404,11 @@ EXTREME_COLUMNS = {
     "llvm_ad_rgb": [(p, "auto") for p in PLUGINS],
     "llvm_ad_spectral": [(p, t) for p in PLUGINS for t in (False, True)]
     + [("thinfilm_diffuse", "auto")],
-    # (not thinfilm_roughdielectric's Mueller tables: they are thinfilm_dielectric's, one
-    # key; its kernel reading them at the microfacets' angles takes ~20 s to compile)
-    "llvm_ad_spectral_polarized": [(p, t) for p in PLUGINS for t in (False, True)
-                                   if (p, t) != ("thinfilm_roughdielectric", True)],
+    # every exact path, and the Mueller tables of a reflecting, a transmitting and the
+    # coated-diffuse stack (the rough plugins' and the coating's are the same tables read
+    # at other angles, and each polarized BSDF costs ~1-3 s of kernel compilation)
+    "llvm_ad_spectral_polarized": [(p, False) for p in PLUGINS]
+    + [(p, True) for p in ("thinfilm_conductor", "thinfilm_dielectric", "thinfilm_diffuse")],
 }
 #: Per variant family, the thicknesses of its rows: every one of :data:`EXTREME`, but in
 #: polarized variants those beyond ``coherence_thickness`` alone, where their own code
