@@ -58,6 +58,7 @@ def _plugin_modules() -> dict:
 
 
 def _register_current() -> list[str]:
+    import drjit as dr
     import mitsuba as mi
 
     variant = mi.variant()
@@ -73,7 +74,7 @@ def _register_current() -> list[str]:
                 mod = modules[module] = importlib.reload(mod)
                 _built_for[module] = variant
             cls = getattr(mod, cls_name)
-            if not variant.startswith("scalar"):   # scalar variants make no symbolic calls
+            if dr.is_jit_v(mi.Float):   # only JIT variants make symbolic calls
                 gc_guard.watch_traces(cls)
             register_plugin(name, lambda props, cls=cls: cls(props))
             done.append(name)
