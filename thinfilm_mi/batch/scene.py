@@ -61,7 +61,6 @@ from tqdm import tqdm
 
 from thinfilm_mi.batch import exr
 from thinfilm_mi.errors import RenderError, RenderFailure, UsageError
-from thinfilm_mi.render import gc_guard
 
 #: the prefix of the messages a render prints on stderr (the console script's name)
 PROG = "thinfilm-render"
@@ -464,9 +463,8 @@ def render_scene(scene, spp: int, seed: int = 0, sensor: int = 0,
     t0 = time.perf_counter()
     with progress_bar(progress, total=spp, unit="spp") as bar:
         for i, k in enumerate(plan):
-            with gc_guard.rendering():   # any thread: no pass frees a traced scene
-                img = mi.render(scene, spp=k, seed=pass_seed(seed, i), sensor=sensor)
-                dr.eval(img)
+            img = mi.render(scene, spp=k, seed=pass_seed(seed, i), sensor=sensor)
+            dr.eval(img)
             arr = np.array(img, dtype=np.float64)
             accum = arr * k if accum is None else accum + arr * k
             done += k

@@ -37,9 +37,9 @@ frees nothing) while that set is not empty, whichever thread starts the pass.
   the GIL to other threads while it runs finalizers). Importing the package wraps
   ``mi.render`` in it, so that a render on any thread is covered from its start,
   before any method of ours runs (symbolic calls of other domains, an emitter's
-  say, may come first); our own entry points (the CLI, sweeps, the renders of
-  design, through :func:`thinfilm_mi.batch.scene.render_scene`) render inside it
-  explicitly.
+  say, may come first). Our own entry points (the CLI, sweeps, the renders of
+  design) render through ``mi.render`` (:func:`thinfilm_mi.batch.scene.render_scene`),
+  so they are covered the same way.
 * The thread that leaves the set last, once a pass was deferred, unfreezes the heap
   and runs one full :func:`gc.collect`, so the dropped scenes are freed once no
   thread traces them.
