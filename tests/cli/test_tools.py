@@ -163,3 +163,25 @@ def test_spectrum_with_too_many_wavelengths_is_one_clear_line(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert rc == 2 and len(err) == 1
     assert "--wl" in err[0] and "4700000001 values" in err[0] and "at most" in err[0]
+
+
+def test_closed_pipe_ends_quietly():
+    # `python -m thinfilm_mi materials | head -1`: the reader may close the pipe before
+    # the command writes; closing the read end first makes that order certain. The
+    # command must end without a traceback, with the closed-pipe status
+    import os
+    import subprocess
+    import sys
+
+    from thinfilm_mi.cli.parser import CLOSED_PIPE
+
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        proc = subprocess.run([sys.executable, "-m", "thinfilm_mi", "materials"],
+                              stdout=write, stderr=subprocess.PIPE, timeout=120)
+    finally:
+        os.close(write)
+    err = proc.stderr.decode()
+    assert proc.returncode == CLOSED_PIPE, err
+    assert "Traceback" not in err and "BrokenPipe" not in err, err

@@ -6,18 +6,25 @@ Exit statuses (every command): 0 success; 2 bad input
 dependency, :class:`~thinfilm_mi.errors.MissingExtra`; and
 :class:`~thinfilm_mi.errors.ThinFilmError` or any ``ValueError`` a tool command
 reports); 130 interrupted (Ctrl-C); 1 anything else
-(:class:`~thinfilm_mi.errors.RenderFailure`, a failure while writing).
+(:class:`~thinfilm_mi.errors.RenderFailure`, a failure while writing). A reader that
+closes the output early (``python -m thinfilm_mi materials | head``) ends the command
+quietly, with the status of a process a closed pipe stops (141).
 """
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import traceback
 
 from thinfilm_mi.batch.scene import one_line
 from thinfilm_mi.errors import RenderFailure, UsageError
 
-__all__ = ["ArgumentParser", "exit_code", "report_error", "failure"]
+__all__ = ["ArgumentParser", "exit_code", "report_error", "failure", "run_command",
+           "CLOSED_PIPE"]
+
+#: The exit status after the reader closed stdout: a shell's for a process SIGPIPE stops.
+CLOSED_PIPE = 141
 
 
 class ArgumentParser(argparse.ArgumentParser):
@@ -57,3 +64,17 @@ def failure(cause: BaseException, message: str | None = None) -> RenderFailure:
     error = RenderFailure(message if message is not None else f"{type(cause).__name__}: {one_line(cause)}")
     error.__cause__ = cause
     return error
+
+
+def run_command(command, args) -> int:
+    """``command(args)``, ended quietly where the reader closes stdout early: Python would
+    otherwise print a traceback for the ``BrokenPipeError``, and again at exit when it
+    flushes stdout (hence stdout pointed at ``os.devnull``)."""
+    try:
+        rc = command(args)
+        sys.stdout.flush()
+        return rc
+    except BrokenPipeError:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return CLOSED_PIPE

@@ -43,7 +43,7 @@ from thinfilm_mi.batch.scene import (
     parse_size,
     render_file,
 )
-from thinfilm_mi.cli.parser import ArgumentParser, exit_code, failure, report_error
+from thinfilm_mi.cli.parser import ArgumentParser, exit_code, failure, report_error, run_command
 from thinfilm_mi.errors import RenderError, UsageError
 
 __all__ = ["render_main", "run", "add_render_arguments", "build_parser", "plan_outputs", "summary"]
@@ -165,7 +165,7 @@ def render_main(argv: Sequence[str] | None = None) -> int:
         return report_error(PROG, e, "--verbose" in argv)
     except SystemExit as e:  # --help
         return int(e.code or 0)
-    return run(args)
+    return run_command(run, args)
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ import numpy as np
 from thinfilm_mi.batch.scene import DEFAULT_VARIANT, parse_size, render_file, setup_llvm_only
 from thinfilm_mi.batch.scene import PROG as RENDER_PROG
 from thinfilm_mi.cli import render as render_command
-from thinfilm_mi.cli.parser import ArgumentParser, failure, report_error
+from thinfilm_mi.cli.parser import ArgumentParser, failure, report_error, run_command
 from thinfilm_mi.errors import RenderError, ThinFilmError, UsageError, require_extra
 
 __all__ = [
@@ -411,7 +411,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         return report_error(prog, e, "--verbose" in argv)
     except SystemExit as e:  # --help
         return int(e.code or 0)
-    return args.func(args)
+    return run_command(args.func, args)
 
 
 if __name__ == "__main__":
