@@ -1,0 +1,96 @@
+"""The spread of ``thinfilm_coating``'s sample weights against its base's own.
+
+    python benchmarks/coating_weights.py [--samples 1000000] [--variant llvm_ad_spectral]
+                                         [--json]
+
+A path tracer multiplies its throughput by ``sample()``'s weight: heavy weights are the
+fireflies of a render. For each base of :data:`BASES`, alone and under the coating
+:data:`COAT` (films "TiO2 80; SiO2 120" on a 1.5 coat), at ``cos θ_i`` 1.0 and 0.3, this
+draws --samples calls of ``sample()`` with independent uniform numbers at one wavelength
+(550 nm: every lane of the spectrum carries it, so a weight is one number) and reports
+the variance of the weights, the largest, and the share of the total weight carried by
+weights over :data:`HEAVY` (the energy a render gets from rare, bright samples).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+#: the coating of every row: a TiO2 film under SiO2 on a clear 1.5 coat
+COAT = {"layers": "TiO2 80; SiO2 120", "int_ior": 1.5}
+#: (label, the nested BSDF)
+BASES = [
+    ("roughconductor α 0.3", {"type": "roughconductor", "alpha": 0.3}),
+    ("principled grey, roughness 0.3", {"type": "principled", "roughness": 0.3,
+                                        "base_color": {"type": "rgb", "value": 0.5}}),
+    ("diffuse 0.5", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}}),
+]
+COSINES = (1.0, 0.3)
+#: a weight above this is "heavy" (a firefly's scale at the spp of a preview)
+HEAVY = 10.0
+WAVELENGTH = 550.0
+
+
+def weights(bsdf, cos_theta: float, n: int, seed: int = 7):
+    """``sample()``'s weights at ``cos_theta`` (first channel), for ``n`` uniform draws."""
+    import drjit as dr
+    import mitsuba as mi
+
+    rng = np.random.default_rng(seed)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.n = mi.Normal3f(0, 0, 1)
+    si.sh_frame = mi.Frame3f(si.n)
+    sin_theta = float(np.sqrt(max(0.0, 1.0 - cos_theta ** 2)))
+    si.wi = mi.Vector3f(sin_theta, 0.0, cos_theta)
+    if mi.is_spectral:
+        si.wavelengths = dr.full(mi.Spectrum, WAVELENGTH, n)
+    ctx = mi.BSDFContext()
+    s1 = mi.Float(rng.random(n, dtype=np.float32))
+    s2 = mi.Point2f(rng.random(n, dtype=np.float32), rng.random(n, dtype=np.float32))
+    _, w = bsdf.sample(ctx, si, s1, s2, True)
+    w = np.asarray(mi.unpolarized_spectrum(w)).reshape(-1, n)[0]
+    return np.nan_to_num(w)
+
+
+def stats(w: np.ndarray) -> dict:
+    total = float(w.sum())
+    heavy = float(w[w > HEAVY].sum())
+    return {"mean": float(w.mean()), "variance": float(w.var()), "max": float(w.max()),
+            "heavy_share": heavy / total if total > 0 else 0.0}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--samples", type=int, default=1_000_000)
+    parser.add_argument("--variant", default="llvm_ad_spectral")
+    parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    args = parser.parse_args()
+    import mitsuba as mi
+
+    mi.set_variant(args.variant)
+    import thinfilm_mi  # noqa: F401  (registers the plugins)
+
+    rows = []
+    for label, base in BASES:
+        alone = mi.load_dict(base)
+        coat = mi.load_dict({"type": "thinfilm_coating", **COAT, "bsdf": base})
+        for c in COSINES:
+            rows.append({"base": label, "cos_theta_i": c,
+                         "alone": stats(weights(alone, c, args.samples)),
+                         "coating": stats(weights(coat, c, args.samples))})
+    if args.json:
+        print(json.dumps(rows, indent=1))
+        return
+    print(f"| base | cos θ_i | base alone: variance, max | coating: variance, max, "
+          f"share of weight in weights > {HEAVY:g} |")
+    print("|---|---|---|---|")
+    for r in rows:
+        a, c = r["alone"], r["coating"]
+        print(f"| {r['base']} | {r['cos_theta_i']:.1f} | {a['variance']:.3f}, {a['max']:.2f} | "
+              f"{c['variance']:.3f}, {c['max']:.1f}, {100 * c['heavy_share']:.2f} % |")
+
+
+if __name__ == "__main__":
+    main()
