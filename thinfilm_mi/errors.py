@@ -12,17 +12,23 @@ Two families:
   :class:`MissingExtra` (a UsageError and an ImportError) is an optional
   dependency that is not installed; its message names the extra to install.
 
+:func:`plugin_boundary` is where a plugin's name joins an error: every plugin's
+constructor and parameter update run inside it, so what they call names only the
+parameter and the value.
+
 The library never exits: the command line (:func:`thinfilm_mi.cli.parser.exit_code`)
 maps these classes to exit statuses, in one place.
 """
 from __future__ import annotations
 
 import importlib
+from collections.abc import Iterator
+from contextlib import contextmanager
 from types import ModuleType
 
 __all__ = [
     "ThinFilmError", "MaterialError", "RenderError", "UsageError", "RenderFailure", "MissingExtra",
-    "require_extra",
+    "plugin_boundary", "require_extra",
 ]
 
 
@@ -59,3 +65,18 @@ def require_extra(module: str, extra: str, purpose: str) -> ModuleType:
     except ImportError as e:
         raise MissingExtra(f"{purpose} needs {module.partition('.')[0]}, which is not installed: "
                            f"pip install 'thinfilm-mi[{extra}]'") from e
+
+
+@contextmanager
+def plugin_boundary(plugin: str) -> Iterator[None]:
+    """Run a plugin's constructor or parameter update: a ``ValueError`` (every
+    :class:`ThinFilmError`) or ``TypeError`` raised inside leaves with ``"{plugin}: "``
+    in front of its message, once (a message that already starts so is left as it is),
+    as the same exception object."""
+    try:
+        yield
+    except (ValueError, TypeError) as e:
+        prefix = f"{plugin}: "
+        if len(e.args) == 1 and isinstance(e.args[0], str) and not e.args[0].startswith(prefix):
+            e.args = (prefix + e.args[0],)
+        raise

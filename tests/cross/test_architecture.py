@@ -14,7 +14,7 @@
 * Every module lists its public names in ``__all__`` (each one defined or imported
   there), but for the subpackages in :data:`ALL_PENDING`.
 * No plugin module imports another plugin module: what plugins share lives in the
-  layers below (``render.microfacet``, ``render.props``), as Mitsuba's BSDFs share
+  layers below (``render.microfacet``, ``render.reader``), as Mitsuba's BSDFs share
   ``microfacet.h``; ``plugins/__init__`` registers them.
 """
 from __future__ import annotations

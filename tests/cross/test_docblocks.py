@@ -30,7 +30,7 @@ compose = importlib.util.module_from_spec(_spec)
 sys.modules["compose_docblocks"] = compose
 _spec.loader.exec_module(compose)
 
-#: the property names the BSDFs read through render.props.stack_from_props (measured by
+#: the property names the BSDFs read through render.reader's stack_options (measured by
 #: tests/cross/test_docs.py, which checks that a doc block lists exactly what its plugin reads)
 PATHS = {name: REPO / "thinfilm_mi" / "plugins" / f"{module}.py" for name, (module, _) in PLUGINS.items()}
 

@@ -64,7 +64,8 @@ import mitsuba as mi
 import numpy as np
 
 from thinfilm_mi.colour.cie import colour_weights, trapezoid_weights, xyz_to_srgb_matrix
-from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.errors import ThinFilmError, plugin_boundary
+from thinfilm_mi.render.reader import PluginProperties, finite_number
 
 __all__ = ["NAME", "C", "H", "K", "C0_F32", "C1_F32", "CIE_MIN", "CIE_MAX", "planck", "ThinFilmBlackbody"]
 
@@ -90,23 +91,10 @@ def planck(wavelength_nm, temperature: float) -> np.ndarray:
         return 1e-9 * 2.0 * H * C * C / (lam ** 5 * np.expm1(H * C / (K * lam * temperature)))
 
 
-def _number(props, name: str, default=None) -> float:
-    if name not in props:
-        if default is None:
-            raise ThinFilmError(f"{NAME}: '{name}' is required (a black body temperature "
-                                f"in kelvin, e.g. 2856)")
-        return float(default)
-    value = props.get(name)
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ThinFilmError(f"{NAME}: '{name}' must be a number, got {value!r}")
-    return float(value)
-
-
-def _check(name: str, value: float, strict: bool, unit: str) -> float:
-    if not math.isfinite(value) or value < 0 or (strict and value == 0):
-        raise ThinFilmError(f"{NAME}: '{name}' must be a finite number "
-                            f"{'>' if strict else '>='} 0{unit}, got {value!r}")
-    return value
+def _check(temperature: float, scale: float) -> None:
+    """``temperature`` (K) finite and > 0, ``scale`` finite and >= 0 (load and edits)."""
+    finite_number("'temperature'", temperature, 0.0, strict=True, unit=" (K)")
+    finite_number("'scale'", scale, 0.0)
 
 
 def _scalar(value) -> float:
@@ -115,25 +103,24 @@ def _scalar(value) -> float:
 
 class ThinFilmBlackbody(mi.Texture):
     def __init__(self, props):
-        temperature = _check("temperature", _number(props, "temperature"), True, " (K)")
-        scale = _check("scale", _number(props, "scale", 1.0), False, "")
-        lo = _number(props, "wavelength_min", CIE_MIN)
-        hi = _number(props, "wavelength_max", CIE_MAX)
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
-            raise ThinFilmError(f"{NAME}: 'wavelength_min' and 'wavelength_max' must be finite "
-                                f"with 0 < wavelength_min < wavelength_max (nm), got {lo!r} "
-                                f"and {hi!r}")
-        left = list(props.unqueried())
-        if left:
-            raise ThinFilmError(f"{NAME}: unreferenced propert{'y' if len(left) == 1 else 'ies'} "
-                                + ", ".join(repr(k) for k in left)
-                                + " (misspelled? see the plugin's parameter table)")
-        self.range = (lo, hi)
-        self.spectral = bool(mi.is_spectral)
-        self.temperature = mi.Float(temperature)
-        self.scale = mi.Float(scale)
-        self._valid = (temperature, scale)
-        self._update(temperature, scale)
+        with plugin_boundary(NAME):
+            read = PluginProperties(props)
+            temperature = read.number("temperature", lo=0.0, strict=True, unit=" (K)",
+                                      required="a black body temperature in kelvin, e.g. 2856")
+            scale = read.number("scale", 1.0, 0.0)
+            lo = read.number("wavelength_min", CIE_MIN, unit=" (nm)")
+            hi = read.number("wavelength_max", CIE_MAX, unit=" (nm)")
+            if not 0 < lo < hi:
+                raise ThinFilmError(f"'wavelength_min' and 'wavelength_max' must be finite "
+                                    f"with 0 < wavelength_min < wavelength_max (nm), got {lo!r} "
+                                    f"and {hi!r}")
+            read.check_unqueried()
+            self.range = (lo, hi)
+            self.spectral = bool(mi.is_spectral)
+            self.temperature = mi.Float(temperature)
+            self.scale = mi.Float(scale)
+            self._valid = (temperature, scale)
+            self._update(temperature, scale)
         self._make_opaque()
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.Texture.__init__(self, props)
@@ -146,8 +133,7 @@ class ThinFilmBlackbody(mi.Texture):
 
     def _update(self, temperature: float, scale: float) -> None:
         """Validate ``temperature``/``scale`` and recompute what ``eval`` reads."""
-        _check("temperature", temperature, True, " (K)")
-        _check("scale", scale, False, "")
+        _check(temperature, scale)
         lam = self._nodes()
         # the spectral variants' float32 formula must stay finite (exp(x) - 1 rounds
         # to 0 above ~1e11 K), and so must the colour: the same temperatures load in
@@ -158,7 +144,7 @@ class ThinFilmBlackbody(mi.Texture):
             f32 = f32 * _f(scale)
         colour = self.colour(temperature, scale, self.range)
         if not (np.all(np.isfinite(f32)) and np.all(np.isfinite(colour.astype(np.float32)))):
-            raise ThinFilmError(f"{NAME}: 'temperature' = {temperature!r} K (scale {scale!r}) "
+            raise ThinFilmError(f"'temperature' = {temperature!r} K (scale {scale!r}) "
                                 f"gives a radiance beyond float32 range")
         radiance = scale * planck(lam, temperature)
         if self.spectral:
@@ -249,6 +235,11 @@ class ThinFilmBlackbody(mi.Texture):
         callback.put("scale", self.scale, mi.ParamFlags.NonDifferentiable)
 
     def parameters_changed(self, keys=None):
+        with plugin_boundary(NAME):
+            self._changed()
+
+    def _changed(self):
+        """Validate an edit of ``temperature``/``scale``; a rejected one is undone."""
         temperature, scale = _scalar(self.temperature), _scalar(self.scale)
         try:
             self._update(temperature, scale)

@@ -113,14 +113,10 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from thinfilm_mi.errors import plugin_boundary
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.params import ParameterGuard
-from thinfilm_mi.render.props import (
-    check_unqueried,
-    optional_texture,
-    stack_from_props,
-    substrate_from_props,
-)
+from thinfilm_mi.render.reader import PluginProperties
 from thinfilm_mi.render.variant import check_variant
 
 __all__ = ["NAME", "ThinFilmConductor"]
@@ -130,11 +126,14 @@ NAME = "thinfilm_conductor"
 
 class ThinFilmConductor(mi.BSDF):
     def __init__(self, props):
-        check_variant(NAME)
-        self.mode = modes.current()
-        self.stack = stack_from_props(props, NAME, substrate_from_props(props, NAME))
-        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
-        check_unqueried(props, NAME)
+        with plugin_boundary(NAME):
+            check_variant(NAME)
+            self.mode = modes.current()
+            read = PluginProperties(props)
+            substrate = read.substrate()
+            self.stack = read.kernel_stack(substrate, plugin=NAME)
+            self.specular_reflectance = read.factor("specular_reflectance")
+            read.check_unqueried()
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
         flags = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide

@@ -116,11 +116,12 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from thinfilm_mi.errors import plugin_boundary
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.lobe_choice import chosen_weight, reflection_probability
-from thinfilm_mi.render.media import DEFAULT_INT_IOR, real_index
+from thinfilm_mi.render.media import DEFAULT_INT_IOR
 from thinfilm_mi.render.params import ParameterGuard
-from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
+from thinfilm_mi.render.reader import PluginProperties
 from thinfilm_mi.render.variant import check_variant
 
 __all__ = ["NAME", "ThinFilmDielectric"]
@@ -130,14 +131,16 @@ NAME = "thinfilm_dielectric"
 
 class ThinFilmDielectric(mi.BSDF):
     def __init__(self, props):
-        check_variant(NAME)
-        self.mode = modes.current()
-        interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
-        self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
-        self.eta = interior.mean_real() / self.stack.ambient.mean_real()
-        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
-        self.specular_transmittance = optional_texture(props, "specular_transmittance", NAME)
-        check_unqueried(props, NAME)
+        with plugin_boundary(NAME):
+            check_variant(NAME)
+            self.mode = modes.current()
+            read = PluginProperties(props)
+            interior = read.index("int_ior", DEFAULT_INT_IOR)
+            self.stack = read.kernel_stack(interior, sides={False: True, True: True}, plugin=NAME)
+            self.eta = interior.mean_real() / self.stack.ambient.mean_real()
+            self.specular_reflectance = read.factor("specular_reflectance")
+            self.specular_transmittance = read.factor("specular_transmittance")
+            read.check_unqueried()
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
         self.m_components = [

@@ -130,13 +130,13 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.lobe_choice import chosen_weight, reflection_probability
-from thinfilm_mi.render.media import DEFAULT_INT_IOR, real_index
+from thinfilm_mi.render.media import DEFAULT_INT_IOR
 from thinfilm_mi.render.microfacet import Microfacet, rough_bsdf_base
 from thinfilm_mi.render.params import ParameterGuard
-from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
+from thinfilm_mi.render.reader import PluginProperties
 from thinfilm_mi.render.variant import check_variant
 
 __all__ = ["NAME", "GLOSSY_R", "GLOSSY_T", "ThinFilmRoughDielectric"]
@@ -151,22 +151,24 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
     TEXTURES = ("specular_reflectance", "specular_transmittance")
 
     def __init__(self, props):
-        check_variant(NAME)
-        self.mode = modes.current()
-        self.microfacet = Microfacet(props, NAME)
-        interior = real_index(props.get("int_ior", DEFAULT_INT_IOR), "int_ior")
-        self.stack = stack_from_props(props, NAME, interior, sides={False: True, True: True})
-        n_int, n_ext = interior.mean_real(), self.stack.ambient.mean_real()
-        if n_int == n_ext:
-            raise ThinFilmError(f"{NAME}: 'int_ior' ({interior.label}) and 'ext_ior' "
-                                f"({self.stack.ambient.label}) must differ (mean index "
-                                f"{n_int:g} on both sides: a rough interface without "
-                                "refraction is undefined; use thinfilm_dielectric)")
-        #: Relative index for directions (mean real indices, as thinfilm_dielectric).
-        self.eta = n_int / n_ext
-        self.specular_reflectance = optional_texture(props, "specular_reflectance", NAME)
-        self.specular_transmittance = optional_texture(props, "specular_transmittance", NAME)
-        check_unqueried(props, NAME)
+        with plugin_boundary(NAME):
+            check_variant(NAME)
+            self.mode = modes.current()
+            read = PluginProperties(props)
+            self.microfacet = Microfacet(read)
+            interior = read.index("int_ior", DEFAULT_INT_IOR)
+            self.stack = read.kernel_stack(interior, sides={False: True, True: True}, plugin=NAME)
+            n_int, n_ext = interior.mean_real(), self.stack.ambient.mean_real()
+            if n_int == n_ext:
+                raise ThinFilmError(f"'int_ior' ({interior.label}) and 'ext_ior' "
+                                    f"({self.stack.ambient.label}) must differ (mean index "
+                                    f"{n_int:g} on both sides: a rough interface without "
+                                    "refraction is undefined; use thinfilm_dielectric)")
+            #: Relative index for directions (mean real indices, as thinfilm_dielectric).
+            self.eta = n_int / n_ext
+            self.specular_reflectance = read.factor("specular_reflectance")
+            self.specular_transmittance = read.factor("specular_transmittance")
+            read.check_unqueried()
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
         sides = mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide | self.microfacet.flags

@@ -1,8 +1,9 @@
 r"""The parameter rows that the film-stack plugins' doc blocks share, written once.
 
-Every BSDF that reads a stack through :func:`thinfilm_mi.render.props.stack_from_props`
-reads the same five properties (:data:`SHARED_NAMES`): ``thickness``, ``tabulate``,
-``table_error``, ``spectral_resolution`` and ``coherence_thickness``. Their rows of a doc
+Every BSDF that reads a stack through
+:meth:`thinfilm_mi.render.reader.PluginProperties.stack_options` reads the same five
+properties (:data:`SHARED_NAMES`): ``thickness``, ``tabulate``, ``table_error``,
+``spectral_resolution`` and ``coherence_thickness``. Their rows of a doc
 block's ``.. pluginparameters::`` table are written here, and
 ``scripts/compose_docblocks.py`` writes them into each plugin's doc block, so that the doc
 block in the source still reads alone (Mitsuba's doc generator reads module docstrings

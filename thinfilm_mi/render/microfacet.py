@@ -10,73 +10,61 @@ variant; the class :func:`rough_bsdf_base` returns derives from the variant's
 """
 from __future__ import annotations
 
-import math
-
 import drjit as dr
 import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.params import MAX_ALPHA
-from thinfilm_mi.render.textures import checked_texture, uniform
+from thinfilm_mi.render.textures import uniform
 
-__all__ = ["DEFAULT_ALPHA", "Microfacet", "rough_bsdf_base"]
+__all__ = ["DEFAULT_ALPHA", "DISTRIBUTIONS", "Microfacet", "rough_bsdf_base"]
 
 #: Mitsuba's default roughness of its microfacet BSDFs.
 DEFAULT_ALPHA = 0.1
 
 
-def _alpha_texture(props, name: str, plugin: str):
-    """A roughness parameter as a texture; numbers must be finite and > 0."""
-    value = props.get(name, DEFAULT_ALPHA)
-    if isinstance(value, bool) or isinstance(value, str):
-        raise ThinFilmError(f"{plugin}: '{name}' must be a number > 0 or a texture, "
-                            f"got {value!r}")
-    if isinstance(value, (int, float)):
-        if not math.isfinite(value) or not 0 < value <= MAX_ALPHA:
-            raise ThinFilmError(f"{plugin}: '{name}' (roughness) must be a finite number > 0 "
-                                f"and <= {MAX_ALPHA:g}, got {value!r} (for a smooth surface "
-                                "use the smooth plugin)")
-        return uniform(value)
-    return checked_texture(props, name, plugin, "a number > 0 or a texture",
-                           f"{plugin}: '{name}' (roughness)", 0.0, MAX_ALPHA, mono=True, strict=True)
+def _alpha_texture(read, name: str):
+    """A roughness parameter as a texture: finite and > 0 (a number: a ``uniform`` one)."""
+    return read.texture(name, "a number > 0 or a texture", f"'{name}' (roughness)", 0.0, MAX_ALPHA,
+                        mono=True, strict=True, uniform_number=True,
+                        hint=" (for a smooth surface use the smooth plugin)")
+
+
+#: ``distribution``'s values: the names of their ``mi.MicrofacetType`` (read in the
+#: variant of the call)
+DISTRIBUTIONS = {"beckmann": "Beckmann", "ggx": "GGX"}
 
 
 class Microfacet:
     """The microfacet parameters shared by the rough thin-film BSDFs.
 
     Reads ``distribution``, ``alpha`` or ``alpha_u`` + ``alpha_v`` and
-    ``sample_visible`` as Mitsuba's ``roughconductor``/``roughdielectric`` do,
-    validates them, and builds ``mi.MicrofacetDistribution`` at a hit.
+    ``sample_visible`` from a :class:`~thinfilm_mi.render.reader.PluginProperties`, as
+    Mitsuba's ``roughconductor``/``roughdielectric`` do, and builds
+    ``mi.MicrofacetDistribution`` at a hit.
     """
 
-    def __init__(self, props, plugin: str):
-        dist = props.get("distribution", "beckmann")
-        types = {"beckmann": mi.MicrofacetType.Beckmann, "ggx": mi.MicrofacetType.GGX}
-        if not isinstance(dist, str) or dist.lower() not in types:
-            raise ThinFilmError(f"{plugin}: 'distribution' must be 'beckmann' or 'ggx', "
-                                f"got {dist!r}")
-        self.name = dist.lower()
-        self.type = types[self.name]
-        self.sample_visible = props.get("sample_visible", True)
-        if not isinstance(self.sample_visible, bool):
-            raise ThinFilmError(f"{plugin}: 'sample_visible' must be a boolean, "
-                                f"got {self.sample_visible!r}")
-        has_u, has_v, has_a = ("alpha_u" in props), ("alpha_v" in props), ("alpha" in props)
+    def __init__(self, read):
+        kind = read.choice("distribution", DISTRIBUTIONS)
+        self.name, self.type = kind.lower(), getattr(mi.MicrofacetType, kind)
+        self.sample_visible = read.boolean("sample_visible", True)
+        has_u, has_v, has_a = ("alpha_u" in read), ("alpha_v" in read), ("alpha" in read)
         if has_a and (has_u or has_v):
-            given = ", ".join(f"{n}={props.get(n)!r}" for n in ("alpha", "alpha_u", "alpha_v")
-                              if n in props)
-            raise ThinFilmError(f"{plugin}: give either 'alpha' or 'alpha_u' + 'alpha_v', "
-                                f"not both (got {given})")
+            given = ", ".join(f"{n}={read.value(n)!r}" for n in ("alpha", "alpha_u", "alpha_v")
+                              if n in read)
+            raise ThinFilmError(f"give either 'alpha' or 'alpha_u' + 'alpha_v', not both (got {given})")
         if has_u != has_v:
             given, missing = ("alpha_u", "alpha_v") if has_u else ("alpha_v", "alpha_u")
-            raise ThinFilmError(f"{plugin}: '{missing}' is missing ('{given}' = "
-                                f"{props.get(given)!r}; an anisotropic roughness needs both)")
+            raise ThinFilmError(f"'{missing}' is missing ('{given}' = {read.value(given)!r}; "
+                                "an anisotropic roughness needs both)")
         self.anisotropic = has_u
         if has_u:
-            self.alpha_u = _alpha_texture(props, "alpha_u", plugin)
-            self.alpha_v = _alpha_texture(props, "alpha_v", plugin)
+            self.alpha_u = _alpha_texture(read, "alpha_u")
+            self.alpha_v = _alpha_texture(read, "alpha_v")
+        elif has_a:
+            self.alpha_u = self.alpha_v = _alpha_texture(read, "alpha")
         else:
-            self.alpha_u = self.alpha_v = _alpha_texture(props, "alpha", plugin)
+            self.alpha_u = self.alpha_v = uniform(DEFAULT_ALPHA)
 
     @property
     def flags(self):

@@ -41,16 +41,15 @@ from typing import NamedTuple
 
 import drjit as dr
 
-from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.optics.choices import choose
-from thinfilm_mi.render.textures import checked_texture, mitsuba_module, texture_range, uniform
+from thinfilm_mi.render.params import MAX_ROUGHNESS
+from thinfilm_mi.render.reader import PluginProperties
+from thinfilm_mi.render.textures import mitsuba_module, texture_range, uniform
 
 __all__ = ["ROUGHNESS_MODELS", "RoughnessModel", "Qualitative", "EON", "roughness_model", "MAX_ROUGHNESS",
            "H_AVG", "C1_FON", "C2_FON", "BaseTerms", "OrenNayar", "coefficients", "qualitative_h"]
 
-#: Largest ``roughness`` accepted (radians): a slope angle's standard deviation beyond
-#: 90° means nothing, and larger values are most likely degrees given by mistake.
-MAX_ROUGHNESS = math.pi / 2
 #: ``2∫h(μ) μ dμ``: the hemispherical mean of the qualitative model's ``B`` term.
 H_AVG = 2.0 / 3.0 - 64.0 / (45.0 * math.pi)
 #: The EON paper's constants.
@@ -139,42 +138,36 @@ class EON(RoughnessModel):
 ROUGHNESS_MODELS = {m.name: m for m in (Qualitative(), EON())}
 
 
-def roughness_model(value, plugin: str) -> RoughnessModel:
+def roughness_model(value) -> RoughnessModel:
     """The :data:`ROUGHNESS_MODELS` entry named ``value`` (:func:`~thinfilm_mi.optics.choices.choose`:
-    case-insensitive); a ``ThinFilmError`` naming ``plugin``'s ``roughness_model``, the
-    value and the choices otherwise."""
-    return choose(ROUGHNESS_MODELS, value, f"{plugin}: 'roughness_model'")
+    case-insensitive); a ``ThinFilmError`` naming ``roughness_model``, the value and the
+    choices otherwise."""
+    return choose(ROUGHNESS_MODELS, value, "'roughness_model'")
 
 
 class OrenNayar:
-    """``roughness`` (a texture, radians) and ``roughness_model`` of a ``thinfilm_diffuse``.
+    """``roughness`` (a texture, radians) and ``roughness_model`` of a ``thinfilm_diffuse``,
+    read from a :class:`~thinfilm_mi.render.reader.PluginProperties` (or the plugin's bare
+    ``mi.Properties``: then read in the boundary of ``plugin``).
 
     :attr:`rough` says whether the kernel needs the rough base: ``False`` while the
     roughness is 0 everywhere and carries no gradients, so that the plugin then runs
     its Lambertian code unchanged (bit-identical results). :meth:`refresh` recomputes
     it after an edit."""
 
-    def __init__(self, props, plugin: str):
+    def __init__(self, read, plugin: str = "thinfilm_diffuse"):
+        #: the plugin, named in the error of a render that :meth:`check_lambertian` refuses
         self.plugin = plugin
-        #: the :class:`RoughnessModel`
-        self.model = roughness_model(props.get("roughness_model", next(iter(ROUGHNESS_MODELS))), plugin)
-        self.texture = self._texture(props)
+        with plugin_boundary(plugin):   # for a caller that passes the bare mi.Properties
+            if not isinstance(read, PluginProperties):
+                read = PluginProperties(read)
+            #: the :class:`RoughnessModel`
+            self.model = read.choice("roughness_model", ROUGHNESS_MODELS)
+            self.texture = uniform(0.0) if "roughness" not in read else read.texture(
+                "roughness", f"a number in [0, {MAX_ROUGHNESS:.6g}] (radians) or a texture",
+                "'roughness' (σ, radians)", 0.0, MAX_ROUGHNESS, mono=True, uniform_number=True)
         self.rough = False
         self.refresh()
-
-    def _texture(self, props):
-        plugin = self.plugin
-        value = props.get("roughness", 0.0)
-        want = f"a number in [0, {MAX_ROUGHNESS:.6g}] (radians) or a texture"
-        if isinstance(value, (bool, str)):
-            raise ThinFilmError(f"{plugin}: 'roughness' must be {want}, got {value!r}")
-        if isinstance(value, (int, float)):
-            if not math.isfinite(value) or not 0.0 <= value <= MAX_ROUGHNESS:
-                raise ThinFilmError(f"{plugin}: 'roughness' (σ, radians) must be finite and in "
-                                    f"[0, {MAX_ROUGHNESS:.6g}], got {value!r}")
-            return uniform(float(value))
-        return checked_texture(props, "roughness", plugin, want, f"{plugin}: 'roughness' (σ, radians)",
-                               0.0, MAX_ROUGHNESS, mono=True)
 
     def _carries_gradients(self) -> bool:
         mi = mitsuba_module()

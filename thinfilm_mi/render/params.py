@@ -18,17 +18,20 @@ import re
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
-from thinfilm_mi.render.orennayar import MAX_ROUGHNESS
 from thinfilm_mi.render.textures import mitsuba_module, texture_range
 
-__all__ = ["ALBEDO_SLACK", "MAX_ALPHA", "ParameterGuard", "RULES", "check_value", "unchanged"]
+__all__ = ["ALBEDO_SLACK", "MAX_ALPHA", "MAX_ROUGHNESS", "ParameterGuard", "RULES", "check_value",
+           "unchanged"]
 
 #: Largest microfacet roughness accepted (``alpha``, ``alpha_u``, ``alpha_v``):
 #: beyond ~1 a Beckmann/GGX surface is already near-uniform; 100 leaves room
 #: while keeping the distribution's terms in float32 range.
 MAX_ALPHA = 100.0
+#: Largest Oren-Nayar ``roughness`` accepted (radians): a slope angle's standard deviation
+#: beyond 90° means nothing, and larger values are most likely degrees given by mistake.
+MAX_ROUGHNESS = math.pi / 2
 #: Tolerance on a diffuse albedo's upper bound of 1 (sRGB white upsampled to a
 #: spectrum peaks a hair above 1).
 ALBEDO_SLACK = 1e-3
@@ -75,7 +78,7 @@ def _shown(arr: np.ndarray, what: str = "an array") -> str:
     return f"{what} with values in [{arr.min():.7g}, {arr.max():.7g}]"
 
 
-def check_value(key: str, value, plugin: str, texture=None) -> None:
+def check_value(key: str, value, texture=None) -> None:
     """:class:`ThinFilmError` naming ``key`` and the value unless it is finite and
     within the range :data:`RULES` gives for ``key``; with ``texture`` (the object
     that owns the key), the texture's values are checked instead of ``value``."""
@@ -101,7 +104,7 @@ def check_value(key: str, value, plugin: str, texture=None) -> None:
         parts.append(f"<= {hi:g}")
     want = "finite" + (" and " + " and ".join(parts) if parts else "")
     shown = _shown(arr, "an array" if texture is None else "a texture")
-    raise ThinFilmError(f"{plugin}: '{key}' ({what}) must be {want}, got {shown}; "
+    raise ThinFilmError(f"'{key}' ({what}) must be {want}, got {shown}; "
                         "the edit was undone and the BSDF keeps its last valid parameters")
 
 
@@ -140,8 +143,9 @@ class ParameterGuard:
 
     Create it at the end of the constructor; call :meth:`changed` from
     ``parameters_changed`` with the BSDF and the function that refreshes its
-    state (it receives the changed keys, see :meth:`changed`). It keeps no
-    reference to the BSDF: no reference cycle.
+    state (it receives the changed keys, see :meth:`changed`): that call is the
+    plugin boundary of an edit (:func:`~thinfilm_mi.errors.plugin_boundary` of
+    ``plugin``). It keeps no reference to the BSDF: no reference cycle.
     """
 
     def __init__(self, bsdf, plugin: str):
@@ -168,6 +172,10 @@ class ParameterGuard:
         the last valid snapshot instead (:func:`unchanged`: a comparison of JIT
         indices, no evaluation), which is the same through a scene or a BSDF.
         """
+        with plugin_boundary(self.plugin):
+            self._changed(bsdf, refresh, keys)
+
+    def _changed(self, bsdf, refresh, keys) -> None:
         if self._restoring is not None:
             # writing the last valid values back: the BSDF's state is refreshed
             # only if a refresh ran on the rejected values
@@ -188,7 +196,7 @@ class ParameterGuard:
                     if id(texture) in seen:
                         continue
                     seen.add(id(texture))
-                check_value(key, params[key], self.plugin, texture)
+                check_value(key, params[key], texture)
         except Exception:
             # rejected before the refresh: the BSDF's state is still the last valid one
             self._restore(params, refreshed=False)

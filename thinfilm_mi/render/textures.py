@@ -12,7 +12,8 @@
 * Reading: :func:`texture_on_grid` (a spectrum on a wavelength grid) and
   :func:`texture_range` (smallest and largest value over a texture's spectral
   and spatial domain) at load time; :func:`check_texture_range` turns the
-  latter into an error naming the parameter.
+  latter into an error naming the parameter; :func:`property_texture` makes a plugin
+  property into a texture.
 """
 from __future__ import annotations
 
@@ -25,9 +26,9 @@ import numpy as np
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID, SPECTRAL_RANGE
 
-__all__ = ["GRID", "LUMINANCE", "check_texture_range", "checked_texture", "irregular",
-           "mitsuba_module", "new_object", "regular", "scalar", "texture_on_grid", "texture_range",
-           "uniform"]
+__all__ = ["GRID", "LUMINANCE", "bounds", "check_texture_range", "checked_texture", "irregular",
+           "mitsuba_module", "new_object", "property_texture", "regular", "scalar", "texture_on_grid",
+           "texture_range", "uniform"]
 
 
 def mitsuba_module():
@@ -229,19 +230,37 @@ def texture_range(tex, mono: bool = False):
     return float(np.min(arr)), float(np.max(arr))
 
 
+def property_texture(props, name: str, want: str, *, unbounded: bool = False):
+    """The property ``name`` of a plugin's ``mi.Properties`` as a Mitsuba texture
+    (``get_unbounded_texture`` with ``unbounded``: RGB values above 1 kept as given), or a
+    :class:`ThinFilmError` saying it must be ``want`` where Mitsuba cannot make one of it."""
+    try:
+        return props.get_unbounded_texture(name) if unbounded else props.get_texture(name)
+    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
+        raise ThinFilmError(f"'{name}' must be {want}, got {props.get(name)!r} ({e})") from None
+
+
 def checked_texture(props, name: str, plugin: str, want: str, what: str, lo: float = -math.inf,
                     hi: float = math.inf, *, mono: bool = False, strict: bool = False, cover: bool = False):
-    """The plugin property ``name`` as a Mitsuba texture (``props.get_texture``), refused
-    with a :class:`ThinFilmError` saying it must be ``want`` where Mitsuba cannot make one
-    of it, and its values checked at load by :func:`check_texture_range` (``what``,
-    ``lo``, ``hi``, ``mono``, ``strict``, ``cover``)."""
-    value = props.get(name)
+    """The plugin property ``name`` as a texture (:func:`property_texture`, its error
+    naming ``plugin``) with its values checked at load by :func:`check_texture_range`
+    (``what``, ``lo``, ``hi``, ``mono``, ``strict``, ``cover``). A plugin reads textures
+    through :class:`thinfilm_mi.render.reader.PluginProperties`; this is the form for
+    code that still holds the bare properties."""
     try:
-        tex = props.get_texture(name)
-    except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
-        raise ThinFilmError(f"{plugin}: '{name}' must be {want}, got {value!r} ({e})") from None
+        tex = property_texture(props, name, want)
+    except ThinFilmError as e:
+        raise ThinFilmError(f"{plugin}: {e}") from None
     check_texture_range(tex, what, lo, hi, mono=mono, strict=strict, cover=cover)
     return tex
+
+
+def bounds(lo: float = -math.inf, hi: float = math.inf, strict: bool = False) -> str:
+    """``">= lo and <= hi"`` (``>`` with ``strict``; an infinite bound left out; ``""``
+    with none)."""
+    low = f"{'>' if strict else '>='} {lo:g}" if math.isfinite(lo) else ""
+    high = f"<= {hi:g}" if math.isfinite(hi) else ""
+    return " and ".join(x for x in (low, high) if x)
 
 
 def _spectrum_span(tex):
@@ -286,9 +305,7 @@ def check_texture_range(tex, what: str, lo: float = -math.inf, hi: float = math.
     bad = (not (math.isfinite(vmin) and math.isfinite(vmax)) or vmin < lo or vmax > hi
            or (strict and vmin <= lo))
     if bad:
-        low = f"{'>' if strict else '>='} {lo:g}" if math.isfinite(lo) else ""
-        high = f"<= {hi:g}" if math.isfinite(hi) else ""
-        want = " and ".join(x for x in (low, high) if x) or "finite"
+        want = bounds(lo, hi, strict) or "finite"
         raise ThinFilmError(f"{what} must be finite and {want} everywhere, got a texture with "
                             f"values in [{vmin!r}, {vmax!r}]"
                             + (f" ({_uncovered('it', span)})" if span is not None else ""))
