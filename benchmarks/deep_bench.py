@@ -21,7 +21,7 @@ Stacks: the Al stacks of render_bench.py (2.3/1.46 films, 50-200 nm from
    plugin against its counterpart, up to 30 films, is ``render_bench.py``'s.
 3. Descent: 50 steps of gradient descent on the first film's thickness of the
    30-film stack (32x32, 1 spp, ``prb``-free ``path`` integrator, a fixed target
-   image); total time and time spent in ``KernelStack._plan_tables``.
+   image); total time and time spent in ``stack_build.build_tables``.
 4. Edits: the sphere scene at the issue's 128x128, 8 spp, 1, 10 and 30 films at
    default settings and with ``tabulate`` false; a plain render (median of
    --rounds + 2) against a thickness edit through ``mi.traverse(scene)`` (a new
@@ -123,15 +123,16 @@ def descent() -> None:
     import render_bench as rb
 
     import thinfilm_mi  # noqa: F401
-    from thinfilm_mi.render import kernel as K
+    from thinfilm_mi.render import stack_build
     spent = [0.0]
-    plan = K.KernelStack._plan_tables
+    build_tables = stack_build.build_tables
 
-    def timed(self, *args, **kwargs):   # whatever the planner takes (a table quantity, since issue 40)
+    def timed(*args, **kwargs):   # whatever the builder takes
         t = time.perf_counter()
-        plan(self, *args, **kwargs)
+        out = build_tables(*args, **kwargs)
         spent[0] += time.perf_counter() - t
-    K.KernelStack._plan_tables = timed
+        return out
+    stack_build.build_tables = timed
     s = rb.scene_dict("conductor", 32, 1)
     s["sphere"]["bsdf"] = bsdf(30)
     scene = mi.load_dict(s)

@@ -79,11 +79,12 @@ class Counter:
 
     @contextlib.contextmanager
     def patched(self):
-        from thinfilm_mi.render import kernel
+        from thinfilm_mi.render import side_eval
+        from thinfilm_mi.render.loop import LoopFilms
         from thinfilm_mi.tabulate import base, factors
 
-        orig_lookup, orig_rt = base.Table.lookup_channels, kernel._rt
-        orig_loop = kernel.LoopFilms.rt
+        orig_lookup, orig_rt = base.Table.lookup_channels, side_eval.exact_rt
+        orig_loop = LoopFilms.rt
         orig_factors = factors.FactorTable.lookup
         counter = self
 
@@ -105,13 +106,13 @@ class Counter:
             counter.recursions += 1
             return orig_loop(loop, *a, **k)
 
-        base.Table.lookup_channels, kernel._rt, kernel.LoopFilms.rt = lookup_channels, rt, loop_rt
+        base.Table.lookup_channels, side_eval.exact_rt, LoopFilms.rt = lookup_channels, rt, loop_rt
         factors.FactorTable.lookup = factor_lookup
         try:
             yield self
         finally:
-            base.Table.lookup_channels, kernel._rt = orig_lookup, orig_rt
-            kernel.LoopFilms.rt = orig_loop
+            base.Table.lookup_channels, side_eval.exact_rt = orig_lookup, orig_rt
+            LoopFilms.rt = orig_loop
             factors.FactorTable.lookup = orig_factors
 
 

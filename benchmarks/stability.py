@@ -305,7 +305,7 @@ def run_core(c: Case, Arr, loop: bool | str = False):
 
     ``loop``: the form render kernels use for stacks of ``unpolarized.LOOP_MIN_FILMS``
     films or more, ``optics.stack_rt_loop``, with each lane's films gathered
-    from film-major buffers (as ``kernel._LoopFilms`` gathers a film's index),
+    from film-major buffers (as ``render.loop.LoopFilms`` gathers a film's index),
     ``R = (Rs + Rp) / 2`` and ``T`` clipped to ``[0, 1 - R]`` as in the kernel;
     ``loop="real"``: the same with the hints of :func:`real_hints` (the
     real-amplitude loop the kernels use for real films above the ambient).

@@ -10,8 +10,8 @@ import pytest
 import thinfilm_mi as tf
 from tests.support.kernels import compiled, interaction
 from tests.support.stacks import sphere_scene
-from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.render import stack_plan
 
 
 def points(n, seed=3):
@@ -60,7 +60,7 @@ def test_loop_and_unrolled_kernels_agree(llvm, monkeypatch):
             "tabulate": False}
     cos, wls = points(3000, seed=4)
     looped = mi.load_dict(spec)
-    monkeypatch.setattr(K, "BUFFERED_MIN_FILMS", 1000)
+    monkeypatch.setattr(stack_plan, "BUFFERED_MIN_FILMS", 1000)
     unrolled = mi.load_dict(spec)
     assert looped.stack.plan[False].loop is not None
     assert unrolled.stack.plan[False].loop is None

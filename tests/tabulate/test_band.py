@@ -13,6 +13,7 @@ import pytest
 import thinfilm_mi as tf
 from tests.support.stacks import benchmark_layers, benchmark_thicknesses
 from thinfilm_mi.render import kernel as K
+from thinfilm_mi.render.textures import GRID
 from thinfilm_mi.tabulate import axes, policy
 from thinfilm_mi.tabulate import band as band_tables
 from thinfilm_mi.tabulate import base as tabulate_base
@@ -85,7 +86,7 @@ def test_a_resonant_stack_gets_a_verified_band_limited_table(monkeypatch):
     rounding), and its colours under D65/A/F11 pass the check."""
     side = _resonant_side(monkeypatch)
     stats = tabulate_base.BuildReport()
-    table = band_tables.build_table(side, 1e-3, K.GRID, policy.MAX_TEXELS, 1.0, report=stats)
+    table = band_tables.build_table(side, 1e-3, GRID, policy.MAX_TEXELS, 1.0, report=stats)
     assert table is not None, stats
     assert stats["exact_attempt"]["result"] != "table"
     assert table.resolution == 1.0 and table.error <= 1e-3
@@ -165,7 +166,7 @@ def test_band_table_of_a_side_lit_from_inside_glass():
                          "layers": layers, "tabulate": False})
     inside = K.side_data(bsdf.stack.plan[True], True)
     assert np.all(np.asarray(inside.n0(np.array([500.0]))) > 1.2) and inside.transmission
-    table = band_tables.build_band_table(inside, 1e-3, K.GRID, policy.MAX_TEXELS, 1.0)
+    table = band_tables.build_band_table(inside, 1e-3, GRID, policy.MAX_TEXELS, 1.0)
     assert table is not None and table.axis.name == "tir" and table.channels == 2
     assert table.error <= 1e-3
     sig = band_tables.sigma_nu(1.0)
@@ -286,7 +287,7 @@ def test_a_sheared_table_of_r_and_t_matches_a_brute_force_convolution():
     b = mi.load_dict({"type": "thinfilm_dielectric", "layers": benchmark_layers(30), "int_ior": 1.5,
                       "tabulate": False})
     side = K.side_data(b.stack.plan[False], True)
-    table = band_tables.build_band_table(side, 1e-3, K.GRID, policy.MAX_TEXELS, 1.0)
+    table = band_tables.build_band_table(side, 1e-3, GRID, policy.MAX_TEXELS, 1.0)
     assert table is not None and table.shear is not None and table.channels == 2
     sig = band_tables.sigma_nu(1.0)
     for theta in (0.0, 50.0, 75.0):

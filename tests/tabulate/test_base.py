@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 import thinfilm_mi as tf
-from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.render import stack_build
 from thinfilm_mi.tabulate import axes
 
 pytestmark = pytest.mark.usefixtures("llvm")
@@ -53,11 +53,11 @@ def test_table_cache_is_bounded_in_bytes_least_recently_used_first_out(monkeypat
     the test's tables take instead of 64 MiB, so that a few exceed it) and evicts the
     least recently used. Tables still used by a BSDF stay valid (the BSDF holds them)."""
     from thinfilm_mi.tabulate import base as tabulate_base
-    monkeypatch.setattr(K, "TABLE_CACHE", tabulate_base.TableCache())
+    monkeypatch.setattr(stack_build, "TABLE_CACHE", tabulate_base.TableCache())
     one = mi.load_dict({"type": "thinfilm_conductor", "material": "Al",
                         "layers": "1.46 150; 2.3 60", "tabulate": True}).stack.plan[False].table
     cache = tabulate_base.TableCache(max_bytes=int(3.5 * one.nbytes))
-    monkeypatch.setattr(K, "TABLE_CACHE", cache)
+    monkeypatch.setattr(stack_build, "TABLE_CACHE", cache)
     bsdfs = []
     for i in range(12):
         bsdfs.append(mi.load_dict({"type": "thinfilm_conductor", "material": "Al",

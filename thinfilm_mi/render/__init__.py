@@ -1,7 +1,11 @@
 """The render layer: what the Mitsuba plugins share.
 
-* :mod:`thinfilm_mi.render.kernel` -- ``KernelStack``: a stack's media as textures, its
-  evaluation plan, tables and the reading of plugin properties.
+* :mod:`thinfilm_mi.render.kernel` -- ``KernelStack``, the stack a plugin evaluates: the
+  composition of what a stack is (:mod:`~thinfilm_mi.render.film_stack`: its films and
+  media as textures), how it is planned (:mod:`~thinfilm_mi.render.stack_plan`), built
+  (:mod:`~thinfilm_mi.render.stack_build`: its tables and film buffers) and evaluated
+  (:mod:`~thinfilm_mi.render.stack_eval`; one side: :mod:`~thinfilm_mi.render.side_eval`;
+  both sides of a lossless stack from one: :mod:`~thinfilm_mi.render.mirror`).
 * :mod:`thinfilm_mi.render.modes` -- the one place that decides what a plugin returns in
   each variant family (spectral, polarized, RGB/mono).
 * :mod:`thinfilm_mi.render.amplitudes` -- Mueller matrices from complex amplitudes.

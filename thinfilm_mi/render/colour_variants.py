@@ -1,6 +1,7 @@
 """Colour tables for the RGB and mono variants: what a planned side of a
 :class:`~thinfilm_mi.render.kernel.KernelStack` returns there, and how its gradients are
-obtained (no plugin classes here; below :mod:`kernel`, which calls it).
+obtained (no plugin classes here; below :mod:`~thinfilm_mi.render.stack_build` and
+:mod:`~thinfilm_mi.render.stack_eval`, which call it).
 
 * :func:`colour_channels` — ``"rgb"``, ``"mono"`` or ``None`` (spectral variants).
 * :func:`colour_table` — a side's ``R`` [and ``T``] integrated against colour
@@ -73,7 +74,7 @@ COLOUR_CACHE = TableCache()
 
 def colour_table(stack, side, side_data):
     """The :class:`~thinfilm_mi.tabulate.integrated.ColourTable` of the planned side ``side`` of the
-    :class:`~thinfilm_mi.render.kernel.KernelStack` ``stack`` in RGB/mono variants, shared
+    :class:`~thinfilm_mi.render.film_stack.FilmStack` ``stack`` in RGB/mono variants, shared
     between stacks with identical optics; ``None`` where the plugin evaluates per
     channel (no films over an index given per channel). ``side_data(side,
     transmission, channel)`` gives the side's float64 build data
@@ -232,7 +233,7 @@ def _wavelength_texture(ix):
 
 
 def index_on_wavelengths(ix, si, wavelengths, active=True):
-    """The :class:`~thinfilm_mi.render.kernel.SpectralIndex` ``ix`` at ``wavelengths``
+    """The :class:`~thinfilm_mi.render.media.SpectralIndex` ``ix`` at ``wavelengths``
     (``mi.Spectrum``, nm) in RGB/mono variants, as ``(re, im)``: a dataset's from
     a float texture of its 1 nm values (built once per index), anything else
     (numbers: ``uniform``, differentiable) as its textures evaluate."""

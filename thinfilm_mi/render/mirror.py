@@ -5,7 +5,7 @@ A stack between real media whose films do not absorb conserves energy
 crossing it either way along one path). So ``R`` seen from the substrate at
 ``θ_s`` is ``R`` seen from the ambient at ``θ_a`` with ``n_a sin θ_a = n_s sin θ_s``
 (Snell's law through the films; beyond the critical angle ``R = 1``), and
-``T = 1 - R`` on both sides. :class:`~thinfilm_mi.render.kernel.KernelStack` plans
+``T = 1 - R`` on both sides. :mod:`~thinfilm_mi.render.stack_plan` plans
 such a stack (a ``thinfilm_dielectric`` or ``thinfilm_roughdielectric`` lit from
 both sides, spectral variants, the substrate's index at least the ambient's) with
 one table of ``R`` lit from the ambient (one channel instead of two, one side
@@ -28,6 +28,7 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
+from thinfilm_mi.render.side_eval import side_response
 from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
 
 __all__ = ["branches", "either_side", "exact_mirrors", "literal_outside",
@@ -62,14 +63,14 @@ def exact_mirrors(ambient, substrate) -> bool:
     return all(ix.knots is not None and ix.knots.size == 0 for ix in (ambient, substrate))
 
 
-def mirrored_rt(stack, si, cos_theta, inside: bool | Any, active, transmission: bool):
+def mirrored_rt(side, si, cos_theta, inside: bool | Any, active, transmission: bool):
     """``R`` (and ``T = 1 - R``) at ``si.wavelengths`` for light at ``cos_theta`` on the
     side ``inside`` (a bool or a mask) of a stack planned as mirrored (see the module
-    docstring): one lookup per wavelength of the ambient side's table, or without a
-    table one exact evaluation of the ambient side (when neither medium is dispersive:
-    one mapped angle per lane). ``None`` where neither applies."""
+    docstring), from ``side``, its planned ambient side
+    (:class:`~thinfilm_mi.render.stack_plan.SidePlan`): one lookup per wavelength of its
+    table, or without a table one exact evaluation of it (when neither medium is
+    dispersive: one mapped angle per lane). ``None`` where neither applies."""
     mi = mitsuba_module()
-    side = stack.plan[False]
     wl = si.wavelengths
     constant = exact_mirrors(side.n0, side.exit)
     if side.table is None and not constant:
@@ -99,22 +100,23 @@ def mirrored_rt(stack, si, cos_theta, inside: bool | Any, active, transmission: 
         if tir is not None:
             R = dr.select(dr.mask_t(mi.UnpolarizedSpectrum)(*tir), 1.0, R)
     else:
-        R = mi.UnpolarizedSpectrum(stack.side_response(False, si, cos_theta if cos_a is None
-                                                    else cos_a[0], active, False, None))
+        R = mi.UnpolarizedSpectrum(side_response(side, si, cos_theta if cos_a is None
+                                                 else cos_a[0], active, False, None))
         if tir is not None:
             R = dr.select(tir[0], 1.0, R)
     return (R, 1.0 - R) if transmission else R
 
 
-def branches(stack) -> bool:
-    """Whether :func:`either_side` branches for ``stack``: not for a bare interface (its
+def branches(has_films: bool, sides) -> bool:
+    """Whether :func:`either_side` branches for a stack (``has_films``: whether it has
+    films, of any thickness; ``sides``: its planned sides,
+    :class:`~thinfilm_mi.render.stack_plan.SidePlan`): not for a bare interface (its
     Fresnel terms cost less than the branch), nor where a side is optically opaque or
     averages a film incoherently. (Two opaque sides both return the literal ``T = 0``,
     which Dr.Jit 1.5.0 hands back as one branch's own variable: LLVM refused the kernel,
     tests/cross/test_stability_bsdf.py. :func:`literal_outside` now mends any such output;
     these stacks stay unbranched as they were measured.)"""
-    return bool(stack.indices) and not any(s.opaque or any(s.incoherent)
-                                           for s in stack.plan.values())
+    return has_films and not any(s.opaque or any(s.incoherent) for s in sides)
 
 
 def either_side(side, inside, transmission: bool, branch: bool = True):

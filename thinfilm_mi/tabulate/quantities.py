@@ -1,8 +1,8 @@
 """What a table holds: one *quantity* object per kind, registered in :data:`QUANTITIES`.
 
 A :class:`~thinfilm_mi.tabulate.base.SideData` carries its quantity; the builders
-(:mod:`thinfilm_mi.tabulate.exact`, :mod:`thinfilm_mi.tabulate.band`) and the render
-kernel (:mod:`thinfilm_mi.render.kernel`) ask it, never test which it is:
+(:mod:`thinfilm_mi.tabulate.exact`, :mod:`thinfilm_mi.tabulate.band`) and the render layer's
+stack (:mod:`thinfilm_mi.render.stack_plan`, :mod:`thinfilm_mi.render.stack_build`) ask it, never test which it is:
 
 * :data:`POWERS` (``"powers"``): the unpolarized ``R`` [, ``T``] of the spectral
   variants, evaluated by :func:`~thinfilm_mi.optics.unpolarized.unpolarized_rt`
