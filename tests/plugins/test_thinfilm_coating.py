@@ -230,7 +230,7 @@ def test_closed_form_gradient_is_unbiased(key, h):
     """Over ``diffuse`` without coat absorption (the closed form): forward-mode derivatives
     of ``eval`` against central differences lane by lane (h as above: truncation < 2e-4
     relative). The value is deterministic; a film's derivative reaches ``R_dh`` through one
-    cosine-distributed direction (``thinfilm_mi/render/coating_forms.py``), an unbiased
+    cosine-distributed direction (``thinfilm_mi/render/layered/forms.py``), an unbiased
     estimate, so over 4096 lanes the mean difference is within 4σ of the lanes' spread
     plus 2e-4 of the mean |FD|; the albedo's derivative has no estimate in it and matches
     lane by lane (1e-3)."""

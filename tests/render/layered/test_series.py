@@ -1,4 +1,4 @@
-"""``thinfilm_diffuse``'s coated-diffuse model (thinfilm_mi/render/coated_diffuse.py): the exact model
+"""``thinfilm_diffuse``'s coated-diffuse model (thinfilm_mi/render/layered/series.py, models.py): the exact model
 (``model="exact"``), the models' registry, the ``thickness`` texture.
 
 References: tmm's coherent stack (``tmm.coh_tmm``) integrated here with its own
@@ -23,7 +23,7 @@ import thinfilm_mi  # noqa: E402,F401  (registers the plugins)
 from tests.support.bsdf import WAVELENGTHS as WL
 from tests.support.bsdf import direction, make_si, mc_albedo
 from thinfilm_mi.errors import ThinFilmError  # noqa: E402
-from thinfilm_mi.render.coated_diffuse import DIFFUSE_MODELS
+from thinfilm_mi.render.layered.models import DIFFUSE_MODELS
 from thinfilm_mi.render.media import SpectralIndex  # noqa: E402
 
 DIFFUSE_ONLY = mi.BSDFContext()
@@ -460,7 +460,8 @@ def test_factor_table_skipped_while_a_film_carries_gradients():
 def own_tables(tmp_path, monkeypatch):
     """The table store in a temporary directory, this process's table cache empty, and
     the factor tables built here counted (``builds``: one entry per build)."""
-    from thinfilm_mi.render import diffuse, kernel
+    from thinfilm_mi.render import kernel
+    from thinfilm_mi.render.layered import factors as diffuse
     from thinfilm_mi.tabulate import store
 
     monkeypatch.setenv(store.ENVIRONMENT, str(tmp_path / "tables"))
@@ -507,7 +508,7 @@ BASE_KEY = {"type": "thinfilm_diffuse", "layers": "SiO2 500; Au 5", "model": "ex
 
 
 def _factor_key(d: dict) -> str:
-    from thinfilm_mi.render.diffuse import factor_table_key
+    from thinfilm_mi.render.layered.factors import factor_table_key
     coated = mi.load_dict(d).coated
     return factor_table_key(coated.factors(), coated.coating, coated.media())
 

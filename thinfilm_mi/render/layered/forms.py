@@ -1,8 +1,9 @@
-r"""Closed forms of ``thinfilm_coating``'s base part, where the base allows one (no plugin
-classes here): the registry :data:`CLOSED_FORMS`, keyed by the nested BSDF's class, each
-form's code in its class; :func:`closed_form` picks one for a
-:class:`~thinfilm_mi.render.coating.Coating`, which then sums its base part by that form
-instead of the random walk (:meth:`~thinfilm_mi.render.coating.Coating.transmitted`).
+r"""Closed forms of the sum over paths under a smooth top, where the nested base allows one
+(no plugin classes here): the registry :data:`CLOSED_FORMS`, keyed by the nested BSDF's
+class, each form's code in its class; :func:`closed_form` picks one for a
+:class:`~thinfilm_mi.render.layered.nested.NestedEstimator`, which then sums its base part
+by that form instead of the random walk
+(:func:`~thinfilm_mi.render.layered.nested.sum_estimator`).
 
 **Lambertian** (:class:`Lambertian`, Mitsuba's ``diffuse``): every base vertex sends
 ``ρ/π`` towards every direction and, sampled by its cosine, returns ``ρ R_in`` on average,
@@ -12,8 +13,8 @@ so the walk's sum (at most ``N = max_bounces`` vertices) has the expectation::
 
 with ``R_dh = ∫ R_in(μ) 2μ dμ`` the underside's cosine-weighted hemispherical
 reflectance: the series of ``thinfilm_diffuse``'s model ``"exact"`` (its
-:class:`~thinfilm_mi.render.diffuse.ExactFactors` and
-:class:`~thinfilm_mi.render.diffuse.SpectralTerms`, over the coating's own stack: exact,
+:class:`~thinfilm_mi.render.layered.factors.ExactFactors` and
+:class:`~thinfilm_mi.render.layered.factors.SpectralTerms`, over the coating's own stack: exact,
 or tabulated over a ``thickness`` texture's scale; recomputed on edits). ``ρ`` is read from
 the base itself, its ``eval`` at ``wi = wo = z`` times π (the reflectance texture at the
 hit, for any Lambertian). No walk noise, and no walk. It applies without a coat medium's
@@ -28,15 +29,16 @@ from __future__ import annotations
 
 import drjit as dr
 
-from thinfilm_mi.render.coating_delta import base_interaction, intensity
-from thinfilm_mi.render.diffuse import ExactFactors, SpectralTerms
+from thinfilm_mi.render.layered.bottom import base_interaction, intensity
+from thinfilm_mi.render.layered.factors import ExactFactors, SpectralTerms
 from thinfilm_mi.render.textures import mitsuba_module
 
 __all__ = ["Lambertian", "CLOSED_FORMS", "closed_form"]
 
 
 class Lambertian:
-    """The closed form over a Lambertian base (module docstring) for ``coating``."""
+    """The closed form over a Lambertian base (module docstring) for ``coating`` (a
+    :class:`~thinfilm_mi.render.layered.nested.NestedEstimator`)."""
 
     def __init__(self, coating):
         self.coating = coating
@@ -46,7 +48,7 @@ class Lambertian:
     @staticmethod
     def applies(coating) -> bool:
         """No coat absorption, a spectral variant."""
-        return coating.sigma_a is None and not coating.mode.integrated
+        return coating.medium.sigma_a is None and not coating.mode.integrated
 
     def refresh(self) -> None:
         """``R_dh`` at the current films (load and edits; updated in place: no recompile)."""
@@ -62,16 +64,16 @@ class Lambertian:
                                        active)
         return intensity(value, self.coating.mode.polarized) * dr.pi
 
-    def sum(self, ctx_mode, si, wo_in, seed, active):
+    def sum(self, ctx_mode, si, wi_in, wo_in, seed, active):
         """The walk's expectation ``ρ/π cos θ_o' (1 - (ρ R_dh)^N) / (1 - ρ R_dh)`` (the
-        variant's value); ``seed``: the walk's, for ``R_dh``'s gradient."""
+        variant's value; any ``wi_in``); ``seed``: the walk's, for ``R_dh``'s gradient."""
         mi = mitsuba_module()
         c = self.coating
         rho = self.albedo(ctx_mode, si, active)
         r_dh = dr.detach(mi.UnpolarizedSpectrum(self.terms.lookup(si, c.stack, active)[0]))
         if c.tracks_gradients(si, active):
             mu = dr.sqrt(mi.sample_tea_float32(seed[0], seed[1], 4))
-            r_in = c.top(si, mu, active, inside=True, transmission=False).R
+            r_in = c.top.unpolarized(si, mu, active, inside=True, transmission=False).R
             r_dh = r_dh + (r_in - dr.detach(r_in))
         x = rho * r_dh
         # 1e-6: below it the series' N terms are all ~1 (x^N = 1 - N(1 - x))

@@ -1,4 +1,4 @@
-"""thinfilm_mi.render.coating: the walk of ``thinfilm_coating`` against closed forms.
+"""thinfilm_mi.render.layered.walk (and nested): the walk of ``thinfilm_coating`` against closed forms.
 
 Independent references: Fresnel's equations and the interreflection series of a
 Lambertian base under a bare interface in float64 (written here), Mitsuba's ``plastic``
@@ -19,7 +19,7 @@ import tmm
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi  # noqa: E402,F401
-from thinfilm_mi.render.coating import inward, outward  # noqa: E402
+from thinfilm_mi.render.layered.top import inward, outward  # noqa: E402
 
 WLS = [450.0, 520.0, 610.0, 700.0]
 #: samples per albedo: the weights' standard deviation is ~0.5, so the mean's
@@ -189,7 +189,7 @@ def test_eval_is_plastic_nonlinear_in_expectation():
 @pytest.mark.parametrize("layers", ["", LOSSLESS], ids=["bare", "lossless"])
 def test_lambertian_closed_form_is_the_walks_expectation(layers):
     """Over ``diffuse`` the base part is the closed form ``ρ/π cos θ_o' / (1 - ρ R_dh)``
-    (``thinfilm_mi/render/coating_forms.py``); a blend of two ``diffuse`` (the same
+    (``thinfilm_mi/render/layered/forms.py``); a blend of two ``diffuse`` (the same
     Lambertian, unknown to the registry) is walked. Over 2^14 random direction pairs at
     cos θ_i 0.7 the walk minus the closed form has mean 0 within 4σ of its spread, and the
     closed form returns the same value for other random numbers (no noise)."""
