@@ -161,7 +161,7 @@ class NestedEstimator:
         if not dr.is_diff_v(mi.Float):
             return False
         own = self.medium.values(si, active)
-        if self.top.stack.colour_gradients(si, active) or any(dr.grad_enabled(v) for v in own):
+        if self.top.carries_gradients(si, active) or any(dr.grad_enabled(v) for v in own):
             return True
         return self.bottom.carries_gradients()
 

@@ -45,12 +45,14 @@ class Top(ABC):
 
     A top answers, at a hit, for light on either side (``inside``: lit from the medium
     above the bottom), its reflectance and transmittance (:meth:`response`), maps outer
-    directions to inner ones and back (:meth:`inward`, :meth:`outward`), and turns an
-    unpolarised weight of one of its lobes into the variant's value (:meth:`crossing`).
-    :attr:`smooth` says whether its lobes are deltas: an estimator then refracts
+    directions to inner ones and back (:meth:`inward`, :meth:`outward`), turns an
+    unpolarised weight of one of its lobes into the variant's value (:meth:`crossing`),
+    says whether its parameters carry gradients, and exposes and refreshes them.
+    :attr:`smooth` says whether its lobes are deltas: the estimators then refract
     deterministically (next-event estimation through the top). A rough top (a microfacet
-    distribution on the interface) is not smooth: it samples and evaluates its reflection
-    and transmission from both sides, and the estimators that accept one say so."""
+    distribution on the interface) is not smooth: it adds the sampling and evaluation of
+    its reflection and transmission from both sides (Guo et al. 2018), which an estimator
+    that accepts it reads."""
     #: whether reflection and transmission are delta lobes
     smooth = True
 
@@ -60,13 +62,42 @@ class Top(ABC):
         side ``inside`` (``R``, and ``T`` if ``transmission``; each lobe's polarisation in
         polarized variants)."""
 
+    def unpolarized(self, si, cos, active, inside, transmission: bool):
+        """:meth:`response` with ``R`` (and ``T``) as ``mi.UnpolarizedSpectrum``."""
+        mi = mitsuba_module()
+        resp = self.response(si, cos, active, inside=inside, transmission=transmission)
+        resp.R = mi.UnpolarizedSpectrum(resp.R)
+        if transmission:
+            resp.T = mi.UnpolarizedSpectrum(resp.T)
+        return resp
+
+    @abstractmethod
+    def inward(self, w):
+        """The inner direction of the outer direction ``w``, and whether it exists."""
+
+    @abstractmethod
+    def outward(self, w):
+        """The outer direction of the inner direction ``w``, and whether it leaves."""
+
     @abstractmethod
     def crossing(self, weight, lobe, arrive, leave):
         """A crossing of (or reflection at) the top as the variant's value."""
 
     @abstractmethod
-    def refresh(self) -> None:
-        """Re-derive the load-time quantities after an edit."""
+    def carries_gradients(self, si, active) -> bool:
+        """Whether a parameter of the top carries gradients at the hit."""
+
+    @abstractmethod
+    def traverse(self, callback) -> None:
+        """Expose the top's parameters."""
+
+    @abstractmethod
+    def parameters_changed(self) -> None:
+        """Refresh after an edit of its parameters."""
+
+    @abstractmethod
+    def describe(self) -> str:
+        """The top, for ``to_string``."""
 
 
 class SmoothTop(Top):
@@ -100,15 +131,6 @@ class SmoothTop(Top):
         return self.mode.response(self.stack, si, cos, active, inside=inside,
                                   transmission=transmission)
 
-    def unpolarized(self, si, cos, active, inside, transmission: bool):
-        """:meth:`response` with ``R`` (and ``T``) as ``mi.UnpolarizedSpectrum``."""
-        mi = mitsuba_module()
-        resp = self.response(si, cos, active, inside=inside, transmission=transmission)
-        resp.R = mi.UnpolarizedSpectrum(resp.R)
-        if transmission:
-            resp.T = mi.UnpolarizedSpectrum(resp.T)
-        return resp
-
     def inward(self, w):
         """:func:`inward` at this top's :attr:`eta_f`."""
         return inward(w, self.eta_f)
@@ -128,6 +150,10 @@ class SmoothTop(Top):
             return mi.Spectrum(weight)
         return self.mode.value(weight, lobe, mi.BSDFContext(mi.TransportMode.Radiance),
                                leave, -arrive)
+
+    def carries_gradients(self, si, active) -> bool:
+        """Whether a film's thickness or index carries gradients at the hit."""
+        return self.stack.colour_gradients(si, active)
 
     def traverse(self, callback) -> None:
         """The stack's parameters (``layers.N.*``, ``thickness``)."""
