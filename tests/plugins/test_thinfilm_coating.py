@@ -2,7 +2,7 @@
 (check 1), Mitsuba's chi2 test of ``sample`` against ``pdf`` (check 5), gradients against
 finite differences (check 6), the RGB product approximation's ΔE2000, traversal and
 validation at load and on edits. The model's closed-form checks (2, 3, 5) are in
-``tests/render/test_coating.py``.
+``tests/render/layered/`` (``test_walk.py``, ``test_forms.py``, ``test_delta.py``).
 """
 from __future__ import annotations
 

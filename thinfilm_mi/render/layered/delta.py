@@ -28,7 +28,7 @@ function of the directions (every Mitsuba BSDF with a delta reflection and ours,
 mixtures), and where a base picks its delta lobe at random (a ``blendbsdf`` of a delta and
 another BSDF) only the last level's closed form is biased, by ``E[M]² (E[(1 - M)^-1] - (1
 - E[M])^-1) >= 0`` (Jensen): < 1e-4 relative for a conductor blended 50/50 with black under
-a bare 1.5 coat (``tests/render/layered/test_walk.py``), where one closed form of one sample was
+a bare 1.5 coat (``tests/render/layered/test_delta.py``), where one closed form of one sample was
 1-3 % off. Light a base transmits (a ``dielectric``'s refraction) is lost, as any base's.
 """
 from __future__ import annotations
