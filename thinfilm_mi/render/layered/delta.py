@@ -48,12 +48,12 @@ TAIL_LEVELS = 2
 
 
 class DeltaBase:
-    """The delta reflection of ``coating.base`` (a
+    """The delta reflection of ``layer.base`` (a
     :class:`~thinfilm_mi.render.layered.nested.NestedEstimator`, whose top's crossings,
     underside and coat absorption it composes)."""
 
-    def __init__(self, coating):
-        self.coating = coating
+    def __init__(self, layer):
+        self.layer = layer
 
     def reflectance(self, ctx_mode, si, w, numbers, active):
         """``B_δ(w)``: the base's delta reflection for light leaving it along ``w`` (its
@@ -62,7 +62,7 @@ class DeltaBase:
         where it samples none."""
         mi = mitsuba_module()
         s1, s2 = numbers
-        bs, g = self.coating.base.sample(base_context(ctx_mode, mi.BSDFFlags.DeltaReflection),
+        bs, g = self.layer.base.sample(base_context(ctx_mode, mi.BSDFFlags.DeltaReflection),
                                          base_interaction(si, w), s1, s2, active)
         ok = active & mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection) \
             & (bs.wo.z > 0) & (bs.pdf > 0)
@@ -74,7 +74,7 @@ class DeltaBase:
         most 1."""
         mi = mitsuba_module()
         b = self.reflectance(ctx_mode, si, w, (mi.Float(0.5), mi.Point2f(0.5, 0.5)), active)
-        return dr.minimum(spectral_mean(intensity(b, self.coating.mode.polarized)), 1.0)
+        return dr.minimum(spectral_mean(intensity(b, self.layer.mode.polarized)), 1.0)
 
     def round_trips(self, ctx_mode, si, w, rng, active):
         """``D(w)``: the delta round trips before a base vertex that light reaches along
@@ -89,10 +89,10 @@ class DeltaBase:
         polarized variants; 0 where the closed form diverges (``M`` >= 1: a lossless
         closed cavity, which no light enters)."""
         mi = mitsuba_module()
-        u = self.coating.underside(si, w, active)
+        u = self.layer.underside(si, w, active)
         m = [u * self.reflectance(ctx_mode, si, w, self.numbers(rng), active)
              for _ in range(TAIL_LEVELS + 1)]
-        if self.coating.mode.polarized:
+        if self.layer.mode.polarized:
             one = dr.identity(mi.Spectrum)
             d = dr.select(dr.all(m[-1][0][0] < 1), dr.rcp(one - m[-1]), dr.zeros(mi.Spectrum))
         else:
@@ -123,7 +123,7 @@ class DeltaBase:
         ``top_i``: the stack's response at ``θ_i``). Light tracing gets its intensity,
         depolarized, as the coating's transmitted part."""
         mi = mitsuba_module()
-        c = self.coating
+        c = self.layer
         wo = mi.reflect(si.wi)
         wo_in = mi.Vector3f(-wi_in.x, -wi_in.y, wi_in.z)
         b = self.reflectance(ctx_mode, si, wi_in, self.numbers(rng), active)

@@ -37,22 +37,22 @@ __all__ = ["Lambertian", "CLOSED_FORMS", "closed_form"]
 
 
 class Lambertian:
-    """The closed form over a Lambertian base (module docstring) for ``coating`` (a
+    """The closed form over a Lambertian base (module docstring) for ``layer`` (a
     :class:`~thinfilm_mi.render.layered.nested.NestedEstimator`)."""
 
-    def __init__(self, coating):
-        self.coating = coating
+    def __init__(self, layer):
+        self.layer = layer
         self.terms = None
         self.refresh()
 
     @staticmethod
-    def applies(coating) -> bool:
+    def applies(layer) -> bool:
         """No coat absorption, a spectral variant."""
-        return coating.medium.sigma_a is None and not coating.mode.integrated
+        return layer.medium.sigma_a is None and not layer.mode.integrated
 
     def refresh(self) -> None:
         """``R_dh`` at the current films (load and edits; updated in place: no recompile)."""
-        c = self.coating
+        c = self.layer
         self.terms = SpectralTerms(ExactFactors(c.stack), c.stack.thickness_texture, c.plugin,
                                    self.terms)
 
@@ -60,15 +60,15 @@ class Lambertian:
         """``ρ`` at the hit: the base's ``eval`` at ``wi = wo = z`` times π."""
         mi = mitsuba_module()
         z = mi.Vector3f(0.0, 0.0, 1.0)
-        value = self.coating.base.eval(mi.BSDFContext(ctx_mode), base_interaction(si, z), z,
+        value = self.layer.base.eval(mi.BSDFContext(ctx_mode), base_interaction(si, z), z,
                                        active)
-        return intensity(value, self.coating.mode.polarized) * dr.pi
+        return intensity(value, self.layer.mode.polarized) * dr.pi
 
     def sum(self, ctx_mode, si, wi_in, wo_in, seed, active):
         """The walk's expectation ``ρ/π cos θ_o' (1 - (ρ R_dh)^N) / (1 - ρ R_dh)`` (the
         variant's value; any ``wi_in``); ``seed``: the walk's, for ``R_dh``'s gradient."""
         mi = mitsuba_module()
-        c = self.coating
+        c = self.layer
         rho = self.albedo(ctx_mode, si, active)
         r_dh = dr.detach(mi.UnpolarizedSpectrum(self.terms.lookup(si, c.stack, active)[0]))
         if c.tracks_gradients(si, active):
@@ -89,8 +89,8 @@ class Lambertian:
 CLOSED_FORMS = {"SmoothDiffuse": Lambertian}
 
 
-def closed_form(coating):
-    """The closed form of ``coating``'s base (an instance of a :data:`CLOSED_FORMS` class),
+def closed_form(layer):
+    """The closed form of ``layer``'s base (an instance of a :data:`CLOSED_FORMS` class),
     or ``None`` where its class has none or the form does not apply (the walk then)."""
-    form = CLOSED_FORMS.get(coating.base.class_name())
-    return form(coating) if form is not None and form.applies(coating) else None
+    form = CLOSED_FORMS.get(layer.base.class_name())
+    return form(layer) if form is not None and form.applies(layer) else None

@@ -89,7 +89,7 @@ class RandomWalk:
         PCG32 seeded with ``seed`` (two ``UInt32``).
 
         Gradients: the walk runs detached, then again with the same random numbers
-        (:meth:`_replay`), adding per vertex what the parameters change there, as
+        (:meth:`_walk` given ``total``), adding per vertex what the parameters change there, as
         Mitsuba's ``prb`` replays a path: ``dW = Σ_j β_j de_j + Σ_j dlog(g_j r_j) (W -
         W_{≤j})`` with ``e_j`` the base's ``eval`` towards ``ω_o'``, ``g_j r_j`` the step's
         base weight (the base's ``eval`` over its detached pdf at the sampled
