@@ -13,7 +13,7 @@ so the walk's sum (at most ``N = max_bounces`` vertices) has the expectation::
 
 with ``R_dh = ∫ R_in(μ) 2μ dμ`` the underside's cosine-weighted hemispherical
 reflectance: the series of ``thinfilm_diffuse``'s model ``"exact"`` (its
-:class:`~thinfilm_mi.render.layered.factors.ExactFactors` and
+:class:`~thinfilm_mi.render.layered.models.Exact`'s factors and
 :class:`~thinfilm_mi.render.layered.factors.SpectralTerms`, over the coating's own stack: exact,
 or tabulated over a ``thickness`` texture's scale; recomputed on edits). ``ρ`` is read from
 the base itself, its ``eval`` at ``wi = wo = z`` times π (the reflectance texture at the
@@ -30,7 +30,8 @@ from __future__ import annotations
 import drjit as dr
 
 from thinfilm_mi.render.layered.bottom import base_interaction, intensity
-from thinfilm_mi.render.layered.factors import ExactFactors, SpectralTerms
+from thinfilm_mi.render.layered.factors import SpectralTerms
+from thinfilm_mi.render.layered.models import Exact
 from thinfilm_mi.render.textures import mitsuba_module
 
 __all__ = ["Lambertian", "CLOSED_FORMS", "closed_form"]
@@ -53,7 +54,9 @@ class Lambertian:
     def refresh(self) -> None:
         """``R_dh`` at the current films (load and edits; updated in place: no recompile)."""
         c = self.layer
-        self.terms = SpectralTerms(ExactFactors(c.stack), c.stack.thickness_texture, c.plugin,
+        # thinfilm_diffuse's model "exact": the whole stack over the coat medium
+        factors = Exact().factors(c.stack, None, None)
+        self.terms = SpectralTerms(factors, c.stack.thickness_texture, c.plugin,
                                    self.terms)
 
     def albedo(self, ctx_mode, si, active):
