@@ -124,7 +124,7 @@ def load_and_edit(variant: str, films: int, repeats: int) -> str:
     import mitsuba as mi
 
     from thinfilm_mi.materials.model import GRID
-    from thinfilm_mi.render.diffuse import DiffuseFactors
+    from thinfilm_mi.render.layered.factors import DiffuseFactors
 
     spec = {"type": "thinfilm_diffuse", "layers": layers_of(films), "reflectance": 0.6}
     loads, edits, partials = [], [], []

@@ -2,7 +2,7 @@
 (check 1), Mitsuba's chi2 test of ``sample`` against ``pdf`` (check 5), gradients against
 finite differences (check 6), the RGB product approximation's ΔE2000, traversal and
 validation at load and on edits. The model's closed-form checks (2, 3, 5) are in
-``tests/render/test_coating.py``.
+``tests/render/layered/`` (``test_walk.py``, ``test_forms.py``, ``test_delta.py``).
 """
 from __future__ import annotations
 
@@ -230,7 +230,7 @@ def test_closed_form_gradient_is_unbiased(key, h):
     """Over ``diffuse`` without coat absorption (the closed form): forward-mode derivatives
     of ``eval`` against central differences lane by lane (h as above: truncation < 2e-4
     relative). The value is deterministic; a film's derivative reaches ``R_dh`` through one
-    cosine-distributed direction (``thinfilm_mi/render/coating_forms.py``), an unbiased
+    cosine-distributed direction (``thinfilm_mi/render/layered/forms.py``), an unbiased
     estimate, so over 4096 lanes the mean difference is within 4σ of the lanes' spread
     plus 2e-4 of the mean |FD|; the albedo's derivative has no estimate in it and matches
     lane by lane (1e-3)."""

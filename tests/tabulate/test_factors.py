@@ -2,7 +2,7 @@
 ``thinfilm_mi/tabulate/factors.py``).
 
 Reference: the exact float64 factors (``DiffuseFactors.rt``, the stack's recursion that
-tmm is checked against in ``tests/render/test_coated_diffuse.py``) and hemispherical
+tmm is checked against in ``tests/render/layered/test_series.py``) and hemispherical
 terms; the kernel's reads must be within ``table_error`` of them (see each test).
 """
 from __future__ import annotations

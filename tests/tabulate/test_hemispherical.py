@@ -104,7 +104,7 @@ def test_scale_table_against_direct_terms():
     n = s.size
     si = make_si(n, direction(0.0))
     r, t, _ = table.lookup(si.wavelengths, mi.Float(s))
-    from thinfilm_mi.render.diffuse import ExactFactors
+    from thinfilm_mi.render.layered.factors import ExactFactors
     R, T = ExactFactors(b.coating).hemispherical_scales(np.array(WL), s)
     np.testing.assert_allclose(np.array(r), R.T, atol=SCALE_ABS / 2 + 1e-6)
     np.testing.assert_allclose(np.array(t), T.T, atol=SCALE_ABS / 2 + 1e-6)

@@ -99,15 +99,15 @@ hash of the directions and ``sample`` from its sample, so both are deterministic
 Mitsuba's ``diffuse`` without ``coat_sigma_a``, in spectral and polarized variants, the
 walk is replaced by its closed form, ``ρ/π cos θ_o' / (1 - ρ R_dh)`` with the underside's
 hemispherical reflectance ``R_dh`` (``thinfilm_diffuse``'s model ``"exact"``): no walk
-noise (``thinfilm_mi/render/coating_forms.py``). ``sample`` picks the delta lobe with
+noise (``thinfilm_mi/render/layered/forms.py``). ``sample`` picks the delta lobe with
 probability ``(R̄ + T̄ b̄)/(R̄ + T̄)`` (``b̄``: the base's mean delta reflectance, 0 without
 one); otherwise it draws from a fixed mixture of the base's own non-delta lobes refracted
 out and a cosine lobe, and weighs the direction by the walk's ``f cos θ_o`` over the
 mixture's density, which is what ``pdf``
 returns (so ``sample``, ``eval`` and ``pdf`` agree, and MIS weights sum to one). With no
 films and ``int_ior`` equal to ``ext_ior`` the plugin returns the nested BSDF itself
-(times the coat's absorption). Details: ``thinfilm_mi/render/coating.py`` and the guide
-``docs/guides/coating.md``.
+(times the coat's absorption). Details: the layered engine, ``thinfilm_mi/render/layered/``
+(``nested.py``, ``walk.py``), and the guide ``docs/guides/coating.md``.
 
 **Variants.** Spectral: the stack exact (or tabulated) at the path's wavelengths, the
 base in Mitsuba's spectral mode. RGB and mono: the stack's ``R`` and ``T`` integrated
@@ -131,7 +131,7 @@ form at the exit direction, ``(1 - R_in B_δ)^-1`` (a Mueller inverse in polariz
 Exact for bases whose delta reflection is a deterministic function of the directions (every
 Mitsuba BSDF with one, ours included); a base that picks its delta lobe at random (a
 ``blendbsdf`` of a delta and another BSDF) is biased by at most 1e-4 relative in the tested
-case (``thinfilm_mi/render/coating.py``). **Not covered.** Light the base transmits (a
+case (``thinfilm_mi/render/layered/delta.py``). **Not covered.** Light the base transmits (a
 ``dielectric``'s refraction) is lost (no layer below it).
 
 .. tabs::
@@ -158,7 +158,12 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.coating import DEFAULT_MAX_BOUNCES, Coating, nested_bsdf
+from thinfilm_mi.render.layered.bottom import NestedBottom, nested_bsdf
+from thinfilm_mi.render.layered.coat import CoatMedium
+from thinfilm_mi.render.layered.engine import Layered
+from thinfilm_mi.render.layered.nested import NestedEstimator
+from thinfilm_mi.render.layered.top import SmoothTop
+from thinfilm_mi.render.layered.walk import DEFAULT_MAX_BOUNCES
 from thinfilm_mi.render.media import real_index
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
@@ -172,6 +177,10 @@ DEFAULT_COAT_IOR = 1.5
 
 
 class ThinFilmCoating(mi.BSDF):
+    """The ``thinfilm_coating`` plugin: its properties read into a
+    :class:`~thinfilm_mi.render.layered.engine.Layered` (:attr:`layered`): a smooth top over
+    the nested BSDF, which does the work."""
+
     def __init__(self, props):
         check_variant(NAME)
         mode = modes.current()
@@ -186,19 +195,13 @@ class ThinFilmCoating(mi.BSDF):
         if isinstance(bounces, bool) or not isinstance(bounces, int) or bounces < 1:
             raise ThinFilmError(f"{NAME}: 'max_bounces' must be an integer >= 1, got {bounces!r}")
         check_unqueried(props, NAME)
-        self.coating = Coating(stack, base, mode, sigma_a, float(thickness), bounces, NAME)
-        #: the base's reflection lobes (component 1: any of them through the coat)
-        self.base_lobes = [lobe for lobe in (mi.BSDFFlags.DiffuseReflection,
-                                             mi.BSDFFlags.GlossyReflection)
-                           if base.flags() & lobe]
-        base_flags = mi.BSDFFlags.Empty
-        for lobe in self.base_lobes:
-            base_flags = base_flags | lobe
+        top, bottom = SmoothTop(stack, mode), NestedBottom(base)
+        medium = CoatMedium(sigma_a, float(thickness), NAME)
+        #: the layered engine (render/layered/)
+        self.layered = Layered(top, bottom, NestedEstimator(top, bottom, medium, mode, bounces, NAME))
         # component 0: the stack's reflection and the base's all-delta chains; component
         # 1 absent over a pure-delta base (conductor, dielectric): a pure delta BSDF
-        components = [mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide]
-        if self.base_lobes:
-            components.append(base_flags | mi.BSDFFlags.FrontSide)
+        components = self.layered.components()
         flags = mi.BSDFFlags.Empty
         for component in components:
             flags = flags | component
@@ -208,38 +211,26 @@ class ThinFilmCoating(mi.BSDF):
         self.m_components, self.m_flags = components, flags
         self.guard = ParameterGuard(self, NAME)
 
-    def _enabled(self, ctx):
-        return (ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0),
-                any(ctx.is_enabled(lobe, 1) for lobe in self.base_lobes))
+    coating = property(lambda self: self.layered.estimator,
+                       doc="The estimator (:class:`~thinfilm_mi.render.layered.nested.NestedEstimator`).")
 
     def sample(self, ctx, si, sample1, sample2, active=True):
-        return self.coating.sample(ctx, si, sample1, sample2, active, *self._enabled(ctx))
+        return self.layered.sample(ctx, si, sample1, sample2, active)
 
     def eval(self, ctx, si, wo, active=True):
-        return self.coating.eval_pdf(ctx, si, wo, active, *self._enabled(ctx), want_pdf=False)[0]
+        return self.layered.eval(ctx, si, wo, active)
 
     def pdf(self, ctx, si, wo, active=True):
-        return self.coating.eval_pdf(ctx, si, wo, active, *self._enabled(ctx), want_value=False)[1]
+        return self.layered.pdf(ctx, si, wo, active)
 
     def eval_pdf(self, ctx, si, wo, active=True):
-        return self.coating.eval_pdf(ctx, si, wo, active, *self._enabled(ctx))
+        return self.layered.eval_pdf(ctx, si, wo, active)
 
     def traverse(self, callback):
-        c = self.coating
-        c.stack.traverse(callback)
-        if c.sigma_a is not None:
-            callback.put("coat_sigma_a", c.sigma_a, mi.ParamFlags.Differentiable)
-        callback.put("coat_thickness", c.thickness, mi.ParamFlags.Differentiable)
-        callback.put("bsdf", c.base, mi.ParamFlags.Differentiable)
+        self.layered.traverse(callback)
 
     def parameters_changed(self, keys):
-        def refresh(changed):
-            self.coating.stack.parameters_changed()
-            self.coating.refresh()
-        self.guard.changed(self, refresh, keys)
+        self.guard.changed(self, self.layered.parameters_changed, keys)
 
     def to_string(self):
-        c = self.coating
-        return (f"ThinFilmCoating[\n  layers = {c.stack.describe()},\n"
-                f"  int_ior = {c.stack.substrate.label},\n  ext_ior = {c.stack.ambient.label},\n"
-                f"  bsdf = {c.base.class_name()}\n]")
+        return f"ThinFilmCoating[\n{self.coating.describe()}]"

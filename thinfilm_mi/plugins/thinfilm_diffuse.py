@@ -73,8 +73,8 @@ Thin-film coated diffuse surface (:monosp:`thinfilm_diffuse`)
      instead of showing ~1 nm fringes no broadband light shows (default: 5000).
 
 A diffuse base (Lambertian, or Oren–Nayar with ``roughness``) under a stack of thin
-films, after Hirayama et al. section 2.4 (the coated-diffuse model and its ``model``
-registry: ``thinfilm_mi/render/coated_diffuse.py``). Component 0 is the delta reflection of the
+films, after Hirayama et al. section 2.4 (the layered engine's smooth top over a diffuse
+bottom and its ``model`` registry: ``thinfilm_mi/render/layered/models.py``). Component 0 is the delta reflection of the
 coating, component 1 the diffuse lobe; the films are evaluated at the path's wavelengths
 in the render kernel (float32), for unpolarised light. In ``*_spectral_polarized``
 variants component 0 is the Mueller matrix of the coating's amplitudes (exact or
@@ -301,8 +301,10 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.coated_diffuse import DIFFUSE_MODELS, CoatedDiffuse, diffuse_model
-from thinfilm_mi.render.diffuse import reflectance_from_props
+from thinfilm_mi.render.layered.bottom import DiffuseBottom, reflectance_from_props
+from thinfilm_mi.render.layered.engine import Layered
+from thinfilm_mi.render.layered.models import DIFFUSE_MODELS, diffuse_model
+from thinfilm_mi.render.layered.series import series_estimator
 from thinfilm_mi.render.media import real_index
 from thinfilm_mi.render.orennayar import OrenNayar
 from thinfilm_mi.render.params import ParameterGuard
@@ -316,8 +318,8 @@ NAME = "thinfilm_diffuse"
 
 class ThinFilmDiffuse(mi.BSDF):
     """The ``thinfilm_diffuse`` plugin: its properties read into a
-    :class:`~thinfilm_mi.render.coated_diffuse.CoatedDiffuse` (:attr:`coated`), which
-    does the work."""
+    :class:`~thinfilm_mi.render.layered.engine.Layered` (:attr:`layered`): a smooth top over
+    a diffuse bottom, summed by the model's closed form, which does the work."""
 
     def __init__(self, props):
         check_variant(NAME)
@@ -333,44 +335,44 @@ class ThinFilmDiffuse(mi.BSDF):
         options = stack_options_from_props(props, NAME)
         rough = OrenNayar(props, NAME)   # roughness: render/orennayar.py
         check_unqueried(props, NAME)
-        #: the coated-diffuse model (stack, base, model; render/coated_diffuse.py)
-        self.coated = CoatedDiffuse(model, films, ext, base, reflectance, rough, options,
-                                    modes.current(), NAME)
+        bottom = DiffuseBottom(reflectance, rough)
+        estimator = series_estimator(model, films, ext, base, bottom, options, modes.current(), NAME)
+        #: the layered engine (render/layered/)
+        self.layered = Layered(estimator.top, bottom, estimator)
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
-        self.m_components = [
-            mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide,
-            mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide,
-        ]
+        self.m_components = self.layered.components()
         self.m_flags = self.m_components[0] | self.m_components[1]
         self.guard = ParameterGuard(self, NAME)
 
     # the model's parts, for inspection
+    coated = property(lambda self: self.layered.estimator,
+                      doc="The estimator (:class:`~thinfilm_mi.render.layered.series.SeriesEstimator`).")
     model = property(lambda self: self.coated.model, doc="The :class:`DiffuseModel`.")
-    coating = property(lambda self: self.coated.coating, doc="The coating's ``KernelStack``.")
+    coating = property(lambda self: self.coated.coating, doc="The top's ``KernelStack``.")
     film_n = property(lambda self: self.coated.film_n, doc="The paper's absorbing film N, or ``None``.")
-    base = property(lambda self: self.coated.base, doc="The base's ``OrenNayar`` roughness.")
+    base = property(lambda self: self.layered.bottom.roughness, doc="The base's ``OrenNayar`` roughness.")
     terms = property(lambda self: self.coated.terms, doc="Spectral variants: ``R_dh``, ``T_hemi``.")
     colour = property(lambda self: self.coated.colour, doc="RGB/mono variants: the diffuse table.")
     r_dh_grad = property(lambda self: self.coated.r_dh_grad, doc="``R_dh``'s derivative table or ``None``.")
 
     def sample(self, ctx, si, sample1, sample2, active=True):
-        return self.coated.sample(ctx, si, sample1, sample2, active)
+        return self.layered.sample(ctx, si, sample1, sample2, active)
 
     def eval(self, ctx, si, wo, active=True):
-        return self.coated.eval_pdf(ctx, si, wo, active, True, False)[0]
+        return self.layered.eval(ctx, si, wo, active)
 
     def pdf(self, ctx, si, wo, active=True):
-        return self.coated.eval_pdf(ctx, si, wo, active, False, True)[1]
+        return self.layered.pdf(ctx, si, wo, active)
 
     def eval_pdf(self, ctx, si, wo, active=True):
-        return self.coated.eval_pdf(ctx, si, wo, active, True, True)
+        return self.layered.eval_pdf(ctx, si, wo, active)
 
     def traverse(self, callback):
-        self.coated.traverse(callback)
+        self.layered.traverse(callback)
 
     def parameters_changed(self, keys):
-        self.guard.changed(self, self.coated.parameters_changed, keys)
+        self.guard.changed(self, self.layered.parameters_changed, keys)
 
     def to_string(self):
         return f"ThinFilmDiffuse[\n{self.coated.describe()}]"

@@ -220,7 +220,7 @@ class LoopFilms:
     def index(self, wl, j=0) -> Cx:
         """Film ``j``'s index at the wavelengths ``wl`` (one search per wavelength, one
         gather per film and wavelength), what its textures give up to float32 rounding:
-        e.g. ``thinfilm_diffuse``'s absorbing film ``N`` (``render/coated_diffuse.py``)."""
+        e.g. ``thinfilm_diffuse``'s absorbing film ``N`` (``render/layered/series.py``)."""
         mi = mitsuba_module()
         if self.constant:
             return Cx(mi.UnpolarizedSpectrum(dr.gather(mi.Float, self.buffer, mi.UInt32(j))), 0.0)

@@ -15,7 +15,7 @@ of :mod:`thinfilm_mi.tabulate.integrated` (unit integral):
     G(k, r) = k / (1 - k r)   (interreflection),   G(k, r) = k   ("single").
 
 ``G`` is the model's: the tables take the coated-diffuse model object
-(:data:`thinfilm_mi.render.coated_diffuse.DIFFUSE_MODELS`), read through its ``g(k, r)``
+(:data:`thinfilm_mi.render.layered.models.DIFFUSE_MODELS`), read through its ``g(k, r)``
 (``G``), ``series(k, r)`` (``G/k``) and ``interreflection`` (whether ``G`` depends on
 ``r``), numpy arrays in, numpy arrays out.
 
@@ -244,7 +244,7 @@ class _Levels:
 
 class ColourDiffuse:
     """The integrated diffuse term and albedo estimate of one ``thinfilm_diffuse``
-    (``factors``: a :class:`~thinfilm_mi.render.diffuse.DiffuseFactors`; ``model``: the
+    (``factors``: a :class:`~thinfilm_mi.render.layered.factors.DiffuseFactors`; ``model``: the
     coated-diffuse model, whose ``G`` the table integrates).
 
     ``kd``: the base albedo per channel where it does not vary over the surface;
@@ -390,7 +390,7 @@ class ColourDiffuse:
         """``[(r_j, M_j)]``: the nodes ``r_j`` of ``R_dh`` (opaque ``mi.Float``) and the
         table's ``M_jc = ∫ ŵ_c t(θ_i) t(θ_o) ℓ_j(R_dh) dλ`` (``mi.Spectrum``) of a table
         built without a fixed albedo, for a base other than Lambert's
-        (:meth:`thinfilm_mi.render.coated_diffuse.DiffuseModel.rough_integrated`)."""
+        (:meth:`thinfilm_mi.render.layered.models.DiffuseModel.rough_integrated`)."""
         import mitsuba as mi
         assert not self.fixed, "node_values needs a table built without a fixed albedo"
         res = self._M.eval(mi.Point2f(self.coordinate(cos_o), self.coordinate(cos_i)), active)
@@ -456,7 +456,7 @@ class _ScaleSlices:
 class ScaledColourDiffuse(ColourDiffuse):
     """:class:`~thinfilm_mi.tabulate.diffuse.ColourDiffuse` over the thickness scale
     ``s`` in ``[s_min, s_max]`` (module docstring): ``factors`` (a
-    :class:`~thinfilm_mi.render.diffuse.DiffuseFactors` at scale 1, whose
+    :class:`~thinfilm_mi.render.layered.factors.DiffuseFactors` at scale 1, whose
     ``at_scale(s)`` and ``hemispherical_scales`` give the terms at ``s``), ``model``,
     ``channels`` and ``kd`` as there. ``plugin`` names the BSDF in errors. The lookups
     take the hit's ``scale`` (clamped to the range)."""

@@ -1,6 +1,6 @@
 """The coated-diffuse model's spectral factors in spectral variants as one table
 (:class:`FactorTable`; no plugin classes here): ``k_r(θ, λ)`` and ``t(θ, λ)`` of
-:class:`~thinfilm_mi.render.diffuse.DiffuseFactors` (the coating's reflectance, and the
+:class:`~thinfilm_mi.render.layered.factors.DiffuseFactors` (the coating's reflectance, and the
 power that reaches the base: ``k_t k_a``, or ``T n_0/n_b`` for model "exact"), with
 ``R_dh(λ)`` and ``T_hemi(λ)``, read by the kernel in place of the stack's recursion or
 its tables of ``R`` and ``T``: one bilinear read at ``θ_i`` serves ``k_r``, ``t`` and the

@@ -1,5 +1,5 @@
 """Hemispherical (cosine-weighted) terms of a coating over a diffuse base, for the
-coated-diffuse model (:mod:`thinfilm_mi.render.coated_diffuse`), at one or at many
+coated-diffuse model (:mod:`thinfilm_mi.render.layered.series`), at one or at many
 thickness scales.
 
 Per wavelength the coated diffuse base needs two angular integrals of the coating

@@ -1,5 +1,5 @@
-r"""The delta lobes of ``thinfilm_coating``'s base (no plugin classes here): the part of
-:mod:`thinfilm_mi.render.coating`'s model that a base with a delta reflection adds.
+r"""The delta-base chain (no plugin classes here): the part of
+:mod:`thinfilm_mi.render.layered.nested`'s estimator that a base with a delta reflection adds.
 
 **Bases with delta lobes** (a smooth ``conductor``, ``dielectric``, ``plastic``'s
 reflection, our ``thinfilm_diffuse``'s film): the paths are split by their *last non-delta
@@ -11,7 +11,7 @@ the coating's delta lobe (component 0)::
 (:meth:`DeltaBase.chain`; ``B_δ(w)``: the base's delta reflectance for light leaving it
 along ``w``, the weight of a sample of the base with only ``DeltaReflection`` enabled;
 polarized: the Mueller chain ``leave · B_δ · (I - U B_δ)^-1 · enter``, each factor in the
-frames :meth:`~thinfilm_mi.render.coating.Coating.crossing` uses). It carries no
+frames :meth:`~thinfilm_mi.render.layered.top.SmoothTop.crossing` uses). It carries no
 ``(η_e/η_c)²``: entering, radiance gains ``(η_c/η_e)²``, leaving it loses it again, and the
 Dirac delta of the inner directions maps to that of the outer ones with the Jacobian
 ``dω'/dω`` that produced the factor for the non-delta part. Every other path ends at a
@@ -28,17 +28,18 @@ function of the directions (every Mitsuba BSDF with a delta reflection and ours,
 mixtures), and where a base picks its delta lobe at random (a ``blendbsdf`` of a delta and
 another BSDF) only the last level's closed form is biased, by ``E[M]² (E[(1 - M)^-1] - (1
 - E[M])^-1) >= 0`` (Jensen): < 1e-4 relative for a conductor blended 50/50 with black under
-a bare 1.5 coat (``tests/render/test_coating.py``), where one closed form of one sample was
+a bare 1.5 coat (``tests/render/layered/test_delta.py``), where one closed form of one sample was
 1-3 % off. Light a base transmits (a ``dielectric``'s refraction) is lost, as any base's.
 """
 from __future__ import annotations
 
 import drjit as dr
 
+from thinfilm_mi.render.layered.bottom import base_context, base_interaction, intensity
 from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.render.variant import spectral_mean
 
-__all__ = ["TAIL_LEVELS", "DeltaBase", "base_context", "base_interaction", "intensity"]
+__all__ = ["TAIL_LEVELS", "DeltaBase"]
 
 #: Levels of the delta round trips' series drawn before its closed form
 #: (:meth:`DeltaBase.round_trips`): the bias of a base that picks its delta lobe at random
@@ -46,34 +47,13 @@ __all__ = ["TAIL_LEVELS", "DeltaBase", "base_context", "base_interaction", "inte
 TAIL_LEVELS = 2
 
 
-def base_context(mode, lobes):
-    """A ``BSDFContext`` for the base enabling only ``lobes`` (``BSDFFlags``: the delta
-    reflection, or the non-delta lobes ``BSDFFlags.Smooth``), all its components."""
-    mi = mitsuba_module()
-    return mi.BSDFContext(mode, int(lobes), 0xFFFFFFFF)
-
-
-def base_interaction(si, w):
-    """A copy of ``si`` whose ``wi`` is the base's direction ``w``."""
-    mi = mitsuba_module()
-    si_b = mi.SurfaceInteraction3f(si)
-    si_b.wi = w
-    return si_b
-
-
-def intensity(x, polarized: bool):
-    """The unpolarised part of a value: ``M00`` of a Mueller matrix, else the spectrum."""
-    mi = mitsuba_module()
-    return mi.UnpolarizedSpectrum(x[0][0] if polarized else x)
-
-
 class DeltaBase:
-    """The delta reflection of ``coating.base`` (a
-    :class:`~thinfilm_mi.render.coating.Coating`, whose underside, crossings and
-    absorption it composes)."""
+    """The delta reflection of ``layer.base`` (a
+    :class:`~thinfilm_mi.render.layered.nested.NestedEstimator`, whose top's crossings,
+    underside and coat absorption it composes)."""
 
-    def __init__(self, coating):
-        self.coating = coating
+    def __init__(self, layer):
+        self.layer = layer
 
     def reflectance(self, ctx_mode, si, w, numbers, active):
         """``B_δ(w)``: the base's delta reflection for light leaving it along ``w`` (its
@@ -82,7 +62,7 @@ class DeltaBase:
         where it samples none."""
         mi = mitsuba_module()
         s1, s2 = numbers
-        bs, g = self.coating.base.sample(base_context(ctx_mode, mi.BSDFFlags.DeltaReflection),
+        bs, g = self.layer.base.sample(base_context(ctx_mode, mi.BSDFFlags.DeltaReflection),
                                          base_interaction(si, w), s1, s2, active)
         ok = active & mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection) \
             & (bs.wo.z > 0) & (bs.pdf > 0)
@@ -94,7 +74,7 @@ class DeltaBase:
         most 1."""
         mi = mitsuba_module()
         b = self.reflectance(ctx_mode, si, w, (mi.Float(0.5), mi.Point2f(0.5, 0.5)), active)
-        return dr.minimum(spectral_mean(intensity(b, self.coating.mode.polarized)), 1.0)
+        return dr.minimum(spectral_mean(intensity(b, self.layer.mode.polarized)), 1.0)
 
     def round_trips(self, ctx_mode, si, w, rng, active):
         """``D(w)``: the delta round trips before a base vertex that light reaches along
@@ -109,10 +89,10 @@ class DeltaBase:
         polarized variants; 0 where the closed form diverges (``M`` >= 1: a lossless
         closed cavity, which no light enters)."""
         mi = mitsuba_module()
-        u = self.coating.underside(si, w, active)
+        u = self.layer.underside(si, w, active)
         m = [u * self.reflectance(ctx_mode, si, w, self.numbers(rng), active)
              for _ in range(TAIL_LEVELS + 1)]
-        if self.coating.mode.polarized:
+        if self.layer.mode.polarized:
             one = dr.identity(mi.Spectrum)
             d = dr.select(dr.all(m[-1][0][0] < 1), dr.rcp(one - m[-1]), dr.zeros(mi.Spectrum))
         else:
@@ -143,17 +123,17 @@ class DeltaBase:
         ``top_i``: the stack's response at ``θ_i``). Light tracing gets its intensity,
         depolarized, as the coating's transmitted part."""
         mi = mitsuba_module()
-        c = self.coating
+        c = self.layer
         wo = mi.reflect(si.wi)
         wo_in = mi.Vector3f(-wi_in.x, -wi_in.y, wi_in.z)
         b = self.reflectance(ctx_mode, si, wi_in, self.numbers(rng), active)
         d = self.round_trips(ctx_mode, si, wi_in, rng, active)
-        leave = c.crossing(top_i.T, top_i.transmission, wi_in, si.wi)
-        enter = c.crossing(top_i.T, top_i.transmission, -wo, -wo_in)
+        leave = c.top.crossing(top_i.T, top_i.transmission, wi_in, si.wi)
+        enter = c.top.crossing(top_i.T, top_i.transmission, -wo, -wo_in)
         value = leave * b * d * enter
         if c.mode.polarized and ctx_mode != mi.TransportMode.Radiance:
             value = mi.depolarizer(mi.UnpolarizedSpectrum(value[0][0]))
-        a = c.attenuation(si, wi_in.z, active)
+        a = c.medium.attenuation(si, wi_in.z, active)
         if a is not None:
             value = value * a * a
         return dr.select(active, value, dr.zeros(mi.Spectrum))

@@ -1,31 +1,22 @@
-"""The coated-diffuse model: a diffuse base under a stack of thin films (no plugin classes
-here; the model's physics are written in ``thinfilm_diffuse``'s doc block).
+"""The estimator over a diffuse bottom (no plugin classes here): ``thinfilm_diffuse``'s
+model, a :class:`~thinfilm_mi.render.layered.top.SmoothTop` (the films, and for the paper's
+models an absorbing innermost film ``N`` under it) over a
+:class:`~thinfilm_mi.render.layered.bottom.DiffuseBottom`, its sum over paths in the
+closed form of a :class:`~thinfilm_mi.render.layered.models.DiffuseModel` (the physics are
+written in ``thinfilm_diffuse``'s doc block).
 
-Composed as pbrt-v4 composes ``CoatedDiffuseBxDF`` from an interface and a diffuse base:
-a :class:`CoatedDiffuse` holds the stack (a :class:`~thinfilm_mi.render.kernel.KernelStack`,
-and for the paper's models an absorbing innermost film ``N``), the base (its albedo
-texture and its :class:`~thinfilm_mi.render.orennayar.OrenNayar` roughness) and the
-model (:data:`DIFFUSE_MODELS`), and gives the BSDF's samples, values and pdfs, its
-load-time terms (``R_dh``, ``T_hemi``, the RGB/mono tables, ``R_dh``'s derivatives), its
-parameters and their edits. The ``thinfilm_diffuse`` plugin reads its properties into
-one and delegates to it; another plugin may hold one the same way.
-
-:data:`DIFFUSE_MODELS` is the ``model`` option: one object per value, each model's code
-in its class (:class:`DiffuseModel`): how it splits the films into a coating and film
-``N``, its spectral factors (hence its hemispherical terms and colour tables), the
-series ``G(k_d, R_dh)`` of its diffuse term per wavelength, in the colour tables and over
-a rough base, whether ``R_dh`` carries derivatives. :func:`diffuse_model` finds one.
+As pbrt-v4's ``CoatedDiffuseBxDF`` is its ``LayeredBxDF`` over a diffuse bottom, a
+:class:`SeriesEstimator` gives the BSDF's samples, values and pdfs, its load-time terms
+(``R_dh``, ``T_hemi``, the RGB/mono tables, ``R_dh``'s derivatives), film ``N``'s
+parameters and their edits; :func:`series_estimator` builds one from the films.
 """
 from __future__ import annotations
-
-from abc import ABC, abstractmethod
 
 import drjit as dr
 import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
-from thinfilm_mi.optics.choices import choose
 from thinfilm_mi.optics.core import Cx, film_attenuation
 from thinfilm_mi.render.colour_variants import (
     GradientSampler,
@@ -34,154 +25,43 @@ from thinfilm_mi.render.colour_variants import (
     index_on_wavelengths,
     prepare_gradients,
 )
-from thinfilm_mi.render.diffuse import (
-    DiffuseFactors,
-    ExactFactors,
+from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.layered.factors import (
     IndexGradients,
     SpectralTerms,
-    absorbs,
     colour_diffuse,
     constant_albedo,
     factor_table,
     texture_gradients_refused,
     with_derivatives,
 )
-from thinfilm_mi.render.kernel import KernelStack
-from thinfilm_mi.render.textures import mitsuba_module, scalar
+from thinfilm_mi.render.layered.top import SmoothTop
+from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.render.variant import spectral_mean
-from thinfilm_mi.tabulate.base import opaque_float
 from thinfilm_mi.tabulate.hemispherical import DerivativeTable
 from thinfilm_mi.tabulate.policy import COATING_RT_MIN_FILMS
 
-__all__ = ["DiffuseModel", "Exact", "Single", "Multiple", "DIFFUSE_MODELS", "diffuse_model",
-           "CoatedDiffuse"]
+__all__ = ["SeriesEstimator", "series_estimator"]
 
 
-class DiffuseModel(ABC):
-    """One value of the ``model`` option of the coated-diffuse model.
-
-    The interface the colour tables (:mod:`thinfilm_mi.tabulate.diffuse`) read is
-    :meth:`g`, :meth:`series` and :attr:`interreflection`; :class:`CoatedDiffuse` reads the
-    rest. This base class is the model with interreflection: ``G(k, r) = k / (1 - k r)``."""
-    #: the value of ``model`` that names it
-    name = ""
-    #: whether the diffuse term sums the light that the coating sends back onto the base
-    #: (``G`` depends on ``R_dh``, whose derivatives the kernel then needs)
-    interreflection = True
-    #: whether ``base_ior`` is a parameter of the model
-    takes_base_ior = False
-
-    @abstractmethod
-    def split(self, films, ext, base):
-        """``(coating films, exit medium, film N, its thickness)`` of ``films``
-        (``[(SpectralIndex, thickness)]``) between the ambient ``ext`` and the base medium
-        ``base``; film ``N`` and its thickness (an opaque float) ``None`` where there is none."""
-
-    def factors(self, coating, film_n, film_n_thickness):
-        """The spectral factors (:class:`~thinfilm_mi.render.diffuse.DiffuseFactors`) of
-        ``coating`` over film ``N``."""
-        return DiffuseFactors(coating, film_n, None if film_n is None else scalar(film_n_thickness))
-
-    def base_ratio(self, ext, base) -> bool:
-        """Whether ``t`` carries the radiance factor ``n_0/n_b`` of a base medium unlike the
-        ambient."""
-        return False
-
-    def g(self, kd, r):
-        """``G(k_d, r)``: the diffuse term per wavelength divided by ``t_i t_o`` (numpy or
-        Dr.Jit)."""
-        return kd / (1.0 - kd * r)
-
-    def series(self, kd, r):
-        """``G(k_d, r) / k_d`` (numpy)."""
-        return 1.0 / (1.0 - kd * r)
-
-    def kernel_series(self, kd, r_dh):
-        """``G(k_d, R_dh) / k_d`` in the kernel (``r_dh()``: ``R_dh`` at the hit, not called
-        by a model without interreflection)."""
-        return dr.rcp(1.0 - kd * r_dh())
-
-    def rough_series(self, terms, r_dh):
-        """``π f / (t_i t_o)`` over a rough base of :class:`~thinfilm_mi.render.orennayar.BaseTerms`
-        ``terms``: ``π f_b + E_i E_o R_dh / (1 - Ē R_dh)`` (``r_dh()`` as in :meth:`kernel_series`)."""
-        r = r_dh()
-        return terms.pi_f + terms.e_i * terms.e_o * r * dr.rcp(1.0 - terms.e_avg * r)
-
-    def rough_integrated(self, node_values, terms):
-        """``π f`` per colour channel over a rough base from the integrated diffuse table's
-        terms ``node_values = [(r_j, M_j)]`` (built without a fixed albedo,
-        :meth:`thinfilm_mi.tabulate.diffuse.ColourDiffuse.node_values`; the Lagrange basis
-        sums to 1): ``π f_b Σ M_j + E_i E_o Σ r_j/(1 - Ē r_j) M_j``, the integral of
-        :meth:`rough_series` against colour matching."""
-        mi = mitsuba_module()
-        single = mi.Spectrum(0.0)
-        rest = mi.Spectrum(0.0)
-        for r, m in node_values:
-            single += m
-            rest += r * dr.rcp(1.0 - terms.e_avg * r) * m
-        return terms.pi_f * single + terms.e_i * terms.e_o * rest
-
-
-class Exact(DiffuseModel):
-    """``"exact"``: every film, coherent, over a base medium of index ``base_ior``."""
-    name = "exact"
-    takes_base_ior = True
-
-    def split(self, films, ext, base):
-        return films, base, None, None
-
-    def factors(self, coating, film_n, film_n_thickness):
-        return ExactFactors(coating)
-
-    def base_ratio(self, ext, base) -> bool:
-        return base is not ext
-
-
-class Multiple(DiffuseModel):
-    """``"multiple"``: the paper's split (films ``1..N-1`` over an absorbing film ``N``,
-    which only attenuates) and the interreflection series."""
-    name = "multiple"
-
-    def split(self, films, ext, base):
-        if films and absorbs(films[-1][0]):
-            return films[:-1], films[-1][0], films[-1][0], opaque_float(films[-1][1])
-        # no absorbing film N: all films over the base medium (matched to the ambient)
-        return films, ext, None, None
-
-
-class Single(Multiple):
-    """``"single"``: the paper's first-order model as published, ``G = k_d``."""
-    name = "single"
-    interreflection = False
-
-    def g(self, kd, r):
-        return kd
-
-    def series(self, kd, r):
-        return 1.0
-
-    def kernel_series(self, kd, r_dh):
-        return mitsuba_module().UnpolarizedSpectrum(1.0)
-
-    def rough_series(self, terms, r_dh):
-        return terms.pi_f
-
-    def rough_integrated(self, node_values, terms):
-        single = mitsuba_module().Spectrum(0.0)
-        for _, m in node_values:
-            single += m
-        return terms.pi_f * single
-
-
-#: The coated-diffuse models by their ``model`` value; the first is the default.
-DIFFUSE_MODELS = {m.name: m for m in (Exact(), Single(), Multiple())}
-
-
-def diffuse_model(value, plugin: str) -> DiffuseModel:
-    """The :data:`DIFFUSE_MODELS` entry named ``value`` (:func:`~thinfilm_mi.optics.choices.choose`:
-    case-insensitive); a ``ThinFilmError`` naming ``plugin``'s ``model``, the value and
-    the choices otherwise."""
-    return choose(DIFFUSE_MODELS, value, f"{plugin}: 'model'")
+def series_estimator(model, films, ext, base, bottom, options: dict, mode,
+                     plugin: str) -> "SeriesEstimator":
+    """The :class:`SeriesEstimator` of ``model`` (a
+    :class:`~thinfilm_mi.render.layered.models.DiffuseModel`) for ``films``
+    (``[(SpectralIndex, thickness nm)]``, outside in) between the ambient ``ext`` and the
+    base medium ``base`` (``SpectralIndex``) over ``bottom`` (a
+    :class:`~thinfilm_mi.render.layered.bottom.DiffuseBottom`); ``options``: the stack's
+    options (:func:`~thinfilm_mi.render.props.stack_options_from_props`); ``mode``: the
+    variant's :mod:`~thinfilm_mi.render.modes` mode; ``plugin`` names the BSDF in errors."""
+    coating, exit_medium, film_n, film_n_thickness = model.split(films, ext, base)
+    # RGB/mono: only k_r from the colour table; t enters through the diffuse table
+    stack = KernelStack(coating, ext, exit_medium, sides={False: not mode.integrated},
+                        rt_min_films=COATING_RT_MIN_FILMS, **options)
+    base_ratio = model.base_ratio(ext, base)
+    bare = not films and (not base_ratio or np.array_equal(
+        base.spectral_values(GRID, real=True), ext.spectral_values(GRID, real=True)))
+    return SeriesEstimator(model, SmoothTop(stack, mode), bottom, (film_n, film_n_thickness),
+                           base_ratio, bare, options["thickness_texture"], mode, plugin)
 
 
 class _FilmParameters:
@@ -202,45 +82,40 @@ class _FilmParameters:
             self.values.append(value)
 
 
-class CoatedDiffuse:
-    """A diffuse base under ``films`` (``[(SpectralIndex, thickness nm)]``, outside in)
-    between the ambient ``ext`` and the base medium ``base`` (``SpectralIndex``), with the
-    :class:`DiffuseModel` ``model``; ``reflectance``: the base's albedo (a texture);
-    ``rough``: its :class:`~thinfilm_mi.render.orennayar.OrenNayar` roughness; ``options``:
-    the stack's options (:func:`~thinfilm_mi.render.props.stack_options_from_props`);
-    ``mode``: the variant's :mod:`~thinfilm_mi.render.modes` mode; ``plugin`` names the
-    BSDF in errors.
+class SeriesEstimator:
+    """The closed form of ``model`` (a :class:`~thinfilm_mi.render.layered.models.DiffuseModel`)
+    for ``top`` (a :class:`~thinfilm_mi.render.layered.top.SmoothTop`) over film ``N``
+    (``film_n``: ``(SpectralIndex, thickness)``, or ``(None, None)``) and ``bottom`` (a
+    :class:`~thinfilm_mi.render.layered.bottom.DiffuseBottom`); ``base_ratio``: whether
+    ``t`` carries ``n_0/n_b``; ``bare``: no films and no interface; ``texture``: the
+    ``thickness`` texture or ``None``. Built by :func:`series_estimator`.
 
-    Component 0 is the coating's delta reflection, component 1 the diffuse lobe.
-    :attr:`bare`: no films and no interface (the base medium is the ambient): exactly
-    Mitsuba's ``diffuse`` (or the rough base alone), with no stack work."""
+    Component 0 is the top's delta reflection, component 1 the diffuse lobe. :attr:`bare`:
+    no films and no interface (the base medium is the ambient): exactly Mitsuba's
+    ``diffuse`` (or the rough base alone), with no stack work."""
 
-    def __init__(self, model: DiffuseModel, films, ext, base, reflectance, rough, options: dict,
+    def __init__(self, model, top, bottom, film_n, base_ratio: bool, bare: bool, texture,
                  mode, plugin: str):
         self.model, self.mode, self.plugin = model, mode, plugin
-        self.reflectance = reflectance
-        #: the base's roughness (:class:`~thinfilm_mi.render.orennayar.OrenNayar`)
-        self.base = rough
-        self.texture = options["thickness_texture"]
-        coating, exit_medium, self.film_n, self.film_n_thickness = model.split(films, ext, base)
-        # RGB/mono: only k_r from the colour table; t enters through the diffuse table
-        self.coating = KernelStack(coating, ext, exit_medium, sides={False: not mode.integrated},
-                                   rt_min_films=COATING_RT_MIN_FILMS, **options)
+        self.top, self.bottom = top, bottom
+        self.texture = texture
+        self.film_n, self.film_n_thickness = film_n
         #: t carries n_0/n_b (a base medium unlike the ambient)
-        self.base_ratio = model.base_ratio(ext, base)
+        self.base_ratio = base_ratio
         #: no films and no interface (a base medium of the ambient's index): Mitsuba's diffuse
-        self.bare = not films and (not self.base_ratio or np.array_equal(
-            base.spectral_values(GRID, real=True), ext.spectral_values(GRID, real=True)))
+        self.bare = bare
         #: spectral variants: R_dh and T_hemi (SpectralTerms)
         self.terms = None
         #: RGB/mono variants: the diffuse term integrated as a product (ColourDiffuse)
         self.colour = None
         #: R_dh's derivative table, while a film parameter carries gradients
         self.r_dh_grad = None
-        #: spectral JIT variants: the model's table (``diffuse.factor_table``) or None
+        #: spectral JIT variants: the model's table (``factors.factor_table``) or None
         self.table = None
         self.index_gradients = IndexGradients()   #: whether an index carries gradients
         self.update()
+
+    coating = property(lambda self: self.top.stack, doc="The top's ``KernelStack``.")
 
     # -- load-time terms -------------------------------------------------------
     def factors(self):
@@ -260,7 +135,7 @@ class CoatedDiffuse:
         if self.mode.integrated:
             if factors is not None:
                 self.colour = colour_diffuse(factors, self.texture, self.model, colour_channels(),
-                                             constant_albedo(self.reflectance, self.base.rough),
+                                             constant_albedo(self.bottom.reflectance, self.bottom.rough),
                                              self.plugin)
                 if self.film_n is not None and dr.is_diff_v(mitsuba_module().Float):
                     prepare_gradients([self.film_n])
@@ -296,6 +171,7 @@ class CoatedDiffuse:
         if not dr.is_diff_v(mi.Float):
             return False
         found = _FilmParameters()
+        self.top.traverse(found)
         self.traverse(found)
         return any(dr.is_diff_v(v) and dr.grad_enabled(v) for v in found.values)
 
@@ -346,10 +222,10 @@ class CoatedDiffuse:
         if table is not None:
             k_r, t, _, _ = table[0].lookup(cos_theta, table[1], active,
                                            reflectance or not transmission)
-            shape = self.mode.response(self.coating, si, cos_theta, active).reflection \
+            shape = self.top.response(si, cos_theta, active).reflection \
                 if lobe and self.mode.polarized else None   # (k_r: the table's, as eval_pdf's)
             return k_r, t if transmission else None, shape
-        resp = self.mode.response(self.coating, si, cos_theta, active, transmission=transmission)
+        resp = self.top.response(si, cos_theta, active, transmission=transmission)
         k_r = mi.UnpolarizedSpectrum(resp.R)
         if not transmission:
             return k_r, None, resp.reflection
@@ -364,7 +240,7 @@ class CoatedDiffuse:
         return self.terms.lookup(si, self.coating, active)
 
     def r_dh_with_derivatives(self, r_dh, si, wavelengths, index_at, active):
-        """``R_dh`` carrying its derivatives (:func:`~thinfilm_mi.render.diffuse.with_derivatives`;
+        """``R_dh`` carrying its derivatives (:func:`~thinfilm_mi.render.layered.factors.with_derivatives`;
         as is without interreflection or stack)."""
         if not self.model.interreflection or self.bare:
             return r_dh
@@ -427,7 +303,7 @@ class CoatedDiffuse:
         ``t_i t_o`` times the model's :meth:`DiffuseModel.rough_series`), or its integral
         over wavelengths in RGB/mono variants."""
         cos_o = mitsuba_module().Frame3f.cos_theta(wo)
-        base = self.base.terms(si, kd, wo, active) if self.base.rough else None
+        base = self.bottom.terms(si, kd, wo, active) if self.bottom.rough else None
         if self.colour is not None:
             scale = self.colour_scale(si, active)
             if base is None:
@@ -445,11 +321,6 @@ class CoatedDiffuse:
             return t_i * t_o * self.model.rough_series(base, lambda: self.r_dh(si, active))
         return kd * t_i * t_o * series
 
-    def bare_value(self, si, wo, active):
-        """``π f`` without films: ``k_d`` (exactly Mitsuba's ``diffuse``) or the rough base's."""
-        kd = self.reflectance.eval(si, active)
-        return self.base.terms(si, kd, wo, active).pi_f if self.base.rough else kd
-
     def prob_specular(self, si, k_r, t_i, kd, series, active, cos_i):
         """The probability of choosing the delta component: the spectral mean of ``k_r``
         against that of the diffuse albedo estimate ``t_i k_d T_hemi S`` (the colour
@@ -463,12 +334,11 @@ class CoatedDiffuse:
         return dr.select(total > 0, spec / dr.select(total > 0, total, 1.0), 0.0)
 
     # -- the BSDF --------------------------------------------------------------
-    def sample(self, ctx, si, sample1, sample2, active=True):
-        """``(BSDFSample3f, weight)`` as Mitsuba's ``BSDF.sample``."""
+    def sample(self, ctx, si, sample1, sample2, active, has_spec: bool, has_diff: bool):
+        """``(BSDFSample3f, weight)`` as Mitsuba's ``BSDF.sample``, with the components
+        ``has_spec`` (0) and ``has_diff`` (1) enabled."""
         mi = mitsuba_module()
-        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
-        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
-        self.base.check_lambertian()
+        self.bottom.check()
         bs = dr.zeros(mi.BSDFSample3f)
         cos_i = mi.Frame3f.cos_theta(si.wi)
         active = mi.Bool(active) & (cos_i > 0)
@@ -481,7 +351,7 @@ class CoatedDiffuse:
             bs.eta = 1.0
             bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
             bs.sampled_component = mi.UInt32(1)
-            value = self.mode.value(self.bare_value(si, bs.wo, active), self.mode.depolarized,
+            value = self.mode.value(self.bottom.bare_value(si, bs.wo, active), self.mode.depolarized,
                                     ctx, si.wi, bs.wo)
             return bs, dr.select(active & (bs.pdf > 0), value, 0.0)
 
@@ -490,7 +360,7 @@ class CoatedDiffuse:
                                               lobe=True)
         kd = series = None
         if has_diff:
-            kd = self.reflectance.eval(si, active)
+            kd = self.bottom.reflectance.eval(si, active)
             series = self.series(si, kd, active) if spectral else None
         if has_spec and has_diff:
             # detached: a sampling decision divides the weight as a constant
@@ -523,21 +393,21 @@ class CoatedDiffuse:
         return bs, dr.select(active & (bs.pdf > 0),
                              self.mode.value(weight, lobe, ctx, si.wi, bs.wo), 0.0)
 
-    def eval_pdf(self, ctx, si, wo, active, want_value: bool = True, want_pdf: bool = True):
-        """``(value, pdf)`` as Mitsuba's ``BSDF.eval_pdf`` (the parts not wanted are 0)."""
+    def eval_pdf(self, ctx, si, wo, active, has_spec: bool, has_diff: bool,
+                 want_value: bool = True, want_pdf: bool = True):
+        """``(value, pdf)`` as Mitsuba's ``BSDF.eval_pdf`` (the parts not wanted are 0), with
+        the components ``has_spec`` and ``has_diff`` enabled."""
         mi = mitsuba_module()
-        has_spec = ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0)
-        has_diff = ctx.is_enabled(mi.BSDFFlags.DiffuseReflection, 1)
         if not has_diff:
             return mi.Spectrum(0.0), mi.Float(0.0)
-        self.base.check_lambertian()
+        self.bottom.check()
         cos_i = mi.Frame3f.cos_theta(si.wi)
         cos_o = mi.Frame3f.cos_theta(wo)
         active = mi.Bool(active) & (cos_i > 0) & (cos_o > 0)
         pdf = mi.warp.square_to_cosine_hemisphere_pdf(wo) if want_pdf else mi.Float(0.0)
 
         if self.bare:  # exactly Mitsuba's diffuse
-            value = (self.bare_value(si, wo, active) * dr.inv_pi * cos_o) if want_value \
+            value = (self.bottom.bare_value(si, wo, active) * dr.inv_pi * cos_o) if want_value \
                 else mi.UnpolarizedSpectrum(0.0)
             value = self.mode.value(value, self.mode.depolarized, ctx, si.wi, wo)
             return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)
@@ -546,7 +416,7 @@ class CoatedDiffuse:
         value = mi.Spectrum(0.0)
         if want_value or need_prob:
             spectral = self.colour is None
-            kd = self.reflectance.eval(si, active)
+            kd = self.bottom.reflectance.eval(si, active)
             series = self.series(si, kd, active) if spectral else None
             k_r, t_i, _ = self.factors_at(si, cos_i, active, transmission=spectral)
         if want_value:
@@ -559,25 +429,22 @@ class CoatedDiffuse:
 
     # -- parameters ------------------------------------------------------------
     def traverse(self, callback) -> None:
-        """Expose the films (``layers.N.*``), ``thickness``, ``reflectance`` and ``roughness``."""
+        """Expose film ``N`` (``layers.N.*``; the top and the bottom expose their own)."""
         mi = mitsuba_module()
-        self.coating.traverse(callback)
         if self.film_n is not None:
             i = len(self.coating)
             callback.put(f"layers.{i}.thickness", self.film_n_thickness, mi.ParamFlags.Differentiable)
             self.film_n.traverse(callback, f"layers.{i}.")
-        callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
-        self.base.traverse(callback)
 
     def parameters_changed(self, changed) -> None:
-        """Refresh after an edit of the keys ``changed`` (``None``: any)."""
-        self.coating.parameters_changed()
+        """Refresh after an edit of the keys ``changed`` (``None``: any; the top refreshed
+        first)."""
         if self.film_n is not None:
             self.film_n.parameters_changed(self.plugin, f"layers.{len(self.coating)}.")
         if self.film_n_thickness is not None and dr.is_jit_v(self.film_n_thickness):
             dr.make_opaque(self.film_n_thickness)
         colour_albedo = self.colour is not None and self.colour.fixed
-        if self.base.refresh() or changed is None or any(
+        if self.bottom.refresh() or changed is None or any(
                 k.startswith(("layers.", "thickness")) or (colour_albedo and k.startswith("reflectance"))
                 for k in changed):
             self.update()
@@ -596,5 +463,5 @@ class CoatedDiffuse:
             d = self.film_n_thickness
             d = float(dr.ravel(d)[0]) if dr.is_array_v(d) else d
             layers = f"{layers} over absorbing film {self.film_n.label} {d:g} nm"
-        return (f"  model = {self.model.name},\n{self.base.describe()}  layers = {layers},\n"
+        return (f"  model = {self.model.name},\n{self.bottom.describe()}  layers = {layers},\n"
                 f"  ext_ior = {self.coating.ambient.label}\n")

@@ -1,8 +1,9 @@
-r"""Closed forms of ``thinfilm_coating``'s base part, where the base allows one (no plugin
-classes here): the registry :data:`CLOSED_FORMS`, keyed by the nested BSDF's class, each
-form's code in its class; :func:`closed_form` picks one for a
-:class:`~thinfilm_mi.render.coating.Coating`, which then sums its base part by that form
-instead of the random walk (:meth:`~thinfilm_mi.render.coating.Coating.transmitted`).
+r"""Closed forms of the sum over paths under a smooth top, where the nested base allows one
+(no plugin classes here): the registry :data:`CLOSED_FORMS`, keyed by the nested BSDF's
+class, each form's code in its class; :func:`closed_form` picks one for a
+:class:`~thinfilm_mi.render.layered.nested.NestedEstimator`, which then sums its base part
+by that form instead of the random walk
+(:func:`~thinfilm_mi.render.layered.nested.sum_estimator`).
 
 **Lambertian** (:class:`Lambertian`, Mitsuba's ``diffuse``): every base vertex sends
 ``ρ/π`` towards every direction and, sampled by its cosine, returns ``ρ R_in`` on average,
@@ -12,8 +13,8 @@ so the walk's sum (at most ``N = max_bounces`` vertices) has the expectation::
 
 with ``R_dh = ∫ R_in(μ) 2μ dμ`` the underside's cosine-weighted hemispherical
 reflectance: the series of ``thinfilm_diffuse``'s model ``"exact"`` (its
-:class:`~thinfilm_mi.render.diffuse.ExactFactors` and
-:class:`~thinfilm_mi.render.diffuse.SpectralTerms`, over the coating's own stack: exact,
+:class:`~thinfilm_mi.render.layered.models.Exact`'s factors and
+:class:`~thinfilm_mi.render.layered.factors.SpectralTerms`, over the coating's own stack: exact,
 or tabulated over a ``thickness`` texture's scale; recomputed on edits). ``ρ`` is read from
 the base itself, its ``eval`` at ``wi = wo = z`` times π (the reflectance texture at the
 hit, for any Lambertian). No walk noise, and no walk. It applies without a coat medium's
@@ -28,50 +29,54 @@ from __future__ import annotations
 
 import drjit as dr
 
-from thinfilm_mi.render.coating_delta import base_interaction, intensity
-from thinfilm_mi.render.diffuse import ExactFactors, SpectralTerms
+from thinfilm_mi.render.layered.bottom import base_interaction, intensity
+from thinfilm_mi.render.layered.factors import SpectralTerms
+from thinfilm_mi.render.layered.models import Exact
 from thinfilm_mi.render.textures import mitsuba_module
 
 __all__ = ["Lambertian", "CLOSED_FORMS", "closed_form"]
 
 
 class Lambertian:
-    """The closed form over a Lambertian base (module docstring) for ``coating``."""
+    """The closed form over a Lambertian base (module docstring) for ``layer`` (a
+    :class:`~thinfilm_mi.render.layered.nested.NestedEstimator`)."""
 
-    def __init__(self, coating):
-        self.coating = coating
+    def __init__(self, layer):
+        self.layer = layer
         self.terms = None
         self.refresh()
 
     @staticmethod
-    def applies(coating) -> bool:
+    def applies(layer) -> bool:
         """No coat absorption, a spectral variant."""
-        return coating.sigma_a is None and not coating.mode.integrated
+        return layer.medium.sigma_a is None and not layer.mode.integrated
 
     def refresh(self) -> None:
         """``R_dh`` at the current films (load and edits; updated in place: no recompile)."""
-        c = self.coating
-        self.terms = SpectralTerms(ExactFactors(c.stack), c.stack.thickness_texture, c.plugin,
+        c = self.layer
+        # thinfilm_diffuse's model "exact": the whole stack over the coat medium
+        factors = Exact().factors(c.stack, None, None)
+        self.terms = SpectralTerms(factors, c.stack.thickness_texture, c.plugin,
                                    self.terms)
 
     def albedo(self, ctx_mode, si, active):
         """``ρ`` at the hit: the base's ``eval`` at ``wi = wo = z`` times π."""
         mi = mitsuba_module()
         z = mi.Vector3f(0.0, 0.0, 1.0)
-        value = self.coating.base.eval(mi.BSDFContext(ctx_mode), base_interaction(si, z), z,
+        value = self.layer.base.eval(mi.BSDFContext(ctx_mode), base_interaction(si, z), z,
                                        active)
-        return intensity(value, self.coating.mode.polarized) * dr.pi
+        return intensity(value, self.layer.mode.polarized) * dr.pi
 
-    def sum(self, ctx_mode, si, wo_in, seed, active):
+    def sum(self, ctx_mode, si, wi_in, wo_in, seed, active):
         """The walk's expectation ``ρ/π cos θ_o' (1 - (ρ R_dh)^N) / (1 - ρ R_dh)`` (the
-        variant's value); ``seed``: the walk's, for ``R_dh``'s gradient."""
+        variant's value; any ``wi_in``); ``seed``: the walk's, for ``R_dh``'s gradient."""
         mi = mitsuba_module()
-        c = self.coating
+        c = self.layer
         rho = self.albedo(ctx_mode, si, active)
         r_dh = dr.detach(mi.UnpolarizedSpectrum(self.terms.lookup(si, c.stack, active)[0]))
         if c.tracks_gradients(si, active):
             mu = dr.sqrt(mi.sample_tea_float32(seed[0], seed[1], 4))
-            r_in = c.top(si, mu, active, inside=True, transmission=False).R
+            r_in = c.top.unpolarized(si, mu, active, inside=True, transmission=False).R
             r_dh = r_dh + (r_in - dr.detach(r_in))
         x = rho * r_dh
         # 1e-6: below it the series' N terms are all ~1 (x^N = 1 - N(1 - x))
@@ -87,8 +92,8 @@ class Lambertian:
 CLOSED_FORMS = {"SmoothDiffuse": Lambertian}
 
 
-def closed_form(coating):
-    """The closed form of ``coating``'s base (an instance of a :data:`CLOSED_FORMS` class),
+def closed_form(layer):
+    """The closed form of ``layer``'s base (an instance of a :data:`CLOSED_FORMS` class),
     or ``None`` where its class has none or the form does not apply (the walk then)."""
-    form = CLOSED_FORMS.get(coating.base.class_name())
-    return form(coating) if form is not None and form.applies(coating) else None
+    form = CLOSED_FORMS.get(layer.base.class_name())
+    return form(layer) if form is not None and form.applies(layer) else None

@@ -1,5 +1,6 @@
-"""The spectral factors and load-time terms of the coated-diffuse model
-(:mod:`thinfilm_mi.render.coated_diffuse`; no plugin classes here).
+"""The spectral factors and load-time terms of the closed forms over a diffuse bottom
+(:mod:`thinfilm_mi.render.layered.models`, :mod:`thinfilm_mi.render.layered.series`,
+:mod:`thinfilm_mi.render.layered.forms`; no plugin classes here).
 
 * :class:`DiffuseFactors` — the factors of the paper's models as the colour tables
   (:mod:`thinfilm_mi.tabulate.diffuse`), the factor table and the load-time terms read
@@ -26,8 +27,8 @@
 * :func:`colour_diffuse`, :func:`constant_albedo` — the RGB/mono tables of the diffuse
   term; :func:`scale_bounds` — the largest value of a ``thickness`` texture, read at load;
   :func:`texture_gradients_refused` — why film gradients and a texture do not go together.
-* :func:`absorbs`, :func:`reflectance_from_props`, :func:`grid_spectrum` — the reading of
-  the films and the albedo, and spectra on the 1 nm grid; :func:`side_rt` — a kernel
+* :func:`absorbs`, :func:`grid_spectrum` — the reading of the films, and spectra on the
+  1 nm grid; :func:`side_rt` — a kernel
   stack's exact float64 ``R``, ``T`` as the colour tables see them.
 """
 from __future__ import annotations
@@ -42,10 +43,8 @@ from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.render.colour_variants import with_absorbing
 from thinfilm_mi.render.kernel import STORE_MIN_POINTS, TABLE_CACHE, KernelStack, side_data
 from thinfilm_mi.render.loop import LoopFilms
-from thinfilm_mi.render.params import ALBEDO_SLACK
 from thinfilm_mi.render.tabulation import table_key
 from thinfilm_mi.render.textures import (
-    checked_texture,
     mitsuba_module,
     regular,
     scalar,
@@ -71,7 +70,7 @@ from thinfilm_mi.tabulate.store import default_store
 __all__ = ["DiffuseFactors", "ExactFactors", "SpectralTerms",
            "IndexGradients", "with_derivatives", "factor_table", "factor_table_key", "colour_diffuse",
            "constant_albedo", "scale_bounds", "texture_gradients_refused", "absorbs",
-           "reflectance_from_props", "grid_spectrum", "side_rt"]
+           "grid_spectrum", "side_rt"]
 
 class DiffuseFactors:
     """The spectral factors of the paper's models for
@@ -418,22 +417,6 @@ def absorbs(index) -> bool:
     if mat.constant is not None:
         return mat.constant.imag > 0
     return bool(np.any(mat.index(GRID).imag > 0))
-
-
-def reflectance_from_props(props, plugin: str):
-    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
-    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
-    ``1 - k_d R_dh`` approach 0)."""
-    if "reflectance" not in props:
-        return uniform(0.5)
-    value = props.get("reflectance")
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        if not (0.0 <= value <= 1.0):
-            raise ThinFilmError(f"{plugin}: 'reflectance' must be in [0, 1] (an albedo), "
-                                f"got {value!r}")
-    return checked_texture(props, "reflectance", plugin, "a number, a spectrum or a texture",
-                           f"{plugin}: 'reflectance' (an albedo, energy conservation)", 0.0,
-                           1.0 + ALBEDO_SLACK)
 
 
 def grid_spectrum(tex, values):

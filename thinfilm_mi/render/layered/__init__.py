@@ -1,0 +1,20 @@
+"""The layered BSDF engine: a top interface over a bottom, the light between them summed by
+a registered estimator (pbrt-v4's ``LayeredBxDF``; no plugin classes here). The modules:
+
+* :mod:`~thinfilm_mi.render.layered.engine` — :class:`~thinfilm_mi.render.layered.engine.Layered`,
+  the engine (components, enabled lobes, parameters);
+* :mod:`~thinfilm_mi.render.layered.top` — the top interface (:class:`~thinfilm_mi.render.layered.top.Top`)
+  and the smooth thin-film stack (:class:`~thinfilm_mi.render.layered.top.SmoothTop`);
+* :mod:`~thinfilm_mi.render.layered.bottom` — a diffuse bottom, a nested Mitsuba BSDF;
+* :mod:`~thinfilm_mi.render.layered.coat` — the absorbing medium between them;
+* :mod:`~thinfilm_mi.render.layered.models` — the closed forms over a diffuse bottom (the
+  paper's ``single`` and ``multiple``, the ``exact`` one), applied by
+  :mod:`~thinfilm_mi.render.layered.series` from the spectral factors and load-time terms
+  of :mod:`~thinfilm_mi.render.layered.factors`;
+* :mod:`~thinfilm_mi.render.layered.nested` — the estimator over a nested BSDF, summed by a
+  closed form (:mod:`~thinfilm_mi.render.layered.forms`) or the random walk
+  (:mod:`~thinfilm_mi.render.layered.walk`), with the delta-base chain
+  (:mod:`~thinfilm_mi.render.layered.delta`).
+"""
+
+__all__: list = []

@@ -1,0 +1,186 @@
+r"""The random walk (no plugin classes here): the unbiased estimator of the sum over paths
+between a smooth top and any bottom (a position-free walk, Guo, Hašan, Yan and Zhao 2018;
+pbrt-v4's ``LayeredBxDF``), registered in
+:func:`~thinfilm_mi.render.layered.nested.sum_estimator` where the bottom has no closed
+form (:mod:`thinfilm_mi.render.layered.forms`).
+
+**The estimate** (:meth:`RandomWalk.sum`): from ``w_0 = ω_i'``, at every base vertex ``k``
+the contribution ``β_k f_b(w_k, ω_o') cos θ_o'`` (the base's ``eval``, towards the fixed
+inner direction of ``ω_o``: next-event estimation through the smooth top, which refracts
+``ω_o'`` to ``ω_o`` deterministically); then the base is sampled, ``w``, weight ``g``, and
+the walk goes on reflected by the underside: ``β_{k+1} = β_k g R_in(θ_w) A(w)²``,
+``w_{k+1} = (-w_x, -w_y, w_z)``. The first term is exact (``w_0`` is fixed); later ones
+are unbiased estimates of the interreflection series. Russian roulette from
+:data:`RR_DEPTH` bounces on (survival ``q = min(max β, 0.95)``, ``β /= q``: unbiased);
+the walk stops after ``max_bounces`` base vertices: the paths with more are dropped. For
+a Lambertian base of albedo ``ρ`` each vertex sends back ``ρ R̄`` of what it receives
+(``R̄``: the underside's hemispherical reflectance), so the dropped energy is at most ``(ρ R̄)^N /
+(1 - ρ R̄)`` of the light that entered: ``0.596^64/0.404 ≈ 1e-14`` for a bare ``η = 1.5``
+coat over white. A base that sends its light beyond the critical angle meets ``R_in = 1``
+there and may lose more (``tests/render/layered/test_walk.py`` measures the truncation at
+``N = 1``). Random numbers: a PCG32 seeded from the sample's numbers in ``sample`` and
+from a TEA hash of the two directions in ``eval`` (as pbrt-v4's ``LayeredBxDF``), so
+"""
+from __future__ import annotations
+
+import struct
+
+import drjit as dr
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render.layered.bottom import base_interaction, intensity
+from thinfilm_mi.render.textures import mitsuba_module
+
+__all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "RandomWalk", "eval_seed", "sample_seed",
+           "logical_not"]
+
+#: Default cap on the base vertices of a walk (``max_bounces``); its bias is stated in
+#: the module docstring.
+DEFAULT_MAX_BOUNCES = 64
+#: Russian roulette starts after this many base vertices.
+RR_DEPTH = 3
+
+
+def logical_not(mask):
+    """``~mask`` (a Python bool in scalar variants, where ``~True`` is -2)."""
+    return ~mask if dr.is_array_v(mask) else not mask
+
+
+def _shl(x, k: int):
+    """``x << k`` on 32 bits (Python ints in scalar variants do not wrap)."""
+    return (x << k) & 0xFFFFFFFF if isinstance(x, int) else x << k
+
+
+def _bits(x):
+    """The bits of a float32 as a ``UInt32`` (an int in scalar variants)."""
+    mi = mitsuba_module()
+    if not dr.is_array_v(mi.Float):
+        return struct.unpack("<I", struct.pack("<f", float(x)))[0]
+    return dr.reinterpret_array(mi.UInt32, mi.Float(x))
+
+
+def eval_seed(wi, wo):
+    """A hash of the two directions (pbrt-v4's ``LayeredBxDF`` seeds ``f()`` so)."""
+    mi = mitsuba_module()
+    a = mi.sample_tea_32(_bits(wi.x) ^ _shl(_bits(wi.z), 7), _bits(wi.y), 4)
+    b = mi.sample_tea_32(_bits(wo.x) ^ _shl(_bits(wo.z), 7), _bits(wo.y) ^ a[1], 4)
+    return a[0] ^ b[1], b[0]
+
+
+def sample_seed(sample1, sample2):
+    """A hash of a sample's numbers (``sample`` seeds the walk so)."""
+    mi = mitsuba_module()
+    seed = (_bits(sample1) ^ _shl(_bits(sample2.y), 16), _bits(sample2.x))
+    return mi.sample_tea_32(seed[0], seed[1], 4)
+
+
+class RandomWalk:
+    """The random walk of ``layer`` (a :class:`~thinfilm_mi.render.layered.nested.NestedEstimator`:
+    its top's underside, its bottom, its coat medium and ``max_bounces``)."""
+
+    def __init__(self, layer):
+        self.layer = layer
+
+    def refresh(self) -> None:
+        """Nothing to re-derive after an edit (the walk reads the parameters at each call)."""
+
+    def sum(self, ctx_mode, si, w0, wo_in, seed, active):
+        """``Σ_k β_k f_b(w_k, ω_o') cos θ_o'`` from ``w_0 = w0`` (module docstring), the
+        PCG32 seeded with ``seed`` (two ``UInt32``).
+
+        Gradients: the walk runs detached, then again with the same random numbers
+        (:meth:`_walk` given ``total``), adding per vertex what the parameters change there, as
+        Mitsuba's ``prb`` replays a path: ``dW = Σ_j β_j de_j + Σ_j dlog(g_j r_j) (W -
+        W_{≤j})`` with ``e_j`` the base's ``eval`` towards ``ω_o'``, ``g_j r_j`` the step's
+        base weight (the base's ``eval`` over its detached pdf at the sampled
+        direction: sampling decisions are detached; at a delta vertex, whose ``eval`` is
+        0, the replayed sample's weight times its pdf) and underside, and ``W - W_{≤j}``
+        what the walk gathered after vertex ``j``. Every term depends on the parameters
+        through its own vertex only, the sum-style loop Dr.Jit differentiates in reverse
+        mode without storing the trajectory."""
+        if not self.layer.tracks_gradients(si, active):
+            return self._walk(ctx_mode, si, w0, wo_in, seed, active, None)
+        if self.layer.mode.polarized:
+            # the walk's sum after vertex j is a matrix product β_j s_j R_j: its derivative
+            # needs the suffix R_j, which a forward loop does not have (the scalar replay
+            # divides by β_j s_j instead; a Mueller product of depolarizers is singular)
+            raise ThinFilmError(f"{self.layer.plugin}: gradients in polarized variants over a walked "
+                                f"base ({self.layer.base.class_name()}) are not supported (the "
+                                "replay's per-vertex ratios are per wavelength, not per "
+                                "Mueller matrix); they are over a pure-delta base and over "
+                                "Mitsuba's diffuse without coat_sigma_a (no walk)")
+        with dr.suspend_grad():
+            total = self._walk(ctx_mode, si, w0, wo_in, seed, active, None)
+        surrogate = self._walk(ctx_mode, si, w0, wo_in, seed, active, total)
+        return total + (surrogate - dr.detach(surrogate))
+
+    def _walk(self, ctx_mode, si, w0, wo_in, seed, active, total):
+        """The walk (``total`` None), or its replay carrying the gradients (``total``: the
+        detached walk's sum)."""
+        mi = mitsuba_module()
+        ctx = mi.BSDFContext(ctx_mode)
+        base, max_bounces = self.layer.base, self.layer.max_bounces
+        replay = total is not None
+        rng = mi.PCG32(size=1, initstate=mi.UInt64(seed[0]), initseq=mi.UInt64(seed[1]))
+        zero = dr.zeros(mi.Spectrum)
+
+        def cond(acc, gathered, beta, w, depth, rng, active):
+            return active
+
+        def body(acc, gathered, beta, w, depth, rng, active):
+            alive = active
+            si_b = base_interaction(si, w)
+            e = base.eval(ctx, si_b, wo_in, active)
+            with dr.suspend_grad(when=replay):
+                gathered = dr.select(active, gathered + beta * e, gathered)
+                depth = depth + 1
+                s1 = rng.next_float32()
+                s2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+                bs, g = base.sample(ctx, si_b, s1, s2, active)
+                cos = bs.wo.z
+                active = active & (cos > 0) & (depth < max_bounces) & (bs.pdf > 0)
+                # the light that reached the base along -bs.wo left the previous vertex
+                # along w_next and reflected at the underside
+                w_next = mi.Vector3f(-bs.wo.x, -bs.wo.y, cos)
+                step = g * self.layer.underside(si, w_next, active)
+            if replay:
+                # this vertex's terms (their values do not matter: only their gradients)
+                e_r = base.eval(ctx, si_b, bs.wo, active)
+                if self.layer.delta is not None:
+                    # eval has no delta part: a delta vertex's value is the replayed
+                    # sample's weight times its pdf (the lobe's probability), so that the
+                    # base's delta parameters (a conductor's eta, k) keep their gradients
+                    bs_a, g_a = base.sample(ctx, si_b, s1, s2, active)
+                    e_r = dr.select(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta),
+                                    g_a * bs_a.pdf, e_r)
+                g_r = e_r / dr.detach(dr.select(bs.pdf > 0, bs.pdf, 1.0)) \
+                    * self.layer.underside(si, w_next, active)
+                live = dr.detach(g_r) != 0
+                ratio = dr.select(live, g_r / dr.select(live, dr.detach(g_r), 1.0), 0.0)
+                acc = mi.Spectrum(acc + dr.select(active, ratio * (total - gathered), zero)
+                                  + dr.select(alive, beta * e, zero))
+            else:
+                acc = gathered
+            with dr.suspend_grad(when=replay):
+                beta = dr.select(active, beta * step, zero)
+                w = w_next
+                q = dr.minimum(dr.max(intensity(beta, self.layer.mode.polarized)), 0.95)
+                roulette = active & (depth >= RR_DEPTH)
+                u = rng.next_float32()
+                active = active & (logical_not(roulette) | (u < q)) & (q > 0)
+                beta = dr.select(roulette, beta / dr.select(q > 0, q, 1.0), beta)
+            return acc, gathered, beta, w, depth, rng, active
+
+        acc0, gathered0, beta0 = mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(1.0)
+        if self.layer.mode.polarized:
+            # Mueller matrices that start as literals (zeros, the identity) fill in one
+            # entry per product along the walk, so Dr.Jit would find the loop state still
+            # changing when it records the loop a second time (a principled base): start
+            # them as evaluated values
+            dr.make_opaque(acc0, gathered0, beta0)
+        state = (acc0, gathered0, beta0, mi.Vector3f(w0), mi.UInt32(0), rng, mi.Bool(active))
+        labels = ("acc", "gathered", "beta", "w", "depth", "rng", "active")
+        # max_iterations=-1: the replay is a sum of per-vertex terms (Dr.Jit's fast path
+        # for reverse-mode differentiation of such loops)
+        return dr.while_loop(state, cond, body, labels=labels,
+                             max_iterations=-1 if replay else None)[0]
