@@ -30,7 +30,7 @@ standard deviation of the facet slope angles; :data:`MAX_ROUGHNESS` at most), wi
 :data:`ROUGHNESS_MODELS` holds one object per value of ``roughness_model``
 (:func:`roughness_model` looks one up); :class:`OrenNayar` reads and validates the
 parameters and gives, per hit, the base's :class:`BaseTerms`, which the coated-diffuse
-model (:mod:`thinfilm_mi.render.coated_diffuse`) puts under the films (the model is
+model (:mod:`thinfilm_mi.render.layered.series`) puts under the films (the model is
 written in the plugin's doc block).
 """
 from __future__ import annotations
