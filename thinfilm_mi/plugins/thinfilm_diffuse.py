@@ -299,16 +299,16 @@ from __future__ import annotations
 
 import mitsuba as mi
 
-from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.layered.bottom import DiffuseBottom, reflectance_from_props
+from thinfilm_mi.render.layered.bottom import DiffuseBottom, albedo
 from thinfilm_mi.render.layered.engine import Layered
-from thinfilm_mi.render.layered.models import DIFFUSE_MODELS, diffuse_model
+from thinfilm_mi.render.layered.models import DIFFUSE_MODELS
 from thinfilm_mi.render.layered.series import series_estimator
-from thinfilm_mi.render.media import real_index
+from thinfilm_mi.render.media import DEFAULT_EXT_IOR
 from thinfilm_mi.render.orennayar import OrenNayar
 from thinfilm_mi.render.params import ParameterGuard
-from thinfilm_mi.render.props import check_unqueried, ext_ior_from_props, films_from_props, stack_options_from_props
+from thinfilm_mi.render.reader import PluginProperties
 from thinfilm_mi.render.variant import check_variant
 
 __all__ = ["ThinFilmDiffuse", "NAME"]
@@ -322,21 +322,24 @@ class ThinFilmDiffuse(mi.BSDF):
     a diffuse bottom, summed by the model's closed form, which does the work."""
 
     def __init__(self, props):
-        check_variant(NAME)
-        model = diffuse_model(props.get("model", next(iter(DIFFUSE_MODELS))), NAME)
-        films = films_from_props(props, NAME)
-        ext = ext_ior_from_props(props)
-        if "base_ior" in props and not model.takes_base_ior:
-            names = " or ".join(repr(m) for m, o in DIFFUSE_MODELS.items() if o.takes_base_ior)
-            raise ThinFilmError(f"{NAME}: 'base_ior' is a parameter of model {names} only "
-                                f"(model is {model.name!r})")
-        base = real_index(props.get("base_ior"), "base_ior") if "base_ior" in props else ext
-        reflectance = reflectance_from_props(props, NAME)
-        options = stack_options_from_props(props, NAME)
-        rough = OrenNayar(props, NAME)   # roughness: render/orennayar.py
-        check_unqueried(props, NAME)
-        bottom = DiffuseBottom(reflectance, rough)
-        estimator = series_estimator(model, films, ext, base, bottom, options, modes.current(), NAME)
+        with plugin_boundary(NAME):
+            check_variant(NAME)
+            read = PluginProperties(props)
+            model = read.choice("model", DIFFUSE_MODELS)
+            films = read.films()
+            ext = read.index("ext_ior", DEFAULT_EXT_IOR)
+            if "base_ior" in read and not model.takes_base_ior:
+                names = " or ".join(repr(m) for m, o in DIFFUSE_MODELS.items() if o.takes_base_ior)
+                raise ThinFilmError(f"'base_ior' is a parameter of model {names} only "
+                                    f"(model is {model.name!r})")
+            base = read.index("base_ior", None) if "base_ior" in read else ext
+            reflectance = albedo(read)
+            options = dict(read.stack_options(), plugin=NAME)
+            rough = OrenNayar(read, NAME)   # roughness: render/orennayar.py
+            read.check_unqueried()
+            bottom = DiffuseBottom(reflectance, rough)
+            estimator = series_estimator(model, films, ext, base, bottom, options, modes.current(),
+                                         NAME)
         #: the layered engine (render/layered/)
         self.layered = Layered(estimator.top, bottom, estimator)
         # registered once complete: from here on every thread's symbolic calls trace it

@@ -26,7 +26,7 @@ import numpy as np
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID, SPECTRAL_RANGE
 
-__all__ = ["GRID", "LUMINANCE", "bounds", "check_texture_range", "checked_texture", "irregular",
+__all__ = ["GRID", "LUMINANCE", "bounds", "check_texture_range", "irregular",
            "mitsuba_module", "new_object", "property_texture", "regular", "scalar", "texture_on_grid",
            "texture_range", "uniform"]
 
@@ -238,21 +238,6 @@ def property_texture(props, name: str, want: str, *, unbounded: bool = False):
         return props.get_unbounded_texture(name) if unbounded else props.get_texture(name)
     except Exception as e:  # noqa: BLE001 - Mitsuba raises RuntimeError/TypeError
         raise ThinFilmError(f"'{name}' must be {want}, got {props.get(name)!r} ({e})") from None
-
-
-def checked_texture(props, name: str, plugin: str, want: str, what: str, lo: float = -math.inf,
-                    hi: float = math.inf, *, mono: bool = False, strict: bool = False, cover: bool = False):
-    """The plugin property ``name`` as a texture (:func:`property_texture`, its error
-    naming ``plugin``) with its values checked at load by :func:`check_texture_range`
-    (``what``, ``lo``, ``hi``, ``mono``, ``strict``, ``cover``). A plugin reads textures
-    through :class:`thinfilm_mi.render.reader.PluginProperties`; this is the form for
-    code that still holds the bare properties."""
-    try:
-        tex = property_texture(props, name, want)
-    except ThinFilmError as e:
-        raise ThinFilmError(f"{plugin}: {e}") from None
-    check_texture_range(tex, what, lo, hi, mono=mono, strict=strict, cover=cover)
-    return tex
 
 
 def bounds(lo: float = -math.inf, hi: float = math.inf, strict: bool = False) -> str:

@@ -17,9 +17,9 @@ import drjit as dr
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.params import ALBEDO_SLACK
-from thinfilm_mi.render.textures import checked_texture, mitsuba_module, uniform
+from thinfilm_mi.render.textures import mitsuba_module, uniform
 
-__all__ = ["DiffuseBottom", "NestedBottom", "nested_bsdf", "reflectance_from_props",
+__all__ = ["DiffuseBottom", "NestedBottom", "nested_bsdf", "albedo",
            "base_context", "base_interaction", "intensity"]
 
 
@@ -44,20 +44,18 @@ def intensity(x, polarized: bool):
     return mi.UnpolarizedSpectrum(x[0][0] if polarized else x)
 
 
-def reflectance_from_props(props, plugin: str):
-    """The base albedo ``reflectance``: finite and in [0, 1] (up to :data:`ALBEDO_SLACK`:
-    sRGB white upsampled to a spectrum peaks a hair above 1; anything larger would let
-    ``1 - k_d R_dh`` approach 0)."""
-    if "reflectance" not in props:
+def albedo(read):
+    """The base albedo ``reflectance`` read by ``read`` (a
+    :class:`~thinfilm_mi.render.reader.PluginProperties`; default 0.5): finite and in [0, 1]
+    (a texture up to :data:`ALBEDO_SLACK`: sRGB white upsampled to a spectrum peaks a hair
+    above 1; anything larger would let ``1 - k_d R_dh`` approach 0)."""
+    if "reflectance" not in read:
         return uniform(0.5)
-    value = props.get("reflectance")
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        if not (0.0 <= value <= 1.0):
-            raise ThinFilmError(f"{plugin}: 'reflectance' must be in [0, 1] (an albedo), "
-                                f"got {value!r}")
-    return checked_texture(props, "reflectance", plugin, "a number, a spectrum or a texture",
-                           f"{plugin}: 'reflectance' (an albedo, energy conservation)", 0.0,
-                           1.0 + ALBEDO_SLACK)
+    value = read.value("reflectance")
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and not 0.0 <= value <= 1.0:
+        raise ThinFilmError(f"'reflectance' must be in [0, 1] (an albedo), got {value!r}")
+    return read.texture("reflectance", "a number, a spectrum or a texture",
+                        "'reflectance' (an albedo, energy conservation)", 0.0, 1.0 + ALBEDO_SLACK)
 
 
 def nested_bsdf(props, plugin: str):

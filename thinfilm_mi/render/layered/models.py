@@ -10,7 +10,8 @@ model says how it splits the films into a top and an absorbing film ``N``, its s
 factors (hence its hemispherical terms and colour tables), the series ``G(k_d, R_dh)`` of
 its diffuse term per wavelength, in the colour tables and over an Oren–Nayar bottom, and
 whether ``R_dh`` carries derivatives; :class:`~thinfilm_mi.render.layered.series.SeriesEstimator`
-applies one. :func:`diffuse_model` finds one.
+applies one. A plugin reads one with
+:meth:`~thinfilm_mi.render.reader.PluginProperties.choice`.
 """
 from __future__ import annotations
 
@@ -18,12 +19,11 @@ from abc import ABC, abstractmethod
 
 import drjit as dr
 
-from thinfilm_mi.optics.choices import choose
 from thinfilm_mi.render.layered.factors import DiffuseFactors, ExactFactors, absorbs
 from thinfilm_mi.render.textures import mitsuba_module, scalar
 from thinfilm_mi.tabulate.base import opaque_float
 
-__all__ = ["DiffuseModel", "Exact", "Single", "Multiple", "DIFFUSE_MODELS", "diffuse_model"]
+__all__ = ["DiffuseModel", "Exact", "Single", "Multiple", "DIFFUSE_MODELS"]
 
 
 class DiffuseModel(ABC):
@@ -145,10 +145,3 @@ class Single(Multiple):
 
 #: The coated-diffuse models by their ``model`` value; the first is the default.
 DIFFUSE_MODELS = {m.name: m for m in (Exact(), Single(), Multiple())}
-
-
-def diffuse_model(value, plugin: str) -> DiffuseModel:
-    """The :data:`DIFFUSE_MODELS` entry named ``value`` (:func:`~thinfilm_mi.optics.choices.choose`:
-    case-insensitive); a ``ThinFilmError`` naming ``plugin``'s ``model``, the value and
-    the choices otherwise."""
-    return choose(DIFFUSE_MODELS, value, f"{plugin}: 'model'")
