@@ -59,7 +59,7 @@ import numpy as np
 
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi as tf  # noqa: E402  (registers the plugins)
-from thinfilm_mi.render import kernel as tf_kernel  # noqa: E402
+from thinfilm_mi.render import stack_build as tf_build  # noqa: E402
 from thinfilm_mi.tabulate import base as tabulate_base  # noqa: E402
 from thinfilm_mi.tabulate import policy  # noqa: E402
 from thinfilm_mi.tabulate.band import sigma_nu  # noqa: E402
@@ -85,8 +85,7 @@ def layers_string(films):
 def band_reference(bsdf, cos64, wl64, n, step=0.002):
     """``R_σ`` at the first ``n`` points by brute force: the build's float64
     evaluator on a grid of ``step`` nm over ±6 σ_ν, Gaussian-weighted."""
-    from thinfilm_mi.render import kernel
-    side = kernel.side_data(bsdf.stack.plan[False], False)
+    side = tf_build.side_data(bsdf.stack.plan[False], False)
     sig = sigma_nu(bsdf.stack.spectral_resolution)
     cos, wl = np.broadcast_to(cos64[None, :], wl64.shape).ravel()[:n], wl64.ravel()[:n]
     out = np.empty(n)
@@ -210,7 +209,7 @@ def main():
                 print(f"| {L} | table | {e:g} | **no table** (not tried: a larger "
                       f"table_error already failed) | – | – | – | – | – | – |", flush=True)
                 continue
-            tf_kernel.TABLE_CACHE.clear()
+            tf_build.TABLE_CACHE.clear()
             t0 = time.perf_counter()
             b = load(films, args.material, tabulate=True, table_error=e, spectral_resolution=0.0)
             t_first = time.perf_counter() - t0
@@ -224,7 +223,7 @@ def main():
             t_b = time.perf_counter()
             b0 = load(films, args.material, tabulate=False)
             t_noload = time.perf_counter() - t_b
-            tf_kernel.TABLE_CACHE.clear()
+            tf_build.TABLE_CACHE.clear()
             t0 = time.perf_counter()
             b = load(films, args.material, tabulate=True, table_error=e, spectral_resolution=0.0)
             t_second = time.perf_counter() - t0 - t_noload
@@ -260,7 +259,7 @@ def band_rows(L, films, args, si, cos, cos64, wl64, results):
     n = args.band_points
     ref = None
     for e in BAND_ERRORS:
-        tf_kernel.TABLE_CACHE.clear()
+        tf_build.TABLE_CACHE.clear()
         t0 = time.perf_counter()
         b = load(films, args.material, tabulate=True, table_error=e)
         t_build = time.perf_counter() - t0

@@ -24,13 +24,13 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
 from thinfilm_mi.materials.stack import check_thickness, parse_layers
 from thinfilm_mi.optics.choices import choose
-from thinfilm_mi.render.kernel import (
+from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.media import DEFAULT_EXT_IOR, SpectralIndex, real_index
+from thinfilm_mi.render.stack_plan import (
     DEFAULT_COHERENCE_THICKNESS,
     DEFAULT_SPECTRAL_RESOLUTION,
     DEFAULT_TABLE_ERROR,
-    KernelStack,
 )
-from thinfilm_mi.render.media import DEFAULT_EXT_IOR, SpectralIndex, real_index
 from thinfilm_mi.render.tabulation import TABULATE_OPTIONS
 from thinfilm_mi.render.textures import bounds, check_texture_range, mitsuba_module, property_texture, uniform
 

@@ -98,12 +98,12 @@ def test_factor_table_skipped_while_a_film_carries_gradients():
 def own_tables(tmp_path, monkeypatch):
     """The table store in a temporary directory, this process's table cache empty, and
     the factor tables built here counted (``builds``: one entry per build)."""
-    from thinfilm_mi.render import kernel
+    from thinfilm_mi.render import stack_build
     from thinfilm_mi.render.layered import factors as diffuse
     from thinfilm_mi.tabulate import store
 
     monkeypatch.setenv(store.ENVIRONMENT, str(tmp_path / "tables"))
-    kernel.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     builds = []
 
     class Counted(diffuse.FactorTable):
@@ -113,7 +113,7 @@ def own_tables(tmp_path, monkeypatch):
 
     monkeypatch.setattr(diffuse, "FactorTable", Counted)
     yield builds
-    kernel.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
 
 
 def test_an_identical_bsdf_shares_the_factor_table(own_tables):

@@ -41,8 +41,9 @@ import numpy as np
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import GRID
 from thinfilm_mi.render.colour_variants import with_absorbing
-from thinfilm_mi.render.kernel import STORE_MIN_POINTS, TABLE_CACHE, KernelStack, side_data
+from thinfilm_mi.render.kernel import KernelStack
 from thinfilm_mi.render.loop import LoopFilms
+from thinfilm_mi.render.stack_build import STORE_MIN_POINTS, TABLE_CACHE, side_data
 from thinfilm_mi.render.tabulation import table_key
 from thinfilm_mi.render.textures import (
     mitsuba_module,
@@ -252,11 +253,11 @@ def factor_table(factors, coating: KernelStack, texture, media):
     (``benchmarks/sample_profile.py --plugins diffuse``, ``benchmarks/plugin_bench.py``).
 
     Shared as the stack's tables are (:func:`factor_table_key`): from this process's
-    :data:`~thinfilm_mi.render.kernel.TABLE_CACHE`, else from the table store on disk
+    :data:`~thinfilm_mi.render.stack_build.TABLE_CACHE`, else from the table store on disk
     (:func:`~thinfilm_mi.tabulate.store.default_store`; its report then says ``"from the
     table store"``, the build's under ``build``), else built (0.09 s for "SiO2 500; Au 5",
     model "exact"; 0.21 s "single") and kept in both (the store from
-    :data:`~thinfilm_mi.render.kernel.STORE_MIN_POINTS` evaluations)."""
+    :data:`~thinfilm_mi.render.stack_build.STORE_MIN_POINTS` evaluations)."""
     if factors is None or texture is not None or not coating.tabulate.builds \
             or not dr.is_jit_v(mitsuba_module().Float):
         return None
