@@ -113,9 +113,8 @@ def branches(has_films: bool, sides) -> bool:
     :class:`~thinfilm_mi.render.stack_plan.SidePlan`): not for a bare interface (its
     Fresnel terms cost less than the branch), nor where a side is optically opaque or
     averages a film incoherently. (Two opaque sides both return the literal ``T = 0``,
-    which Dr.Jit 1.5.0 hands back as one branch's own variable: LLVM refused the kernel,
-    tests/cross/test_stability_bsdf.py. :func:`literal_outside` now mends any such output;
-    these stacks stay unbranched as they were measured.)"""
+    which Dr.Jit 1.5.0 hands back as one branch's own variable, a kernel LLVM refuses
+    (tests/cross/test_stability_bsdf.py): :func:`literal_outside` mends any such output.)"""
     return has_films and not any(s.opaque or any(s.incoherent) for s in sides)
 
 

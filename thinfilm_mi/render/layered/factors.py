@@ -209,8 +209,8 @@ class SpectralTerms:
     def __init__(self, factors, texture=None, plugin: str = "thinfilm_diffuse", old=None):
         self.table = None
         self.r_dh = self.t_hemi = None
-        #: film N's index as a film-loop buffer (its textures' binary searches cost
-        #: the "single" model more than its coating's table: issue 44)
+        #: film N's index as a film-loop buffer (its textures' binary searches would
+        #: cost the "single" model more than its coating's table)
         film_n = getattr(factors, "film_n", None)
         self.film_n = None
         if film_n is not None and film_n.knots is not None and dr.is_jit_v(mitsuba_module().Float):
