@@ -16,11 +16,17 @@ import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.materials import catalog
 from thinfilm_mi.materials.model import RESAMPLE_TOL
 from thinfilm_mi.render.media import SpectralIndex
+from thinfilm_mi.render.textures import texture_on_grid
 
 # the bound plus float32 storage of values up to ~7 (Al's k): 7 * 2^-24 ~ 4e-7, and of the
 # wavelengths (Mitsuba's lerp weight in float32: slope ~0.05/nm * 830 * 2^-24 ~ 3e-6)
 TOL = RESAMPLE_TOL + 5e-6
 WL = np.random.default_rng(7).uniform(360.0, 830.0, 257)
+
+
+def textures(index, wl=WL):
+    """What the kernel's texture lookups give at ``wl``."""
+    return texture_on_grid(index.eta, wl) + 1j * texture_on_grid(index.k, wl)
 
 
 @pytest.fixture(autouse=True)
@@ -33,24 +39,25 @@ def test_a_dataset_renders_within_the_bound_of_its_own_interpolation(name):
     index = SpectralIndex.from_material(name, "material")
     assert index.uniform_grid is not None
     assert index.eta.class_name() == "RegularSpectrum"
-    got = index.spectral_values(WL)
+    got = textures(index)
     want = catalog.resolve(name).index(WL)
     np.testing.assert_allclose(got.real, want.real, rtol=0, atol=TOL)
     np.testing.assert_allclose(got.imag, want.imag, rtol=0, atol=TOL)
-    # what the loops' buffers read on the knots is the data itself (float32 storage)
+    # what the loops' buffers and the tables read is the data itself (float32 storage)
     eta, k = index.data_on(index.knots)
     np.testing.assert_allclose(eta + 1j * k, catalog.resolve(name).index(index.knots),
                                rtol=2e-7, atol=1e-7)
+    np.testing.assert_allclose(index.spectral_values(WL), want, rtol=2e-7, atol=1e-7)
 
 
 def test_an_edit_of_the_arrays_is_resampled_with_its_gradients():
     index = SpectralIndex.from_material("Au", "material")
-    before = index.spectral_values(WL)
+    before = textures(index)
     values = index.arrays["eta"]["values"] * 1.1
     dr.enable_grad(values)
     index.arrays["eta"]["values"] = values
     index.parameters_changed("thinfilm_conductor", "layers.0.")
-    after = index.spectral_values(WL)
+    after = textures(index)
     np.testing.assert_allclose(after.real, 1.1 * before.real, rtol=0, atol=1.1 * TOL)
     np.testing.assert_allclose(after.imag, before.imag, rtol=0, atol=1e-7)
     si = dr.zeros(mi.SurfaceInteraction3f)
@@ -69,7 +76,7 @@ def test_a_dataset_no_grid_holds_keeps_its_own_knots():
     assert mat.uniform_resampling() is None
     index = SpectralIndex.from_material(mat, "material")
     assert index.uniform_grid is None and index.eta.class_name() == "IrregularSpectrum"
-    np.testing.assert_allclose(index.spectral_values(WL), mat.index(WL), rtol=2e-6, atol=1e-6)
+    np.testing.assert_allclose(textures(index), mat.index(WL), rtol=2e-6, atol=1e-6)
 
 
 def test_an_edit_through_mi_traverse_reaches_the_resampled_textures():
@@ -78,11 +85,11 @@ def test_an_edit_through_mi_traverse_reaches_the_resampled_textures():
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "layers": "Au 20",
                          "tabulate": False})
     index = bsdf.stack.indices[0]
-    before = index.spectral_values(WL)
+    before = textures(index)
     params = mi.traverse(bsdf)
     params["layers.0.k.values"] = params["layers.0.k.values"] * 0.5
     params.update()
-    after = index.spectral_values(WL)
+    after = textures(index)
     np.testing.assert_allclose(after.imag, 0.5 * before.imag, rtol=0, atol=TOL)
     wl = np.array(params["layers.0.k.wavelengths"])
     params["layers.0.k.wavelengths"] = mi.Float(wl[::-1].copy())

@@ -171,13 +171,14 @@ class SpectralIndex:
         """``eta`` and ``k`` (float64) at ``grid``: the data's own linear interpolation
         (the :attr:`arrays` as last edited) where the textures hold a resampling of
         it, else what the textures give. On :attr:`knots` it is piecewise linear."""
-        def part(name):
-            arrays = self.arrays.get(name) if self.uniform_grid is not None else None
-            if arrays is None:
-                return texture_on_grid(getattr(self, name), grid)
-            return np.interp(grid, *(np.asarray(dr.detach(arrays[a]), np.float64).ravel()
-                                     for a in ("wavelengths", "values")))
-        return part("eta"), part("k")
+        return self._data_part("eta", grid), self._data_part("k", grid)
+
+    def _data_part(self, name: str, wl: np.ndarray) -> np.ndarray:
+        arrays = self.arrays.get(name) if self.uniform_grid is not None else None
+        if arrays is None:
+            return texture_on_grid(getattr(self, name), wl)
+        return np.interp(wl, *(np.asarray(dr.detach(arrays[a]), np.float64).ravel()
+                               for a in ("wavelengths", "values")))
 
     @classmethod
     def from_textures(cls, eta_tex, k_tex, label: str) -> "SpectralIndex":
@@ -205,10 +206,13 @@ class SpectralIndex:
 
     def spectral_values(self, wavelengths: np.ndarray, real: bool = False) -> np.ndarray | None:
         """The index at ``wavelengths`` (float64; complex unless ``real``), read as the
-        render kernel of a spectral variant reads it: through the textures (so
-        ``mi.traverse`` edits are seen), except a dataset's in RGB and mono variants,
-        whose textures hold channel means (read from the material). ``None`` for
-        textures given per channel (an ``rgb`` ``eta``/``k`` in an RGB variant)."""
+        films' buffers of a spectral variant read it (:meth:`data_on`: a dataset's own
+        interpolation, as last edited through ``mi.traverse``; other textures through
+        themselves), except a dataset's in RGB and mono variants, whose textures hold
+        channel means (read from the material). ``None`` for textures given per channel
+        (an ``rgb`` ``eta``/``k`` in an RGB variant). Tables are built from it: a dataset's
+        resampling (within 1e-4) moves a thick film's phase by ~1e-3 rad, the budget of a
+        table's error."""
         wl = np.asarray(wavelengths, np.float64)
         channels = colour_channels()
 
@@ -219,7 +223,7 @@ class SpectralIndex:
                 v = self.material.index(np.clip(wl, GRID[0], GRID[-1]))
                 return v.real if name == "eta" else v.imag
             if channels is None or tex.class_name() == "UniformSpectrum":
-                return texture_on_grid(tex, wl)
+                return self._data_part(name, wl)
             return None
         eta = part(self.eta, "eta")
         if real or eta is None:
