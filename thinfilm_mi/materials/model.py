@@ -264,8 +264,8 @@ class UniformResampling:
     """A dataset's index on :func:`uniform_grid` (``step``): ``values`` (complex128, one
     per grid wavelength) and the measured ``deviation`` ``(n, k)`` of their linear
     interpolation from the dataset's own, at its knots (where the difference of two
-    piecewise-linear functions peaks) and at the cells' midpoints and quarters (where a
-    formula's curvature does)."""
+    piecewise-linear functions peaks: both agree at the grid's nodes) and at the cells'
+    midpoints (where a formula's, of nearly constant curvature across a cell, does)."""
 
     def __init__(self, step: float, values: np.ndarray, deviation: tuple[float, float]):
         self.step = step
@@ -279,12 +279,14 @@ class UniformResampling:
             return None
         lo, hi = SPECTRAL_RANGE
         knots = material.knots()
-        fine = uniform_grid(RESAMPLE_STEPS[-1] / 4)
-        probe = np.unique(np.concatenate([knots[(knots > lo) & (knots < hi)], fine]))
-        exact = material.index(probe)
+        knots = knots[(knots > lo) & (knots < hi)]
+        exact_knots = material.index(knots)
         for step in RESAMPLE_STEPS:
             grid = uniform_grid(step)
             values = material.index(grid)
+            mids = grid[:-1] + 0.5 * step
+            probe = np.concatenate([knots, mids])
+            exact = np.concatenate([exact_knots, material.index(mids)])
             dn = np.abs(np.interp(probe, grid, values.real) - exact.real).max()
             dk = np.abs(np.interp(probe, grid, values.imag) - exact.imag).max()
             if max(dn, dk) <= RESAMPLE_TOL:
