@@ -45,6 +45,8 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+# this checkout's package, not an installed one
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 os.environ.setdefault("THINFILM_MI_TABLE_CACHE", "off")
 
 DEPTHS = (10, 30, 100, 300, 1000)

@@ -32,10 +32,14 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import sys
 import time
 
 import numpy as np
+
+# this checkout's package, not an installed one
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 STACK = "SiO2 500"
 METALS = "SiO2 500; Au 20; Al 10"

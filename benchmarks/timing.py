@@ -35,6 +35,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+#: This checkout's root: its package is the one timed (first on ``sys.path`` here and in the
+#: children), not an installed one
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, REPO)
+
 __all__ = ["COUNTERPARTS", "MODES", "Counterpart", "alone", "child", "first_images", "mode_of",
            "own_table_store", "pair_rounds", "render_sync", "sphere_scene", "timed_render"]
 
@@ -198,7 +203,9 @@ def child(script: str, *args: str, **env: str) -> dict | list:
     """``script`` run with ``args`` in a fresh process, the table store off unless ``env``
     says otherwise (``env``: more environment variables): the JSON of its last line of output
     (its stderr passed on)."""
-    env = {"THINFILM_MI_TABLE_CACHE": "off", **env}
+    env = {"THINFILM_MI_TABLE_CACHE": "off",
+           "PYTHONPATH": os.pathsep.join([REPO] + [p for p in os.environ.get("PYTHONPATH", "")
+                                                   .split(os.pathsep) if p]), **env}
     res = subprocess.run([sys.executable, os.path.abspath(script), *args],
                          env=dict(os.environ, **env), capture_output=True, text=True)
     if res.returncode != 0:

@@ -55,7 +55,11 @@ def test_conductor_reads_the_loop_and_matches_float64(llvm, layers, uniform, rea
 def test_loop_and_unrolled_kernels_agree(llvm, monkeypatch):
     """The same BSDF evaluated through the loop and through the unrolled films read
     from their index textures (the buffers' threshold raised): both float32, different
-    operation order."""
+    operation order. The textures hold the datasets on their own knots here, as the
+    buffers do (a resampling on a uniform grid moves TiO2's n by up to 1e-4, and these
+    resonant stacks' R by ~4e-4: that is the materials' stated bound, not the loop's)."""
+    from thinfilm_mi.materials.model import DispersiveMaterial
+    monkeypatch.setattr(DispersiveMaterial, "uniform_resampling", lambda self: None)
     spec = {"type": "thinfilm_conductor", "layers": DISPERSIVE, "material": "Au",
             "tabulate": False}
     cos, wls = points(3000, seed=4)

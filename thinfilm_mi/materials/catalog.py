@@ -46,6 +46,7 @@ import math
 import os
 import re
 import threading
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -73,7 +74,8 @@ from thinfilm_mi.materials.sources import (
     short_reference,
 )
 
-__all__ = ["resolve", "refractive_index", "list_materials", "format_material_table", "save_material"]
+__all__ = ["resolve", "refractive_index", "list_materials", "format_material_table",
+           "format_resampling_table", "rendering_materials", "save_material"]
 
 # ---------------------------------------------------------------------------
 # resolve()
@@ -272,6 +274,46 @@ def format_material_table() -> str:
                      "(TiO2 holds the extraordinary index).")
     lines += ["", "Also accepted: a number (1.46, 0.42+2.47j) or a file: .csv (wavelength_nm, n, k), "
                   ".spd (Mitsuba: X.eta.spd + X.k.spd), .yml (refractiveindex.info format)."]
+    return "\n".join(lines)
+
+
+def rendering_materials() -> list[tuple[str, Material]]:
+    """``(name, material)`` of every named material that covers 360-830 nm (the ones a
+    render takes). Mitsuba's presets are read afresh, not through :func:`resolve`'s
+    cache, so a listing leaves a preset's load-time warning to its first real use."""
+    out = []
+    for row in list_materials():
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")   # Mitsuba's swapped TiO2 labels
+                mat = (load_mitsuba(row["name"][len("mitsuba:"):]) if row["kind"] == "mitsuba"
+                       else resolve(row["name"]))
+        except MaterialError:
+            continue   # a preset whose data do not load
+        if mat.constant is not None or mat.covers(*SPECTRAL_RANGE):
+            out.append((row["name"], mat))
+    return out
+
+
+def format_resampling_table() -> str:
+    """A Markdown table of each of :func:`rendering_materials` with the uniform grid its
+    spectral render textures hold it on and the measured deviation in n and in k from
+    its own interpolation
+    (:meth:`~thinfilm_mi.materials.model.DispersiveMaterial.uniform_resampling`);
+    "own knots" where no grid meets the bound; 0 where the data's knots lie on the grid."""
+    lines = ["| material | grid step (nm) | deviation in n | deviation in k |",
+             "|---|---:|---:|---:|"]
+    for name, mat in rendering_materials():
+        if mat.constant is not None:
+            lines.append(f"| {name} | constant | – | – |")
+            continue
+        fit = mat.uniform_resampling()
+        if fit is None:
+            lines.append(f"| {name} | own knots | – | – |")
+            continue
+        step = f"1/{round(1 / fit.step)}" if fit.step < 1 else "1"
+        dn, dk = (f"{d:.1e}" if d >= 1e-12 else "0" for d in fit.deviation)
+        lines.append(f"| {name} | {step} | {dn} | {dk} |")
     return "\n".join(lines)
 
 

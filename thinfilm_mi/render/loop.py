@@ -33,10 +33,11 @@ __all__ = ["LoopFilms"]
 class LoopFilms:
     """The films of one side as kernel buffers for :func:`optics.stack_rt_loop`.
 
-    Every film's ``eta`` and ``k`` are evaluated through its textures on the
-    union of the films' knots (:attr:`SpectralIndex.knots`: the 1 nm grid and
-    the datasets' own knots), where each texture is piecewise linear, so linear
-    interpolation on that grid reproduces the texture up to float32 rounding.
+    Every film's ``eta`` and ``k`` are evaluated on the union of the films' knots
+    (:attr:`SpectralIndex.knots`: the 1 nm grid and the datasets' own knots), where
+    each film's data are piecewise linear (:meth:`SpectralIndex.data_on`: a dataset's
+    own interpolation, also where its textures hold a resampling of it), so linear
+    interpolation on that grid reproduces the data up to float32 rounding.
     One buffer holds, per film and grid cell, ``(eta_i, eta_i+1)`` or, where
     some film absorbs, ``(eta_i, k_i, eta_i+1, k_i+1)``: one gather per film and
     wavelength. The cell and weight of each wavelength are found once, before
@@ -58,8 +59,7 @@ class LoopFilms:
         self.g0 = float(grid[0])
         self.cells = grid.size - 1
         self.uniform = bool(np.array_equal(grid, GRID))
-        eta = np.stack([texture_on_grid(ix.eta, grid) for ix, _, _ in films])
-        k = np.stack([texture_on_grid(ix.k, grid) for ix, _, _ in films])
+        eta, k = (np.stack(parts) for parts in zip(*(ix.data_on(grid) for ix, _, _ in films)))
         self.real = bool(np.all(k == 0))
         #: per film: no absorption on the grid
         self.lossless = [bool(np.all(kj == 0)) for kj in k]

@@ -1,8 +1,8 @@
 """A stack's media in the render kernel: :class:`SpectralIndex`, a complex index
-``eta + i k`` as two Mitsuba textures (uniform, a dataset's irregular spectrum, or
-the user's textures), with what the plans and tables read from it (its values on a
-wavelength grid, its knots and kinks), and :func:`real_index` for the non-absorbing
-media (``ext_ior``, ``int_ior``).
+``eta + i k`` as two Mitsuba textures (uniform; a dataset's regular spectrum on a
+uniform grid, or its irregular one on its own knots; or the user's textures), with what
+the plans and tables read from it (its values on a wavelength grid, its knots and
+kinks), and :func:`real_index` for the non-absorbing media (``ext_ior``, ``int_ior``).
 """
 from __future__ import annotations
 
@@ -18,7 +18,14 @@ from thinfilm_mi.materials.stack import AMBIENT_K_TOL
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.render.colour_variants import channel_mean_texture, colour_channels
 from thinfilm_mi.render.params import unchanged
-from thinfilm_mi.render.textures import GRID, irregular, mitsuba_module, texture_on_grid, uniform
+from thinfilm_mi.render.textures import (
+    GRID,
+    irregular,
+    mitsuba_module,
+    regular,
+    texture_on_grid,
+    uniform,
+)
 
 __all__ = ["DEFAULT_EXT_IOR", "DEFAULT_INT_IOR", "SpectralIndex", "real_index"]
 
@@ -39,9 +46,9 @@ class SpectralIndex:
         self.label = label
         self.constant = constant
         self.material = material
-        #: Wavelengths (nm) on which the textures are piecewise linear: empty for
-        #: a constant, the 1 nm grid plus the dataset's knots for a dataset,
-        #: ``None`` for textures given by the user (unknown).
+        #: Wavelengths (nm) on which the index's data are piecewise linear
+        #: (:meth:`data_on`): empty for a constant, the 1 nm grid plus the dataset's
+        #: knots for a dataset, ``None`` for textures given by the user (unknown).
         self.knots = knots
         #: The arrays of the ``irregular`` spectra among the two textures (a
         #: dataset's, or the user's), ``"eta"``/``"k"`` -> ``{"wavelengths": Float,
@@ -53,21 +60,51 @@ class SpectralIndex:
         #: and is left broken for every later ``params.update()``.
         self.arrays = {}
         self._arrays_edited = False
+        #: where the textures are resampled: per part, the arrays last written into them
+        self._written = {}
         for part, tex in (("eta", eta_tex), ("k", k_tex)):
             if tex.class_name() == "IrregularSpectrum":
                 tp = mitsuba_module().traverse(tex)
                 self.arrays[part] = {name: type(tp[name])(tp[name])
                                      for name in ("wavelengths", "values")}
+        #: The uniform grid (nm) the textures hold a dataset on
+        #: (:meth:`~thinfilm_mi.materials.model.DispersiveMaterial.uniform_resampling`),
+        #: ``None`` where they hold its own knots.
+        self.uniform_grid = None
+
+    def _resampled(self, resampling, data_grid: np.ndarray, data: np.ndarray) -> None:
+        """Hold the dataset on ``resampling``'s uniform grid: ``regular`` spectra (a
+        wavelength's cell is one multiply), while the data (``data`` on ``data_grid``)
+        stay the arrays :meth:`traverse` exposes and an edit resamples."""
+        mi = mitsuba_module()
+        self.uniform_grid = resampling.grid
+        for part, values, data_values in (("eta", resampling.values.real, data.real),
+                                          ("k", resampling.values.imag, data.imag)):
+            tex = getattr(self, part)
+            if tex.class_name() != "RegularSpectrum":
+                continue   # a uniform k = 0
+            tp = mi.traverse(tex)
+            tp["values"] = mi.Float(values.astype(np.float32))
+            tp.update()
+            self.arrays[part] = {"wavelengths": mi.Float(data_grid.astype(np.float32)),
+                                 "values": mi.Float(data_values.astype(np.float32))}
+            self._written[part] = _snapshot(self.arrays[part])
 
     @classmethod
     def from_material(cls, spec: Any, name: str) -> "SpectralIndex":
         """Build from anything :func:`thinfilm_mi.materials.catalog.resolve` accepts.
 
         Constant indices become ``uniform`` spectra (their ``value`` is exposed
-        to ``mi.traverse``); datasets become ``irregular`` spectra (linear
-        interpolation, Mitsuba's C++ code) on a 1 nm grid over 360-830 nm merged
-        with the dataset's own knots: tabulated data are reproduced exactly and
-        formulas to better than 1e-7.
+        to ``mi.traverse``). In spectral JIT variants a dataset becomes ``regular``
+        spectra on the coarsest uniform grid that reproduces its interpolation
+        within :data:`~thinfilm_mi.materials.model.RESAMPLE_TOL` in n and in k
+        (:meth:`~thinfilm_mi.materials.model.DispersiveMaterial.uniform_resampling`:
+        a wavelength's cell is one multiply, where an irregular spectrum searches);
+        a dataset no grid reproduces so (and every dataset in other variants) becomes
+        ``irregular`` spectra (linear interpolation, Mitsuba's C++ code) on a 1 nm grid
+        over 360-830 nm merged with its own knots: tabulated data are reproduced
+        exactly and formulas to better than 1e-7. Either way the 1 nm grid and the
+        knots are :attr:`knots` and :attr:`arrays` (what ``mi.traverse`` edits).
         """
         try:
             mat = _materials.resolve(spec)
@@ -94,6 +131,10 @@ class SpectralIndex:
                                 "values in 360-830 nm")
 
         channels = colour_channels()
+        # JIT variants only: a scalar variant evaluates one lane at a time, where
+        # Mitsuba's search over the knots costs next to the Python around it
+        resampling = (mat.uniform_resampling()
+                      if channels is None and dr.is_jit_v(mitsuba_module().Float) else None)
 
         def spectrum(v):
             if np.all(v == v[0]):  # e.g. k = 0 everywhere (Mitsuba's spectra need mass)
@@ -103,9 +144,14 @@ class SpectralIndex:
                 # (spectral_values); the textures hold its channel means, for the
                 # plugins' per-channel evaluation (no films over an rgb eta/k)
                 return channel_mean_texture(grid, v, channels)
+            if resampling is not None:   # its values are written by _resampled
+                return regular(v[[0, -1]])
             return irregular(grid, v)
 
-        return cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat, grid)
+        index = cls(spectrum(values.real), spectrum(values.imag), mat.name, None, mat, grid)
+        if resampling is not None:
+            index._resampled(resampling, grid, values)
+        return index
 
     @property
     def kinks(self) -> np.ndarray:
@@ -120,6 +166,19 @@ class SpectralIndex:
         else:
             knots = getattr(self.material, "knots", lambda: np.empty(0))()
         return knots[(knots > GRID[0]) & (knots < GRID[-1])]
+
+    def data_on(self, grid: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``eta`` and ``k`` (float64) at ``grid``: the data's own linear interpolation
+        (the :attr:`arrays` as last edited) where the textures hold a resampling of
+        it, else what the textures give. On :attr:`knots` it is piecewise linear."""
+        return self._data_part("eta", grid), self._data_part("k", grid)
+
+    def _data_part(self, name: str, wl: np.ndarray) -> np.ndarray:
+        arrays = self.arrays.get(name) if self.uniform_grid is not None else None
+        if arrays is None:
+            return texture_on_grid(getattr(self, name), wl)
+        return np.interp(wl, *(np.asarray(dr.detach(arrays[a]), np.float64).ravel()
+                               for a in ("wavelengths", "values")))
 
     @classmethod
     def from_textures(cls, eta_tex, k_tex, label: str) -> "SpectralIndex":
@@ -147,10 +206,13 @@ class SpectralIndex:
 
     def spectral_values(self, wavelengths: np.ndarray, real: bool = False) -> np.ndarray | None:
         """The index at ``wavelengths`` (float64; complex unless ``real``), read as the
-        render kernel of a spectral variant reads it: through the textures (so
-        ``mi.traverse`` edits are seen), except a dataset's in RGB and mono variants,
-        whose textures hold channel means (read from the material). ``None`` for
-        textures given per channel (an ``rgb`` ``eta``/``k`` in an RGB variant)."""
+        films' buffers of a spectral variant read it (:meth:`data_on`: a dataset's own
+        interpolation, as last edited through ``mi.traverse``; other textures through
+        themselves), except a dataset's in RGB and mono variants, whose textures hold
+        channel means (read from the material). ``None`` for textures given per channel
+        (an ``rgb`` ``eta``/``k`` in an RGB variant). Tables are built from it: a dataset's
+        resampling (within 1e-4) moves a thick film's phase by ~1e-3 rad, the budget of a
+        table's error."""
         wl = np.asarray(wavelengths, np.float64)
         channels = colour_channels()
 
@@ -161,7 +223,7 @@ class SpectralIndex:
                 v = self.material.index(np.clip(wl, GRID[0], GRID[-1]))
                 return v.real if name == "eta" else v.imag
             if channels is None or tex.class_name() == "UniformSpectrum":
-                return texture_on_grid(tex, wl)
+                return self._data_part(name, wl)
             return None
         eta = part(self.eta, "eta")
         if real or eta is None:
@@ -210,7 +272,9 @@ class SpectralIndex:
             tex = getattr(self, part)
             tp = mi.traverse(tex)
             wl, values = arrays["wavelengths"], arrays["values"]
-            if unchanged(tp["wavelengths"], wl) and unchanged(tp["values"], values):
+            written = self._written[part] if part in self._written else (
+                tp["wavelengths"], tp["values"])
+            if unchanged(written[0], wl) and unchanged(written[1], values):
                 continue
             w = np.asarray(dr.detach(wl), np.float64).ravel()
             n = dr.width(values)
@@ -223,8 +287,12 @@ class SpectralIndex:
                                     f"increasing wavelengths (nm), got {w.size} values "
                                     f"in [{w.min() if w.size else math.nan:.7g}, "
                                     f"{w.max() if w.size else math.nan:.7g}]")
-            tp["wavelengths"] = wl
-            tp["values"] = values
+            if self.uniform_grid is None:
+                tp["wavelengths"] = wl
+                tp["values"] = values
+            else:
+                tp["values"] = resample_linear(w, values, self.uniform_grid)
+                self._written[part] = _snapshot(arrays)
             tp.update()
             edited = True
         if edited:
@@ -232,6 +300,26 @@ class SpectralIndex:
             self.knots = np.unique(np.concatenate(
                 [np.asarray(dr.detach(a["wavelengths"]), np.float64).ravel()
                  for a in self.arrays.values()]))
+
+
+def _snapshot(arrays: dict) -> tuple:
+    """``(wavelengths, values)`` as new Python objects holding the same variables: an
+    edit through ``mi.traverse`` assigns into the objects :meth:`SpectralIndex.traverse`
+    exposed, and the snapshot keeps what they held before it."""
+    return tuple(type(arrays[name])(arrays[name]) for name in ("wavelengths", "values"))
+
+
+def resample_linear(wavelengths: np.ndarray, values, grid: np.ndarray):
+    """The linear interpolation of ``values`` (a Dr.Jit array, one per entry of the
+    increasing ``wavelengths``) at ``grid``, held constant past the ends: a gather of two
+    knots and a lerp per grid wavelength, so gradients reach ``values``."""
+    mi = mitsuba_module()
+    w = np.asarray(wavelengths, np.float64)
+    i = np.clip(np.searchsorted(w, grid, side="right") - 1, 0, w.size - 2)
+    t = np.clip((grid - w[i]) / (w[i + 1] - w[i]), 0.0, 1.0)
+    lo = dr.gather(mi.Float, values, mi.UInt32(i.astype(np.uint32)))
+    hi = dr.gather(mi.Float, values, mi.UInt32((i + 1).astype(np.uint32)))
+    return dr.lerp(lo, hi, mi.Float(t.astype(np.float32)))
 
 
 def _check_real_medium(index: SpectralIndex, name: str) -> SpectralIndex:
