@@ -22,6 +22,7 @@ def reflection_probability(R, T):
 def chosen_weight(selected_r, prob_r, R, T):
     """The weight of the chosen lobe: ``R / prob_r`` where reflection was chosen, ``T / (1
     - prob_r)`` where transmission was (no division by a zero probability, whose lobe is
-    never chosen)."""
-    return dr.select(selected_r, R / dr.select(prob_r > 0, prob_r, 1.0),
-                     T / dr.select(prob_r < 1, 1.0 - prob_r, 1.0))
+    never chosen), formed as the chosen lobe times one reciprocal per lane rather than a
+    division per wavelength and lobe."""
+    p = dr.select(selected_r, prob_r, 1.0 - prob_r)
+    return dr.select(selected_r, R, T) * dr.rcp(dr.select(p > 0, p, 1.0))
