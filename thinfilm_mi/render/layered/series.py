@@ -381,12 +381,14 @@ class SeriesEstimator:
         bs.pdf = dr.select(sel_spec, prob_spec, (1.0 - prob_spec) * pdf_diff)
 
         weight = mi.UnpolarizedSpectrum(0.0)
+        # the chosen component's probability, inverted once per lane
+        p = dr.select(sel_spec, prob_spec, 1.0 - prob_spec)
+        inv_p = dr.rcp(dr.select(p > 0, p, 1.0))
         if has_spec:
-            weight = dr.select(sel_spec, k_r / dr.select(prob_spec > 0, prob_spec, 1.0), weight)
+            weight = dr.select(sel_spec, k_r * inv_p, weight)
         if has_diff:
             # f cos / pdf with f = k_d t_i t_o series / pi and pdf = (1 - P_spec) cos / pi
-            w_diff = (self.diffuse(si, kd, cos_i, wo_diff, t_i, series, sel_diff)
-                      / dr.select(prob_spec < 1, 1.0 - prob_spec, 1.0))
+            w_diff = self.diffuse(si, kd, cos_i, wo_diff, t_i, series, sel_diff) * inv_p
             weight = dr.select(sel_diff & (pdf_diff > 0), w_diff, weight)
         # the film's reflection is polarized, the light through the base depolarized
         lobe = self.mode.select(sel_spec, spec_lobe, self.mode.depolarized)
