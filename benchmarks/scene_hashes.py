@@ -43,6 +43,12 @@ VARIANTS = ("llvm_ad_spectral", "llvm_ad_rgb", "llvm_ad_spectral_polarized")
 #: flips on a rare path is an outlier the mean absorbs
 IMAGE_RTOL = 1e-4
 
+#: Seconds a variant's child may take (its 15 scenes render in well under a minute on a
+#: shared 2-core machine): a child was seen waiting on a lock for good while it loaded a
+#: scene with an EXR texture (rough_films.xml) right after a one-thread render, so the
+#: run stops with a message instead of blocking its caller
+CHILD_TIMEOUT = 600
+
 
 def image_difference(new, old) -> float:
     """Mean absolute difference of two images relative to the old one's mean."""
@@ -118,9 +124,17 @@ def main() -> int:
         [str(REPO)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
     extra = ["--images", str(Path(args.images).resolve())] if args.images else []
     for variant in VARIANTS:
-        res = subprocess.run([sys.executable, __file__, "--child", variant, "--size", args.size,
-                              "--spp", str(args.spp)] + extra, capture_output=True, text=True,
-                             cwd=REPO, env=env)
+        try:
+            res = subprocess.run([sys.executable, __file__, "--child", variant, "--size",
+                                  args.size, "--spp", str(args.spp)] + extra,
+                                 capture_output=True, text=True, cwd=REPO, env=env,
+                                 timeout=CHILD_TIMEOUT)
+        except subprocess.TimeoutExpired as e:
+            done = (e.stdout or b"").decode(errors="replace") if isinstance(e.stdout, bytes) \
+                else (e.stdout or "")
+            print(f"{variant}: no result within {CHILD_TIMEOUT} s (a child that hangs while it "
+                  f"loads a scene; run again){done and ': ' + done[-200:]}", file=sys.stderr)
+            return 2
         if res.returncode:
             print(res.stderr, file=sys.stderr)
             return res.returncode
