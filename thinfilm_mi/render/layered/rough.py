@@ -200,11 +200,11 @@ class RoughEstimator:
         w0 = -b0
         beta0 = mi.Spectrum(t0 * self.absorb(si, w0.z, ok0))
         zero = dr.zeros(mi.Spectrum)
-        acc0, light_acc0 = mi.Spectrum(zero), mi.Spectrum(zero)
+        acc0, light_acc0, gathered0 = mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(zero)
         if self.mode.polarized:
             # Mueller matrices that start as literals fill in along the loop (walk.py)
-            dr.make_opaque(acc0, light_acc0, beta0, light)
-        state = (acc0, light_acc0, mi.Spectrum(zero), dr.detach(beta0), mi.Vector3f(w0),
+            dr.make_opaque(acc0, light_acc0, gathered0)
+        state = (acc0, light_acc0, gathered0, dr.detach(beta0), mi.Vector3f(w0),
                  mi.UInt32(0), rng, mi.Bool(ok0))
         side = (v, p_o, ok_o, light if totals is None else dr.detach(light), light)
 
