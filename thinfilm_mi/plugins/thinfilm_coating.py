@@ -39,6 +39,19 @@ Thin-film coating over any BSDF (:monosp:`thinfilm_coating`)
    - |float|
    - Thickness ``d`` of the coat medium in the unit of ``coat_sigma_a``, >= 0
      (default: 1). |differentiable|.
+ * - alpha, alpha_u, alpha_v
+   - |float| or |texture|
+   - Roughness of the top interface, isotropic (``alpha``) or along the tangent and
+     bitangent (``alpha_u`` and ``alpha_v``), as in Mitsuba's ``roughdielectric``
+     (default: 0, a smooth top). The films then lie on its microfacets, as in
+     ``thinfilm_roughdielectric``. A rough top needs ``int_ior`` to differ from
+     ``ext_ior``; textures must be > 0. |differentiable|.
+ * - distribution
+   - |string|
+   - The rough top's microfacet distribution: ``beckmann`` (default) or ``ggx``.
+ * - sample_visible
+   - |bool|
+   - Sample the rough top's visible normals, as Mitsuba (default: true).
  * - max_bounces
    - |int|
    - Most base vertices of a path, >= 1 (default: 64), in the walk and in the closed
@@ -123,6 +136,16 @@ depolarized). AD: film thicknesses and indices, ``coat_sigma_a`` and
 ``coat_thickness`` carry gradients (in polarized variants only where no walk runs: over
 a pure-delta base and the closed form over ``diffuse``); the nested BSDF's own
 parameters keep theirs (they appear under ``bsdf.`` in ``mi.traverse``).
+
+**A rough top** (``alpha`` > 0): component 0 is the top's glossy reflection
+(``thinfilm_roughdielectric``'s, exactly); component 1 the light that crosses the top,
+estimated by the walk of pbrt-v4's ``LayeredBxDF``: the top's transmission is sampled from
+both directions, and at every base vertex two next-event estimates through the rough top
+(the light side's sampled direction, the base's own sample) are combined by the power
+heuristic; the underside's reflection is sampled between vertices. ``sample`` draws from
+a fixed mixture of the top's reflection lobe, the base's lobes refracted out and a cosine
+lobe, whose density is what ``pdf`` returns. A delta base under a rough top is glossy.
+Details: ``thinfilm_mi/render/layered/rough.py``.
 
 **Bases with delta lobes.** A path's last non-delta base vertex is connected to the exit
 direction through the base's ``eval``; the delta round trips after it (light entering,

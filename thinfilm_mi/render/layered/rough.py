@@ -61,7 +61,7 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.layered.bottom import base_interaction, intensity
 from thinfilm_mi.render.layered.delta import DeltaBase
 from thinfilm_mi.render.layered.engine import Layered
-from thinfilm_mi.render.layered.nested import MIXTURE
+from thinfilm_mi.render.layered.nested import MIXTURE, NestedEstimator
 from thinfilm_mi.render.layered.walk import RR_DEPTH, eval_seed, logical_not, sample_seed
 from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.render.variant import spectral_mean
@@ -134,35 +134,24 @@ class RoughEstimator:
         """Re-derive the load-time quantities after an edit (the top refreshed first)."""
         self.medium.refresh()
 
-    def traverse(self, callback) -> None:
-        """The coat medium's parameters (the top and the bottom expose their own)."""
-        self.medium.traverse(callback)
-
-    def parameters_changed(self, keys) -> None:
-        self.refresh()
+    #: the coat medium's parameters (the top and the bottom expose their own), whether a
+    #: parameter of the top, the medium or the base carries gradients, and the refresh
+    #: after an edit: the smooth estimator's (they read ``top``, ``medium``, ``bottom`` and
+    #: :meth:`refresh` alone)
+    traverse = NestedEstimator.traverse
+    tracks_gradients = NestedEstimator.tracks_gradients
+    parameters_changed = NestedEstimator.parameters_changed
 
     def describe(self) -> str:
-        """The stack, the roughness, the media and the base, for ``to_string``."""
-        stack = self.top.stack
-        return (f"  layers = {self.top.describe()},\n  int_ior = {stack.substrate.label},\n"
-                f"  ext_ior = {stack.ambient.label},\n  bsdf = {self.bottom.describe()}\n")
+        """The stack, the media and the base (the smooth estimator's), then the roughness,
+        for ``to_string``."""
+        return NestedEstimator.describe(self) + self.top.microfacet.describe()
 
     # -- pieces ----------------------------------------------------------------
     def absorb(self, si, cos, active):
         """Beer–Lambert along one crossing of the coat at ``|cos|`` (1 without a medium)."""
         a = self.medium.attenuation(si, dr.abs(cos), active)
         return 1.0 if a is None else a
-
-    def tracks_gradients(self, si, active) -> bool:
-        """Whether a parameter of the top (films, roughness), the coat medium or the
-        nested BSDF carries gradients (AD variants; decided when the kernel is traced)."""
-        mi = mitsuba_module()
-        if not dr.is_diff_v(mi.Float):
-            return False
-        own = self.medium.values(si, active)
-        if self.top.carries_gradients(si, active) or any(dr.grad_enabled(v) for v in own):
-            return True
-        return self.bottom.carries_gradients()
 
     def walk(self, ctx_mode, si, wo, seed, active):
         """The walk's estimate of the light that crosses the top (module docstring), the

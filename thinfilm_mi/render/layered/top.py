@@ -272,4 +272,4 @@ class RoughTop(SmoothTop):
 
     def describe(self) -> str:
         """The stack and the roughness, for ``to_string``."""
-        return f"{self.stack.describe()},\n{self.microfacet.describe().rstrip().rstrip(',')}"
+        return f"{self.stack.describe()}, {self.microfacet.describe().strip().rstrip(',')}"
