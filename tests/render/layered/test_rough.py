@@ -107,9 +107,25 @@ def test_chi2_sample_against_pdf(base, alpha):
     """``sample``'s directions have the density ``pdf`` returns (both components: the
     top's reflection lobe, the base's lobe refracted out, the cosine lobe): Mitsuba's chi2
     test at significance 0.01, 24 x 48 cells, 16 x 16 points per cell (40 degrees)."""
+    b = rough(BASES[base], alpha, layers=FILMS)
+    test = run_chi2(b)
+    # a base direction beyond the critical angle is a failed sample (pdf leaves it out
+    # alike): over diffuse, 1 - 1/1.5² of the base lobe's share
+    assert float(test.histogram_sum[0]) > 0.6
+
+
+def test_chi2_anisotropic_beckmann_top():
+    """The same over an anisotropic Beckmann top (``alpha_u`` 0.1, ``alpha_v`` 0.4)."""
+    b = mi.load_dict({"type": "thinfilm_coating", "int_ior": 1.5, "alpha_u": 0.1, "alpha_v": 0.4,
+                      "distribution": "beckmann", "layers": FILMS, "bsdf": BASES["roughconductor"]})
+    run_chi2(b)
+
+
+def run_chi2(b):
+    """Mitsuba's chi2 test of ``b``'s ``sample`` against its ``pdf`` at 40 degrees; asserts
+    that it passes and returns it."""
     from mitsuba.chi2 import ChiSquareTest, SphericalDomain
 
-    b = rough(BASES[base], alpha, layers=FILMS)
     ctx = mi.BSDFContext()
 
     def sample_func(sample):
@@ -123,9 +139,7 @@ def test_chi2_sample_against_pdf(base, alpha):
     test = ChiSquareTest(domain=SphericalDomain(), sample_func=sample_func, pdf_func=pdf_func,
                          sample_dim=3, sample_count=100_000, res=24, ires=16)
     assert test.run(0.01), test.messages
-    # a base direction beyond the critical angle is a failed sample (pdf leaves it out
-    # alike): over diffuse, 1 - 1/1.5² of the base lobe's share
-    assert float(test.histogram_sum[0]) > 0.6
+    return test
 
 
 def test_sample_pdf_is_pdf_and_weight_estimates_eval():
