@@ -712,3 +712,13 @@ def test_rough_top_renders_in_every_variant(variant):
     # the mean of the 64 pixels (~2/3 on the sphere; a pixel's 16 samples may still hold a
     # rare heavy weight): at most 1 plus its noise
     assert 0.5 < image.mean() < 1.05, image
+
+
+def test_polarized_gradients_under_a_rough_top_are_refused(polarized):
+    """The rough walk's replay has no Mueller form either: refused, saying why."""
+    b = mi.load_dict({**ROUGH, "layers": FILMS})
+    params = mi.traverse(b)
+    dr.enable_grad(params["alpha.value"])
+    params.update()
+    with pytest.raises(ThinFilmError, match="gradients in polarized variants under a rough top"):
+        b.eval(mi.BSDFContext(), _pol_interaction(mi.Vector3f(0, 0, 1), 1), mi.Vector3f(0, 0, 1))

@@ -50,10 +50,11 @@ class Top(ABC):
     unpolarised weight of one of its lobes into the variant's value (:meth:`crossing`),
     says whether its parameters carry gradients, and exposes and refreshes them.
     :attr:`smooth` says whether its lobes are deltas: the estimators then refract
-    deterministically (next-event estimation through the top). A rough top (a microfacet
-    distribution on the interface) is not smooth: it adds the sampling and evaluation of
-    its reflection and transmission from both sides (Guo et al. 2018), which an estimator
-    that accepts it reads."""
+    deterministically (next-event estimation through the top). A rough top
+    (:class:`RoughTop`: a microfacet distribution on the interface) is not smooth: it adds
+    the sampling and evaluation of its reflection and transmission from both sides (Guo et
+    al. 2018), which its own estimator
+    (:class:`~thinfilm_mi.render.layered.rough.RoughEstimator`) reads."""
     #: whether reflection and transmission are delta lobes
     smooth = True
 
