@@ -39,6 +39,19 @@ Thin-film coating over any BSDF (:monosp:`thinfilm_coating`)
    - |float|
    - Thickness ``d`` of the coat medium in the unit of ``coat_sigma_a``, >= 0
      (default: 1). |differentiable|.
+ * - alpha, alpha_u, alpha_v
+   - |float| or |texture|
+   - Roughness of the top interface, isotropic (``alpha``) or along the tangent and
+     bitangent (``alpha_u`` and ``alpha_v``), as in Mitsuba's ``roughdielectric``
+     (default: 0, a smooth top). The films then lie on its microfacets, as in
+     ``thinfilm_roughdielectric``. A rough top needs ``int_ior`` to differ from
+     ``ext_ior``; textures must be > 0. |differentiable|.
+ * - distribution
+   - |string|
+   - The rough top's microfacet distribution: ``beckmann`` (default) or ``ggx``.
+ * - sample_visible
+   - |bool|
+   - Sample the rough top's visible normals, as Mitsuba (default: true).
  * - max_bounces
    - |int|
    - Most base vertices of a path, >= 1 (default: 64), in the walk and in the closed
@@ -124,6 +137,16 @@ depolarized). AD: film thicknesses and indices, ``coat_sigma_a`` and
 a pure-delta base and the closed form over ``diffuse``); the nested BSDF's own
 parameters keep theirs (they appear under ``bsdf.`` in ``mi.traverse``).
 
+**A rough top** (``alpha`` > 0): component 0 is the top's glossy reflection
+(``thinfilm_roughdielectric``'s, exactly); component 1 the light that crosses the top,
+estimated by the walk of pbrt-v4's ``LayeredBxDF``: the top's transmission is sampled from
+both directions, and at every base vertex two next-event estimates through the rough top
+(the light side's sampled direction, the base's own sample) are combined by the power
+heuristic; the underside's reflection is sampled between vertices. ``sample`` draws from
+a fixed mixture of the top's reflection lobe, the base's lobes refracted out and a cosine
+lobe, whose density is what ``pdf`` returns. A delta base under a rough top is glossy.
+Details: ``thinfilm_mi/render/layered/rough.py``.
+
 **Bases with delta lobes.** A path's last non-delta base vertex is connected to the exit
 direction through the base's ``eval``; the delta round trips after it (light entering,
 reflected by the base's delta lobe and the underside, again and again) are summed in closed
@@ -156,17 +179,18 @@ from __future__ import annotations
 
 import mitsuba as mi
 
-from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.render import modes
-from thinfilm_mi.render.layered.bottom import NestedBottom, nested_bsdf
+from thinfilm_mi.render.layered.bottom import NestedBottom
 from thinfilm_mi.render.layered.coat import CoatMedium
 from thinfilm_mi.render.layered.engine import Layered
 from thinfilm_mi.render.layered.nested import NestedEstimator
-from thinfilm_mi.render.layered.top import SmoothTop
+from thinfilm_mi.render.layered.rough import RoughEstimator, RoughLayered
+from thinfilm_mi.render.layered.top import RoughTop, SmoothTop
 from thinfilm_mi.render.layered.walk import DEFAULT_MAX_BOUNCES
-from thinfilm_mi.render.media import real_index
-from thinfilm_mi.render.params import ParameterGuard
-from thinfilm_mi.render.props import check_unqueried, optional_texture, stack_from_props
+from thinfilm_mi.render.microfacet import DISTRIBUTIONS, Microfacet
+from thinfilm_mi.render.params import MAX_ALPHA, ParameterGuard
+from thinfilm_mi.render.reader import PluginProperties, finite_number
 from thinfilm_mi.render.variant import check_variant
 
 __all__ = ["NAME", "ThinFilmCoating"]
@@ -176,31 +200,59 @@ NAME = "thinfilm_coating"
 DEFAULT_COAT_IOR = 1.5
 
 
+def rough_top(read, stack):
+    """The top's :class:`~thinfilm_mi.render.microfacet.Microfacet`, or ``None`` for the
+    smooth top: no roughness given, or every one given a number equal to 0. A rough top
+    needs a refraction (different mean indices), as ``thinfilm_roughdielectric``."""
+    names = [n for n in ("alpha", "alpha_u", "alpha_v") if n in read]
+    values = [read.value(n) for n in names]
+    numbers = [finite_number(f"'{n}'", v, 0.0, MAX_ALPHA, also=" or a texture")
+               for n, v in zip(names, values)
+               if isinstance(v, (int, float)) and not isinstance(v, bool)]
+    if len(numbers) == len(names) and not any(numbers):
+        read.choice("distribution", DISTRIBUTIONS)
+        read.boolean("sample_visible", True)
+        return None
+    microfacet = Microfacet(read)
+    if stack.substrate.mean_real() == stack.ambient.mean_real():
+        raise ThinFilmError(f"a rough top ({', '.join(f'{n}={v!r}' for n, v in zip(names, values))}) "
+                            f"needs 'int_ior' ({stack.substrate.label}) and 'ext_ior' "
+                            f"({stack.ambient.label}) to differ: a rough interface without "
+                            "refraction is undefined")
+    return microfacet
+
+
 class ThinFilmCoating(mi.BSDF):
     """The ``thinfilm_coating`` plugin: its properties read into a
     :class:`~thinfilm_mi.render.layered.engine.Layered` (:attr:`layered`): a smooth top over
     the nested BSDF, which does the work."""
 
     def __init__(self, props):
-        check_variant(NAME)
-        mode = modes.current()
-        base = nested_bsdf(props, NAME)
-        interior = real_index(props.get("int_ior", DEFAULT_COAT_IOR), "int_ior")
-        stack = stack_from_props(props, NAME, interior, sides={False: True, True: False})
-        sigma_a = optional_texture(props, "coat_sigma_a", NAME)
-        thickness = props.get("coat_thickness", 1.0)
-        if isinstance(thickness, bool) or not isinstance(thickness, (int, float)):
-            raise ThinFilmError(f"{NAME}: 'coat_thickness' must be a number, got {thickness!r}")
-        bounces = props.get("max_bounces", DEFAULT_MAX_BOUNCES)
-        if isinstance(bounces, bool) or not isinstance(bounces, int) or bounces < 1:
-            raise ThinFilmError(f"{NAME}: 'max_bounces' must be an integer >= 1, got {bounces!r}")
-        check_unqueried(props, NAME)
-        top, bottom = SmoothTop(stack, mode), NestedBottom(base)
-        medium = CoatMedium(sigma_a, float(thickness), NAME)
-        #: the layered engine (render/layered/)
-        self.layered = Layered(top, bottom, NestedEstimator(top, bottom, medium, mode, bounces, NAME))
-        # component 0: the stack's reflection and the base's all-delta chains; component
-        # 1 absent over a pure-delta base (conductor, dielectric): a pure delta BSDF
+        with plugin_boundary(NAME):
+            check_variant(NAME)
+            mode = modes.current()
+            read = PluginProperties(props)
+            base = read.nested_bsdf()
+            interior = read.index("int_ior", DEFAULT_COAT_IOR)
+            stack = read.kernel_stack(interior, sides={False: True, True: False}, plugin=NAME)
+            microfacet = rough_top(read, stack)
+            sigma_a = read.factor("coat_sigma_a")
+            thickness = read.number("coat_thickness", 1.0, 0.0)
+            bounces = read.integer("max_bounces", DEFAULT_MAX_BOUNCES, 1)
+            read.check_unqueried()
+            bottom, medium = NestedBottom(base), CoatMedium(sigma_a, thickness, NAME)
+            if microfacet is None:
+                top = SmoothTop(stack, mode)
+                estimator = NestedEstimator(top, bottom, medium, mode, bounces, NAME)
+                #: the layered engine (render/layered/)
+                self.layered = Layered(top, bottom, estimator)
+            else:
+                top = RoughTop(stack, mode, microfacet)
+                estimator = RoughEstimator(top, bottom, medium, mode, bounces, NAME)
+                self.layered = RoughLayered(top, bottom, estimator)
+        # smooth top: component 0 the stack's reflection and the base's all-delta chains,
+        # component 1 absent over a pure-delta base (a pure delta BSDF); rough top:
+        # component 0 the top's glossy reflection, component 1 the light that crosses it
         components = self.layered.components()
         flags = mi.BSDFFlags.Empty
         for component in components:

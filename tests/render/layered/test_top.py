@@ -9,7 +9,7 @@ import pytest
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi  # noqa: E402,F401
 from tests.support.layered import LOSSLESS, WLS, coating, interaction, tmm_rt  # noqa: E402
-from thinfilm_mi.render.layered.top import SmoothTop, Top, inward, outward  # noqa: E402
+from thinfilm_mi.render.layered.top import RoughTop, SmoothTop, Top, inward, outward  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -69,3 +69,41 @@ def test_a_top_must_implement_the_interface():
             return None
     with pytest.raises(TypeError, match="abstract"):
         Partial()
+
+
+def test_rough_top_lobes_are_thinfilm_roughdielectrics():
+    """:class:`RoughTop`'s four lobes (reflection and transmission, lit from outside and
+    from the coat medium) are ``thinfilm_roughdielectric``'s ``eval`` of the same stack
+    and roughness (``T`` read from outside at the outer direction's microfacet angle: the
+    same as the reversed stack's from inside, float32 ~1e-6), and its samples' weights are
+    that plugin's with the lobe fixed (the same microfacet sampled: 1e-5 relative)."""
+    props = {"int_ior": 1.5, "alpha": 0.4, "distribution": "ggx", "layers": LOSSLESS,
+             "tabulate": False}
+    ref = mi.load_dict({"type": "thinfilm_roughdielectric", **props})
+    top = coating(**props, ext_ior=1.000277).coating.top
+    assert isinstance(top, RoughTop) and not top.smooth
+    rng = np.random.default_rng(6)
+    n = 512
+
+    def directions(sign):
+        mu, phi = rng.uniform(0.05, 1.0, n), rng.uniform(0, 2 * np.pi, n)
+        s = np.sqrt(1 - mu ** 2)
+        return mi.Vector3f(mi.Float(s * np.cos(phi)), mi.Float(s * np.sin(phi)), mi.Float(sign * mu))
+
+    for sa, sb in ((1, 1), (-1, -1), (1, -1), (-1, 1)):
+        a, b = directions(sa), directions(sb)
+        si = interaction(1.0, n)
+        si.wi = a
+        reflect = sa == sb
+        want = np.array(ref.eval(mi.BSDFContext(), si, b))
+        got = np.array(top.lobe(si, a, b, mi.Bool(True), reflect=reflect, inside=sa < 0)[0])
+        np.testing.assert_allclose(got, want, rtol=1e-4, atol=1e-6 * np.abs(want).max())
+        ctx = mi.BSDFContext()
+        ctx.component = 0 if reflect else 1
+        s2 = mi.Point2f(mi.Float(rng.random(n, dtype=np.float32)), mi.Float(rng.random(n, dtype=np.float32)))
+        bs, w_ref = ref.sample(ctx, si, mi.Float(0.5), s2)
+        wo, w, _, ok = top.sample(si, a, s2, mi.Bool(True), reflect, sa < 0)
+        ok = np.array(ok) & (np.array(bs.pdf) > 0)
+        assert ok.mean() > 0.25   # (from inside, beyond the critical angle: no transmission)
+        np.testing.assert_allclose(np.array(wo)[:, ok], np.array(bs.wo)[:, ok], atol=1e-5)
+        np.testing.assert_allclose(np.array(w)[:, ok], np.array(w_ref)[:, ok], rtol=1e-4, atol=1e-6)

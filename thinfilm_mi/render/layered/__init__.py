@@ -14,7 +14,10 @@ a registered estimator (pbrt-v4's ``LayeredBxDF``; no plugin classes here). The 
 * :mod:`~thinfilm_mi.render.layered.nested` — the estimator over a nested BSDF, summed by a
   closed form (:mod:`~thinfilm_mi.render.layered.forms`) or the random walk
   (:mod:`~thinfilm_mi.render.layered.walk`), with the delta-base chain
-  (:mod:`~thinfilm_mi.render.layered.delta`).
+  (:mod:`~thinfilm_mi.render.layered.delta`);
+* :mod:`~thinfilm_mi.render.layered.rough` — the estimator under a rough top
+  (:class:`~thinfilm_mi.render.layered.top.RoughTop`), pbrt-v4's walk with next-event
+  estimation through it.
 """
 
 __all__: list = []

@@ -1,8 +1,9 @@
 r"""The top interface of a layered BSDF (no plugin classes here): :class:`Top`, what the
-engine (:mod:`thinfilm_mi.render.layered.engine`) and its estimators read of it, and
+engine (:mod:`thinfilm_mi.render.layered.engine`) and its estimators read of it,
 :class:`SmoothTop`, a smooth thin-film stack (a
 :class:`~thinfilm_mi.render.kernel.KernelStack`) whose reflection and transmission are
-delta lobes.
+delta lobes, and :class:`RoughTop`, the same stack on the microfacets of a rough interface
+(``thinfilm_roughdielectric``'s model), whose lobes are glossy.
 
 Geometry (local shading frame, ``z`` up): the top lies between the ambient (index
 ``η_e``) and the medium above the bottom (``η_c``). A direction ``w`` outside has the inner
@@ -20,7 +21,7 @@ import numpy as np
 from thinfilm_mi.render.textures import GRID, mitsuba_module
 from thinfilm_mi.tabulate.base import opaque_float
 
-__all__ = ["Top", "SmoothTop", "inward", "outward"]
+__all__ = ["Top", "SmoothTop", "RoughTop", "inward", "outward"]
 
 
 def inward(w, eta):
@@ -49,10 +50,11 @@ class Top(ABC):
     unpolarised weight of one of its lobes into the variant's value (:meth:`crossing`),
     says whether its parameters carry gradients, and exposes and refreshes them.
     :attr:`smooth` says whether its lobes are deltas: the estimators then refract
-    deterministically (next-event estimation through the top). A rough top (a microfacet
-    distribution on the interface) is not smooth: it adds the sampling and evaluation of
-    its reflection and transmission from both sides (Guo et al. 2018), which an estimator
-    that accepts it reads."""
+    deterministically (next-event estimation through the top). A rough top
+    (:class:`RoughTop`: a microfacet distribution on the interface) is not smooth: it adds
+    the sampling and evaluation of its reflection and transmission from both sides (Guo et
+    al. 2018), which its own estimator
+    (:class:`~thinfilm_mi.render.layered.rough.RoughEstimator`) reads."""
     #: whether reflection and transmission are delta lobes
     smooth = True
 
@@ -162,3 +164,113 @@ class SmoothTop(Top):
     def describe(self) -> str:
         """The stack, for ``to_string``."""
         return self.stack.describe()
+
+
+class RoughTop(SmoothTop):
+    r"""The thin-film stack ``stack`` on the microfacets of ``microfacet`` (a
+    :class:`~thinfilm_mi.render.microfacet.Microfacet`) as a top: Walter et al.'s rough
+    dielectric with the stack's ``R`` and ``T`` at the microfacet's local angle, as
+    ``thinfilm_roughdielectric``. Directions here are those of the top's own frame: the
+    ambient above (``z > 0``), the coat medium below; ``a`` and ``b`` follow Mitsuba's
+    BSDF convention (radiance leaves along ``a``, light arrives from ``b``). ``R`` lit from
+    the coat medium is the reversed stack's at ``|a·m|``; ``T`` is read from outside at the
+    outer direction's ``|w·m|`` (``T`` is reciprocal), so the stack needs what the smooth
+    top needs. :meth:`inward` and :meth:`outward` (the mean refraction of the macro
+    surface) remain for the estimator's sampling mixture."""
+    smooth = False
+
+    def __init__(self, stack, mode, microfacet):
+        self.microfacet = microfacet
+        super().__init__(stack, mode)
+
+    def half_vector(self, a, b, reflect: bool):
+        """The microfacet normal (upper side) of ``a`` and ``b`` and ``η`` seen from ``a``'s
+        side (``η_b/η_a``)."""
+        eta = dr.select(a.z > 0, self.eta_f, dr.rcp(self.eta_f))
+        m = dr.normalize(a + b * (1.0 if reflect else eta))
+        return dr.mulsign(m, m.z), eta
+
+    def films(self, si, a, b, m, active, reflect: bool, inside: bool):
+        """The stack's weight of the lobe and its :class:`~thinfilm_mi.render.modes.Response`
+        lobe: ``R`` at ``|a·m|`` from ``a``'s side (``inside``: the coat medium's), ``T``
+        from outside at the outer direction's ``|w·m|``."""
+        if reflect:
+            resp = self.mode.response(self.stack, si, dr.abs(dr.dot(a, m)), active,
+                                      inside=inside, transmission=False)
+            return resp.R, resp.reflection
+        outer = b if inside else a
+        resp = self.mode.response(self.stack, si, dr.abs(dr.dot(outer, m)), active,
+                                  inside=False, transmission=True)
+        return resp.T, resp.transmission
+
+    def lobe(self, si, a, b, active, reflect: bool, inside: bool, want_value: bool = True,
+             ctx=None):
+        """``(f(a, b) |cos θ_b|, pdf)`` of the reflection (``reflect``) or the transmission
+        lobe for ``a`` on the side ``inside`` (the coat medium's: ``a.z < 0``; radiance:
+        ``(η_a/η_b)²`` on a crossing), the value ``None`` without ``want_value``; ``pdf``
+        is :meth:`sample`'s density of ``b`` within that lobe. ``ctx`` (radiance by default)
+        orients the Mueller matrices."""
+        mi = mitsuba_module()
+        m, eta = self.half_vector(a, b, reflect)
+        dot_a, dot_b = dr.dot(a, m), dr.dot(b, m)
+        side = (a.z * b.z > 0) if reflect else (a.z * b.z < 0)
+        active = active & side & ((a.z < 0) if inside else (a.z > 0)) & (dot_a * a.z > 0) & (dot_b * b.z > 0)
+        jac = dr.rcp(4.0 * dot_b) if reflect \
+            else eta * eta * dot_b / dr.square(dot_a + eta * dot_b)
+        sample_distr = self.microfacet.distribution(si, active, cos_theta_i=a.z)
+        pdf = dr.select(active, sample_distr.pdf(dr.mulsign(a, a.z), m) * dr.abs(jac), 0.0)
+        if not want_value:
+            return None, pdf
+        distr = self.microfacet.distribution(si, active)
+        dg = distr.eval(m) * distr.G(a, b, m)
+        weight, lobe = self.films(si, a, b, m, active, reflect, inside)
+        if reflect:
+            value = weight * (dg / (4.0 * dr.abs(a.z)))
+        else:
+            value = weight * dr.abs(dg * dot_a * dot_b / (a.z * dr.square(dot_a + eta * dot_b)))
+        ctx = mi.BSDFContext(mi.TransportMode.Radiance) if ctx is None else ctx
+        value = self.mode.value(value, lobe, ctx, a, b, m)
+        return dr.select(active, value, dr.zeros(mi.Spectrum)), pdf
+
+    def sample(self, si, a, sample2, active, reflect: bool, inside: bool):
+        """``(b, weight, pdf, ok)``: a direction of the reflection (``reflect``) or the
+        transmission lobe from ``a`` on the side ``inside`` (a microfacet normal drawn as Mitsuba's
+        ``roughdielectric`` draws it), ``weight = f |cos θ_b| / pdf`` (:meth:`lobe`).
+        The direction and the density are detached: a sampling decision, the weight
+        carries the gradients of ``f`` alone."""
+        mi = mitsuba_module()
+        with dr.suspend_grad():
+            sample_distr = self.microfacet.distribution(si, active, cos_theta_i=a.z)
+            m, pdf_m = sample_distr.sample(dr.mulsign(a, a.z), sample2)
+            dot_a = dr.dot(a, m)
+            ok = active & (pdf_m > 0) & (dot_a * a.z > 0)
+            if reflect:
+                b = mi.reflect(a, m)
+                ok = ok & (a.z * b.z > 0)
+            else:
+                _, cos_t, _, eta_ti = mi.fresnel(dot_a, self.eta_f)
+                b = mi.refract(a, m, cos_t, eta_ti)
+                ok = ok & (cos_t != 0) & (a.z * b.z < 0)
+        value, pdf = self.lobe(si, a, b, ok, reflect, inside)
+        pdf = dr.detach(pdf)
+        ok = ok & (pdf > 0)
+        weight = dr.select(ok, value / dr.select(ok, pdf, 1.0), dr.zeros(mitsuba_module().Spectrum))
+        return b, weight, pdf, ok
+
+    def carries_gradients(self, si, active) -> bool:
+        """Whether a film's thickness or index, or the roughness, carries gradients."""
+        mi = mitsuba_module()
+        if not dr.is_diff_v(mi.Float):
+            return False
+        alphas = (self.microfacet.alpha_u, self.microfacet.alpha_v)
+        return super().carries_gradients(si, active) or any(
+            dr.grad_enabled(tex.eval_1(si, active)) for tex in alphas)
+
+    def traverse(self, callback) -> None:
+        """The stack's parameters and the roughness (``alpha`` or ``alpha_u``/``alpha_v``)."""
+        super().traverse(callback)
+        self.microfacet.traverse(callback)
+
+    def describe(self) -> str:
+        """The stack and the roughness, for ``to_string``."""
+        return f"{self.stack.describe()}, {self.microfacet.describe().strip().rstrip(',')}"

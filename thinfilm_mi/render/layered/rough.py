@@ -1,0 +1,366 @@
+r"""The estimator under a rough top (no plugin classes here): ``thinfilm_coating`` with
+``alpha > 0``, a :class:`~thinfilm_mi.render.layered.top.RoughTop` (the thin-film stack
+on the microfacets of a rough interface) over a
+:class:`~thinfilm_mi.render.layered.bottom.NestedBottom`, through a
+:class:`~thinfilm_mi.render.layered.coat.CoatMedium` (Guo, Hašan, Yan and Zhao 2018;
+pbrt-v4's ``LayeredBxDF``), and the engine that names its components
+(:class:`RoughLayered`).
+
+**The estimate** of ``f cos θ_o`` (:meth:`RoughEstimator.eval_pdf`; ``ω_i``, ``ω_o``
+outside; the top's directions in its own frame, the coat medium below, ``f_t`` its lobes
+in radiance transport, ``A`` Beer–Lambert along one crossing of the coat)::
+
+    f cos θ_o = f_t(ω_i, ω_o) cos θ_o  (the top's reflection, evaluated)
+              + the walk's estimate of the light that crosses the top
+
+The walk (:meth:`RoughEstimator.walk`, pbrt-v4's ``LayeredBxDF::f``): the top's
+transmission is sampled from ``ω_i`` (``w_0``: the base's ``wi``, weight ``β_0 = f_t cos /
+p · A(w_0)``) and, once for the walk, from ``ω_o`` (``v``, density ``p_o(v)``: the light's
+side). At every base vertex ``k`` two next-event estimates reach ``ω_o`` through the top,
+combined by the power heuristic:
+
+* towards ``-v``: ``β_k f_b(w_k, -v) cos · A(v) f_t(v, ω_o) cos θ_o / p_o(v)``, weight
+  ``p_o² / (p_o² + p_b²)`` (``p_b``: the base's density of ``-v``);
+* along the base's sample ``y`` (weight ``g``): ``β_k g A(y) f_t(-y, ω_o) cos θ_o``, weight
+  ``p_b² / (p_b² + p_o(-y)²)``, 1 where the base sampled a delta lobe (the light's side
+  never draws one).
+
+The walk then reflects at the underside, sampled from ``-y`` (the reflection lobe alone,
+its transmission being the next-event estimates' business): ``β_{k+1} = β_k g A(y) f_t
+cos / p · A(w_{k+1})``. Russian roulette from :data:`~thinfilm_mi.render.layered.walk.RR_DEPTH`
+base vertices, at most ``max_bounces`` (as :mod:`~thinfilm_mi.render.layered.walk`);
+random numbers from a PCG32 seeded with a hash of the directions in ``eval`` and of the
+sample's numbers in ``sample`` (the smooth walk's seeds). pbrt-v4 weighs the second
+estimate with the density of ``ω_o`` given ``-y``; here both weights use the density of
+the light's side sampler at the same inner direction, so that they sum to one.
+
+**Sampling** (:meth:`RoughEstimator.sample`): a deterministic mixture whose density
+:meth:`RoughEstimator.mixture_pdf` is exact::
+
+    p(ω_o) = w_R p_R(ω_o) + w_B p_b(ω_i', ω_o') (η_e/η_c)² cos θ_o / cos θ_o' + w_C cos θ_o / π
+
+``p_R``: the top's reflection lobe (visible normals, as ``thinfilm_roughdielectric``);
+``p_b``: the base's non-delta lobes at the mean refraction ``ω_i'`` refracted out (the
+smooth estimator's lobe); the cosine lobe for the interreflections. ``w_R = P_R + (1 -
+P_R)(1 - c) b̄``, ``w_B = (1 - P_R)(1 - c)(1 - b̄)``, ``w_C = (1 - P_R) c`` with ``P_R``
+the spectral mean of the stack's ``R(θ_i)``, ``c`` :data:`~thinfilm_mi.render.layered.nested.MIXTURE`
+and ``b̄`` the base's mean delta reflectance (1 over a pure-delta base: its light leaves
+about the mirror direction, spread by the two crossings, narrower than the top's own
+reflection). The weight is the walk's estimate of ``f cos θ_o`` over ``p``, so that
+``sample``, ``eval`` and ``pdf`` agree and MIS weights sum to one.
+
+**Gradients**: the sampled directions and densities are detached (sampling decisions);
+the values (the stack's ``R`` and ``T``, the microfacet terms, the base, the coat) carry
+them, so the estimate's derivative is an unbiased estimate of ``∂(f cos θ_o)``.
+"""
+from __future__ import annotations
+
+import drjit as dr
+
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render.layered.bottom import base_interaction, intensity
+from thinfilm_mi.render.layered.delta import DeltaBase
+from thinfilm_mi.render.layered.engine import Layered
+from thinfilm_mi.render.layered.nested import MIXTURE, NestedEstimator
+from thinfilm_mi.render.layered.walk import RR_DEPTH, eval_seed, logical_not, sample_seed
+from thinfilm_mi.render.textures import mitsuba_module
+from thinfilm_mi.render.variant import spectral_mean
+from thinfilm_mi.tabulate.base import opaque_float
+
+__all__ = ["RoughEstimator", "RoughLayered", "power_heuristic", "ratio"]
+
+
+def ratio(x):
+    """``x / detach(x)``: 1, with the gradient of ``log x`` (0 where ``x`` is 0)."""
+    live = dr.detach(x) != 0
+    return dr.select(live, x / dr.select(live, dr.detach(x), 1.0), 0.0)
+
+
+def power_heuristic(p, q):
+    """``p² / (p² + q²)`` (0 where both are 0)."""
+    p2, q2 = dr.square(p), dr.square(q)
+    total = p2 + q2
+    return dr.select(total > 0, p2 / dr.select(total > 0, total, 1.0), 0.0)
+
+
+class RoughLayered(Layered):
+    """The engine over a rough top: component 0 is the top's glossy reflection, component
+    1 the light that crosses it (the base's non-delta lobes, and glossy light where the
+    base has a delta reflection: the rough top spreads it)."""
+
+    def base_lobes(self) -> tuple:
+        """The lobes of component 1."""
+        mi = mitsuba_module()
+        lobes = tuple(self.bottom.lobes)
+        if self.bottom.has_delta and mi.BSDFFlags.GlossyReflection not in lobes:
+            lobes = lobes + (mi.BSDFFlags.GlossyReflection,)
+        return lobes
+
+    def components(self) -> list:
+        mi = mitsuba_module()
+        extra = mi.BSDFFlags.FrontSide | self.top.microfacet.flags
+        lobes = mi.BSDFFlags.Empty
+        for lobe in self.base_lobes():
+            lobes = lobes | lobe
+        return [mi.BSDFFlags.GlossyReflection | extra, lobes | extra]
+
+    def enabled(self, ctx):
+        """``(has_top, has_base)``: whether ``ctx`` enables component 0, resp. 1."""
+        mi = mitsuba_module()
+        return (ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0),
+                any(ctx.is_enabled(lobe, 1) for lobe in self.base_lobes()))
+
+
+class RoughEstimator:
+    """The layered BSDF of ``top`` (a :class:`~thinfilm_mi.render.layered.top.RoughTop`)
+    over ``bottom`` (a :class:`~thinfilm_mi.render.layered.bottom.NestedBottom`) through
+    ``medium``; at most ``max_bounces`` base vertices a path; ``mode``:
+    :func:`thinfilm_mi.render.modes.current`."""
+
+    def __init__(self, top, bottom, medium, mode, max_bounces: int, plugin: str):
+        self.top, self.bottom, self.medium = top, bottom, medium
+        self.mode = mode
+        self.max_bounces = int(max_bounces)
+        self.plugin = plugin
+        #: the base's delta reflection (its mean weighs the sampling mixture), or ``None``
+        self.delta = DeltaBase(self) if bottom.has_delta else None
+        self.mix = opaque_float(MIXTURE)
+        self.refresh()
+
+    stack = property(lambda self: self.top.stack, doc="The top's ``KernelStack``.")
+    base = property(lambda self: self.bottom.bsdf, doc="The nested BSDF.")
+
+    def refresh(self) -> None:
+        """Re-derive the load-time quantities after an edit (the top refreshed first)."""
+        self.medium.refresh()
+
+    #: the coat medium's parameters (the top and the bottom expose their own), whether a
+    #: parameter of the top, the medium or the base carries gradients, and the refresh
+    #: after an edit: the smooth estimator's (they read ``top``, ``medium``, ``bottom`` and
+    #: :meth:`refresh` alone)
+    traverse = NestedEstimator.traverse
+    tracks_gradients = NestedEstimator.tracks_gradients
+    parameters_changed = NestedEstimator.parameters_changed
+
+    def describe(self) -> str:
+        """The stack, the media and the base (the smooth estimator's), then the roughness,
+        for ``to_string``."""
+        return NestedEstimator.describe(self) + self.top.microfacet.describe()
+
+    # -- pieces ----------------------------------------------------------------
+    def absorb(self, si, cos, active):
+        """Beer–Lambert along one crossing of the coat at ``|cos|`` (1 without a medium)."""
+        a = self.medium.attenuation(si, dr.abs(cos), active)
+        return 1.0 if a is None else a
+
+    def walk(self, ctx_mode, si, wo, seed, active):
+        """The walk's estimate of the light that crosses the top (module docstring), the
+        PCG32 seeded with ``seed`` (two ``UInt32``).
+
+        Gradients: the walk runs detached, then again with the same random numbers,
+        adding what the parameters change at each vertex (as
+        :meth:`~thinfilm_mi.render.layered.walk.RandomWalk.sum` replays a path: ``dW =
+        Σ_j (the next-event terms' own derivatives at j) + Σ_j dlog(step_j) (W - W_{≤j})
+        + dlog(β_0) W + dlog(L) W_L``, ``step_j`` the throughput's factor at vertex ``j``,
+        ``L`` the light side's factor and ``W_L`` the terms it multiplies): a sum-style
+        loop Dr.Jit differentiates in reverse mode without storing the trajectory."""
+        mi = mitsuba_module()
+        if not self.tracks_gradients(si, active):
+            return self.run(ctx_mode, si, wo, seed, active, None)[0]
+        if self.mode.polarized:
+            raise ThinFilmError(f"{self.plugin}: gradients in polarized variants under a rough "
+                                "top are not supported (the replay's per-vertex ratios are "
+                                "per wavelength, not per Mueller matrix)")
+        with dr.suspend_grad():
+            totals = self.run(ctx_mode, si, wo, seed, active, None)
+        surrogate = self.run(ctx_mode, si, wo, seed, active, totals)[0]
+        return mi.Spectrum(totals[0] + (surrogate - dr.detach(surrogate)))
+
+    def run(self, ctx_mode, si, wo, seed, active, totals):
+        """``(W, W_L)``: the walk's sum and its light-side terms (``totals`` None), or
+        its replay carrying the gradients (``totals``: the detached walk's)."""
+        mi = mitsuba_module()
+        top = self.top
+        rng = mi.PCG32(size=1, initstate=mi.UInt64(seed[0]), initseq=mi.UInt64(seed[1]))
+        b0, t0, _, ok0 = top.sample(si, si.wi, self.numbers(rng), active, False, False)
+        v, _, p_o, ok_o = top.sample(si, wo, self.numbers(rng), active, False, False)
+        e_o, _ = top.lobe(si, v, wo, ok_o, reflect=False, inside=True)
+        light = e_o * self.absorb(si, v.z, ok_o) / dr.select(ok_o, p_o, 1.0)
+        w0 = -b0
+        beta0 = mi.Spectrum(t0 * self.absorb(si, w0.z, ok0))
+        zero = dr.zeros(mi.Spectrum)
+        acc0, light_acc0, gathered0 = mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(zero)
+        if self.mode.polarized:
+            # Mueller matrices that start as literals fill in along the loop (walk.py)
+            dr.make_opaque(acc0, light_acc0, gathered0)
+        state = (acc0, light_acc0, gathered0, dr.detach(beta0), mi.Vector3f(w0),
+                 mi.UInt32(0), rng, mi.Bool(ok0))
+        side = (v, p_o, ok_o, light if totals is None else dr.detach(light), light)
+
+        def cond(acc, light_acc, gathered, beta, w, depth, rng, active):
+            return active
+
+        def body(acc, light_acc, gathered, beta, w, depth, rng, active):
+            return self.vertex(ctx_mode, si, wo, side, totals, acc, light_acc, gathered,
+                               beta, w, depth, rng, active)
+
+        labels = ("acc", "light_acc", "gathered", "beta", "w", "depth", "rng", "active")
+        out = dr.while_loop(state, cond, body, labels=labels,
+                            max_iterations=-1 if totals is not None else None)
+        if totals is None:
+            return out[0], out[1]
+        # the factors before the loop scale all of W (β_0) or W_L (the light side)
+        return mi.Spectrum(out[0] + ratio(beta0) * totals[0] + ratio(light) * totals[1]), None
+
+    def vertex(self, ctx_mode, si, wo, side, totals, acc, light_acc, gathered, beta, w,
+               depth, rng, active):
+        """One base vertex of :meth:`run`: its two next-event estimates, the base's
+        sample, the underside's reflection and Russian roulette; in the replay
+        (``totals`` given) the vertex's gradient terms (:meth:`walk`)."""
+        mi = mitsuba_module()
+        top, base = self.top, self.base
+        v, p_o, ok_o, light, _ = side
+        ctx = mi.BSDFContext(ctx_mode)
+        zero = dr.zeros(mi.Spectrum)
+        si_b = base_interaction(si, w)
+        e, p_b = base.eval_pdf(ctx, si_b, -v, active & ok_o)
+        nee = dr.select(active & ok_o, beta * e * light * power_heuristic(p_o, dr.detach(p_b)),
+                        zero)
+        bs, g = base.sample(ctx, si_b, rng.next_float32(), self.numbers(rng), active)
+        y = dr.detach(bs.wo)
+        alive = active & (y.z > 0) & (bs.pdf > 0)
+        delta = mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)
+        if totals is not None:
+            # g as the base's eval over its detached pdf (a delta vertex: its sample's)
+            pdf = dr.detach(dr.select(alive, bs.pdf, 1.0))
+            g = dr.select(delta, g, base.eval(ctx, si_b, y, alive) / pdf)
+        e_y, _ = top.lobe(si, -y, wo, alive, reflect=False, inside=True)
+        _, p_y = top.lobe(si, wo, -y, alive, reflect=False, inside=False, want_value=False)
+        mis = dr.select(delta, 1.0, power_heuristic(dr.detach(bs.pdf), dr.detach(p_y)))
+        through = g * self.absorb(si, y.z, alive)
+        exit_ = dr.select(alive, beta * through * e_y * mis, zero)
+        z, r, _, ok_r = top.sample(si, -y, self.numbers(rng), alive, True, True)
+        w_next = -z
+        depth = depth + 1
+        active = alive & ok_r & (depth < self.max_bounces)
+        step = through * r * self.absorb(si, w_next.z, active)
+        light_acc = mi.Spectrum(light_acc + dr.detach(nee))
+        gathered = mi.Spectrum(gathered + dr.detach(nee + exit_))
+        if totals is None:
+            acc = gathered
+        else:
+            acc = mi.Spectrum(acc + nee + exit_
+                              + dr.select(active, ratio(step) * (totals[0] - gathered), zero))
+        beta = mi.Spectrum(dr.select(active, beta * dr.detach(step), zero))
+        q = dr.minimum(dr.max(intensity(beta, self.mode.polarized)), 0.95)
+        roulette = active & (depth >= RR_DEPTH)
+        u = rng.next_float32()
+        active = active & (logical_not(roulette) | (u < q)) & (q > 0)
+        beta = mi.Spectrum(dr.select(roulette, beta / dr.select(q > 0, q, 1.0), beta))
+        return acc, light_acc, gathered, beta, w_next, depth, rng, active
+
+    @staticmethod
+    def numbers(rng):
+        """Two numbers of ``rng`` as a ``Point2f``."""
+        return mitsuba_module().Point2f(rng.next_float32(), rng.next_float32())
+
+    def value(self, ctx, si, wo, seed, active, has_top: bool, has_base: bool):
+        """The estimate of ``f cos θ_o`` of the enabled components (``seed``: the walk's)."""
+        mi = mitsuba_module()
+        value = dr.zeros(mi.Spectrum)
+        if has_top:
+            value = self.top.lobe(si, si.wi, wo, active, reflect=True, inside=False, ctx=ctx)[0]
+        if has_base:
+            crossed = self.walk(ctx.mode, si, wo, seed, active)
+            if self.mode.polarized and ctx.mode != mi.TransportMode.Radiance:
+                # importance transport: the chain's intensity for unpolarised light
+                crossed = mi.depolarizer(mi.UnpolarizedSpectrum(crossed[0][0]))
+            value = value + crossed
+        return dr.select(active, value, dr.zeros(mi.Spectrum))
+
+    def shares(self, ctx_mode, si, active, has_top: bool, has_base: bool):
+        """``(w_R, w_B, w_C)``: the mixture's shares (module docstring), deterministic
+        functions of ``ω_i``, detached."""
+        mi = mitsuba_module()
+        if not has_base:
+            return mi.Float(1.0), mi.Float(0.0), mi.Float(0.0)
+        p_r = mi.Float(0.0)
+        if has_top:
+            resp = self.top.unpolarized(si, si.wi.z, active, inside=False, transmission=False)
+            p_r = dr.minimum(spectral_mean(resp.R), 1.0)
+        b = mi.Float(1.0 if not self.bottom.lobes else 0.0)
+        if self.delta is not None and self.bottom.lobes:
+            wi_in, ok = self.top.inward(si.wi)
+            b = self.delta.mean(ctx_mode, si, wi_in, active & ok)
+        rest = 1.0 - p_r
+        return dr.detach((p_r + rest * (1.0 - self.mix) * b,
+                          rest * (1.0 - self.mix) * (1.0 - b), rest * self.mix))
+
+    def mixture_pdf(self, ctx_mode, si, wo, shares, active):
+        """The density of :meth:`sample` at ``wo`` for the mixture ``shares``."""
+        w_r, w_b, w_c = shares
+        active = active & (wo.z > 0)
+        _, p_r = self.top.lobe(si, si.wi, wo, active, reflect=True, inside=False,
+                               want_value=False)
+        p = w_r * p_r + w_c * wo.z * dr.inv_pi
+        if self.bottom.lobes:
+            wi_in, ok_i = self.top.inward(si.wi)
+            wo_in, ok_o = self.top.inward(wo)
+            ok = active & ok_i & ok_o
+            p_b = self.bottom.bsdf.pdf(self.bottom.smooth_context(ctx_mode),
+                                       base_interaction(si, wi_in), wo_in, ok)
+            jac = self.top.inv_eta2 * wo.z / dr.maximum(wo_in.z, 1e-12)
+            p = p + dr.select(ok, w_b * p_b * jac, 0.0)
+        return dr.detach(dr.select(active, p, 0.0))
+
+    # -- the BSDF interface ----------------------------------------------------
+    def sample(self, ctx, si, sample1, sample2, active, has_top: bool, has_base: bool):
+        """``(bs, weight)``: a direction of the mixture (:meth:`mixture_pdf`), weighted by
+        the estimate of ``f cos θ_o`` over its density."""
+        mi = mitsuba_module()
+        bs = dr.zeros(mi.BSDFSample3f)
+        active = mi.Bool(active) & (si.wi.z > 0)
+        if not (has_top or has_base):
+            return bs, mi.Spectrum(0.0)
+        shares = self.shares(ctx.mode, si, active, has_top, has_base)
+        w_r, w_b, _ = shares
+        pick_r = sample1 < w_r
+        pick_b = logical_not(pick_r) & (sample1 < w_r + w_b)
+        pick_c = logical_not(pick_r | pick_b)
+        with dr.suspend_grad():
+            wo, _, _, _ = self.top.sample(si, si.wi, sample2, active & pick_r, True, False)
+            if self.bottom.lobes:
+                s_b = dr.clip((sample1 - w_r) / dr.select(w_b > 0, w_b, 1.0), 0.0, 1.0)
+                wi_in, _ = self.top.inward(si.wi)
+                bs_b, _ = self.bottom.bsdf.sample(self.bottom.smooth_context(ctx.mode),
+                                                  base_interaction(si, wi_in), s_b, sample2,
+                                                  active & pick_b)
+                out, _ = self.top.outward(bs_b.wo)
+                wo = dr.select(pick_b, out, wo)
+            wo = dr.select(pick_c, mi.warp.square_to_cosine_hemisphere(sample2), wo)
+        pdf = self.mixture_pdf(ctx.mode, si, wo, shares, active)
+        ok = active & (wo.z > 0) & (pdf > 0)
+        f = self.value(ctx, si, wo, sample_seed(sample1, sample2), ok, has_top, has_base)
+        bs.wo = dr.select(ok, wo, 0.0)
+        bs.pdf = dr.select(ok, pdf, 0.0)
+        bs.eta = 1.0
+        bs.sampled_component = dr.select(pick_r & has_top, mi.UInt32(0), mi.UInt32(1))
+        bs.sampled_type = dr.select(pick_c, mi.UInt32(+mi.BSDFFlags.DiffuseReflection),
+                                    mi.UInt32(+mi.BSDFFlags.GlossyReflection))
+        return bs, dr.select(ok, f / dr.select(ok, pdf, 1.0), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active, has_top: bool, has_base: bool,
+                 want_value: bool = True, want_pdf: bool = True):
+        """``(f cos θ_o, pdf)``: the estimate (seeded by the directions) and the density
+        of :meth:`sample`."""
+        mi = mitsuba_module()
+        active = mi.Bool(active) & (si.wi.z > 0) & (wo.z > 0)
+        value, pdf = mi.Spectrum(0.0), mi.Float(0.0)
+        if not (has_top or has_base):
+            return value, pdf
+        if want_value:
+            value = self.value(ctx, si, wo, eval_seed(si.wi, wo), active, has_top, has_base)
+        if want_pdf:
+            shares = self.shares(ctx.mode, si, active, has_top, has_base)
+            pdf = self.mixture_pdf(ctx.mode, si, wo, shares, active)
+        return value, pdf
