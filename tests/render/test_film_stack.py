@@ -1,16 +1,30 @@
 """What a stack is (thinfilm_mi/render/film_stack.py): its films as ``to_string`` and
-``mi.traverse`` show them (loaded from XML too), an edit's checks, and what a hit asks
-of it (the thickness texture's scale, whether a parameter carries gradients)."""
+``mi.traverse`` show them (loaded from XML too), an edit's checks, its facts for a plan
+(each medium on the grid, which absorb, which films are opaque), and what a hit asks of
+it (the thickness texture's scale, whether a parameter carries gradients).
+
+Reference for the opacity threshold: the amplitude of light crossing a film once at
+normal incidence, ``exp(-2 pi k d / lambda)``, at its largest over 360-830 nm."""
 from __future__ import annotations
+
+import math
 
 import drjit as dr
 import mitsuba as mi
+import numpy as np
 import pytest
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.render.film_stack import FilmStack
+from thinfilm_mi.render.film_stack import (
+    OPAQUE_AMPLITUDE,
+    FilmStack,
+    on_grid,
+    optically_opaque,
+    stack_facts,
+)
 from thinfilm_mi.render.media import SpectralIndex
+from thinfilm_mi.render.textures import GRID
 
 pytestmark = pytest.mark.usefixtures("llvm")
 
@@ -80,3 +94,33 @@ def test_what_a_hit_asks():
     assert stack.differentiating() and stack.colour_gradients(si)
     textured = _stack((1.46, 500), texture=mi.load_dict({"type": "uniform", "value": -0.5}))
     assert dr.all(textured.thickness_scale_at(si) == 0.0)   # clamped to >= 0
+
+
+def test_an_opaque_film_is_where_light_crossing_it_once_is_below_the_threshold():
+    k = 2.0
+    d = -math.log(OPAQUE_AMPLITUDE) * 830.0 / (2 * math.pi * k)   # the threshold at 830 nm
+    n = on_grid(SpectralIndex.from_material(complex(1.5, k), "film"))
+    assert optically_opaque(n, 1.01 * d, textured=False)
+    assert not optically_opaque(n, 0.99 * d, textured=False)
+    assert not optically_opaque(n, 10 * d, textured=True)   # a texture may thin it
+    assert not optically_opaque(None, 10 * d, textured=False)   # no one spectrum: never
+
+
+def test_the_facts_a_plan_reads_are_the_stack_as_it_is_now():
+    """Each medium on the grid once (as the kernel reads it), which absorb, which films
+    hide what lies beneath; read again after an edit (a thinner metal lets light through)."""
+    stack = _stack((1.46, 100), (complex(1.5, 20.0), 1000), (2.3, 0))
+    facts = stack_facts(stack)
+    assert facts.stack is stack and facts.thickness == [100.0, 1000.0, 0.0]
+    assert set(facts.grid) == {id(ix) for ix in stack.media()}
+    np.testing.assert_array_equal(facts.grid[id(stack.substrate)], np.full(GRID.size, 1.5 + 0j))
+    assert [facts.real[id(ix)] for ix in stack.indices] == [True, False, True]
+    assert facts.opaque == [False, True, False] and not facts.differentiating
+    stack.thickness[1] = mi.Float(10.0)
+    stack.parameters_changed()
+    assert stack_facts(stack).opaque == [False, False, False]
+    assert stack_facts(_stack((complex(1.5, 20.0), 1000), texture=mi.load_dict(
+        {"type": "checkerboard"}))).opaque == [False]   # a texture may thin it
+    varying = SpectralIndex.from_textures(mi.load_dict({"type": "checkerboard"}),
+                                          mi.load_dict({"type": "uniform", "value": 0.0}), "eta")
+    assert on_grid(varying) is None   # varies over the surface: no one spectrum

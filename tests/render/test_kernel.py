@@ -61,3 +61,18 @@ def test_a_table_asked_for_under_a_thickness_texture_is_refused():
     stack = _stack(thickness_texture=texture)   # "auto": evaluated exactly
     assert stack.mode() == "exact" and stack.thickness_texture is texture
     assert np.isfinite(stack.films.thickness_values()).all()
+
+
+def test_an_edit_that_makes_a_film_opaque_plans_its_sides_again():
+    """Au at 20 nm lets light through; at 3000 nm it hides the glass below it: each side
+    then ends at the gold (``T = 0``), and at 20 nm again the plan is as before."""
+    stack = _stack(sides={False: True, True: True}, tabulate=False)
+    assert not any(s.opaque for s in stack.plan.values())
+    stack.thickness[1] = mi.Float(3000.0)
+    stack.parameters_changed()
+    outside, inside = stack.plan[False], stack.plan[True]
+    assert outside.opaque and outside.exit is stack.indices[1] and len(outside.films) == 1
+    assert inside.opaque and inside.exit is stack.indices[1] and inside.films == []
+    stack.thickness[1] = mi.Float(20.0)
+    stack.parameters_changed()
+    assert not any(s.opaque for s in stack.plan.values()) and len(stack.plan[False].films) == 2

@@ -13,7 +13,7 @@ import pytest
 import tmm
 
 from tests.support.specular import F32_TOL, WLS, interaction
-from thinfilm_mi.render.film_stack import FilmStack
+from thinfilm_mi.render.film_stack import FilmStack, stack_facts
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.side_eval import side_response
 from thinfilm_mi.render.stack_build import build_plan
@@ -50,8 +50,8 @@ def _rt(side, cos, transmission=True):
 def test_an_exact_side_unrolled_or_from_buffers_is_tmms(cos):
     stack = _stack([(FILM, 120.0), (1.46, 80.0)], 1.5)
     options = StackOptions(tabulate=False, sides={False: True})
-    unrolled = plan_sides(stack, options).sides[False]
-    buffered = build_plan(stack, options).sides[False]
+    unrolled = plan_sides(stack_facts(stack), options).sides[False]
+    buffered = build_plan(plan_sides(stack_facts(stack), options)).sides[False]
     assert unrolled.loop is None and buffered.loop is not None
     R, T = _tmm([1.0, FILM, 1.46, 1.5], [np.inf, 120.0, 80.0, np.inf], cos)
     for side in (unrolled, buffered):
@@ -63,7 +63,8 @@ def test_below_an_opaque_film_nothing_is_evaluated():
     """The side ends at the metal (its exit medium): ``R`` is that of the film over
     a metal half-space, ``T`` exactly 0."""
     stack = _stack([(1.46, 100.0), (METAL, 1500.0), (FILM, 50.0)], 1.5)
-    side = plan_sides(stack, StackOptions(tabulate=False, sides={False: True})).sides[False]
+    options = StackOptions(tabulate=False, sides={False: True})
+    side = plan_sides(stack_facts(stack), options).sides[False]
     assert side.opaque and side.exit is stack.indices[1]
     r, t = _rt(side, 0.7)
     R, _ = _tmm([1.0, 1.46, METAL], [np.inf, 100.0, np.inf], 0.7)
@@ -72,7 +73,7 @@ def test_below_an_opaque_film_nothing_is_evaluated():
 
 def test_a_side_read_from_its_table():
     stack = _stack([(1.46, 150.0), (2.3, 60.0)], METAL)
-    side = build_plan(stack, StackOptions(tabulate=True)).sides[False]
+    side = build_plan(plan_sides(stack_facts(stack), StackOptions(tabulate=True))).sides[False]
     assert side.table is not None
     for cos in (0.95, 0.5):
         R, _ = _tmm([1.0, 1.46, 2.3, METAL], [np.inf, 150.0, 60.0, np.inf], cos)

@@ -122,19 +122,40 @@ def _films(*films, ambient=1.0, substrate=1.5):
                      SpectralIndex.from_material(substrate, "substrate"))
 
 
+def _plan(stack, options, gave_up=frozenset()):
+    from thinfilm_mi.render.film_stack import stack_facts
+    from thinfilm_mi.render.stack_plan import plan_sides
+    return plan_sides(stack_facts(stack), options, gave_up)
+
+
 def test_a_build_returns_new_sides_and_leaves_the_plan_it_was_given():
-    from thinfilm_mi.render.stack_plan import StackOptions, plan_sides
+    from thinfilm_mi.render.stack_plan import StackOptions
     stack = _films((1.46, 150), (2.3, 60), substrate="Al")
     options = StackOptions(tabulate=True)
-    plan = plan_sides(stack, options)
-    built = stack_build.build_tables(stack, options, plan)
+    plan = _plan(stack, options)
+    built = stack_build.build_tables(plan)
     assert built.sides[False].table is not None and built.sides[False].build_report is not None
     assert plan.sides[False].table is None and plan.sides[False].build_report is None
     assert built.sides[False] is not plan.sides[False]
     # the same optics again: the same table, from the cache
-    again = stack_build.build_tables(stack, options, plan_sides(stack, options))
+    again = stack_build.build_tables(_plan(stack, options))
     assert again.sides[False].table is built.sides[False].table
     assert again.sides[False].build_report["result"] == "from the cache"
+
+
+def test_a_table_serves_its_side_and_buffers_are_built_where_none_does():
+    """The plan's ``buffered`` sides read their films from buffers unless a table serves
+    them: a side's own table holds T wherever the side asks for it (the films absorb,
+    so T is not 1 - R)."""
+    from thinfilm_mi.render.stack_plan import StackOptions
+    stack = _films((complex(1.46, 0.01), 150), (2.3, 60), substrate="Al")
+    for sides in ({False: False}, {False: True}):
+        tabled = stack_build.build_plan(_plan(stack, StackOptions(tabulate=True, sides=sides)))
+        side = tabled.sides[False]
+        assert side.buffered and side.table is not None and side.loop is None
+        assert side.table.channels == (2 if sides[False] else 1)
+        exact = stack_build.build_plan(_plan(stack, StackOptions(tabulate=False, sides=sides)))
+        assert exact.sides[False].table is None and exact.sides[False].loop is not None
 
 
 def test_a_mirrored_plan_without_the_ambient_sides_table_is_planned_side_by_side():
@@ -145,10 +166,12 @@ def test_a_mirrored_plan_without_the_ambient_sides_table_is_planned_side_by_side
     from thinfilm_mi.render.stack_plan import StackOptions
     stack = _films((1.46, 120), (2.3, 70), (1.46, 120), (2.3, 70))
     options = StackOptions(sides={False: True, True: True})
-    plan = stack_build.build_plan(stack, options)
+    plan = stack_build.build_plan(_plan(stack, options))
     assert plan.mirrored and plan.sides[True].table is None
     assert plan.mirror_table(plan.sides[True]) is plan.sides[False].table is not None
-    alone = stack_build.build_plan(stack, options, gave_up=frozenset({False}))
+    assert plan.sides[False].loop is None and plan.sides[True].loop is None
+    alone = stack_build.build_plan(_plan(stack, options, gave_up=frozenset({False})))
     assert not alone.mirrored and alone.sides[False].table is None
     assert alone.sides[True].table is not None and not alone.sides[True].transmission
     assert alone.sides[False].loop is not None and alone.sides[True].loop is None
+    assert alone.gave_up == {False} and alone.failed == []

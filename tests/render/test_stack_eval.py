@@ -15,10 +15,10 @@ import tmm
 
 from tests.support.specular import F32_TOL, WLS, lit_floor_scene
 from thinfilm_mi.render import stack_eval
-from thinfilm_mi.render.film_stack import FilmStack
+from thinfilm_mi.render.film_stack import FilmStack, stack_facts
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.stack_build import build_plan
-from thinfilm_mi.render.stack_plan import StackOptions
+from thinfilm_mi.render.stack_plan import StackOptions, plan_sides
 
 pytestmark = pytest.mark.usefixtures("llvm")
 BOTH = {False: True, True: True}
@@ -80,7 +80,7 @@ def test_each_lane_of_a_mask_is_evaluated_on_its_side(films):
     """An absorbing stack (both sides evaluated under a branch), and one with an
     optically opaque film (both sides computed, then selected)."""
     stack = _stack(films)
-    plan = build_plan(stack, StackOptions(tabulate=False, sides=BOTH))
+    plan = build_plan(plan_sides(stack_facts(stack), StackOptions(tabulate=False, sides=BOTH)))
     assert not plan.mirrored
     _lanes_agree(stack, plan, films, [0.9, 0.9, 0.4, 0.6], [False, True, False, True], F32_TOL)
 
@@ -92,7 +92,7 @@ def test_a_lossless_stack_from_the_substrate_through_its_ambient_side(tabulate):
     the critical angle (cos 0.6 from glass: 1.5 sin θ_s = 1.2) ``R = 1`` and ``T = 0``."""
     films = [(1.46, 100.0), (2.3, 60.0)]
     stack = _stack(films)
-    plan = build_plan(stack, StackOptions(tabulate=tabulate, sides=BOTH))
+    plan = build_plan(plan_sides(stack_facts(stack), StackOptions(tabulate=tabulate, sides=BOTH)))
     table = plan.sides[False].table
     assert plan.mirrored and (table is not None) == tabulate and plan.sides[True].table is None
     tol = F32_TOL + (1.5 * table.error if tabulate else 0.0)   # a table: tests/support/tables.py
@@ -104,7 +104,7 @@ def test_the_side_evaluated_now():
     """The planned side, unless a thickness or an index carries gradients: then every
     film, without skips, table or buffers."""
     stack = _stack([(1.46, 0.0), (1.46, 100.0)])
-    plan = build_plan(stack, StackOptions(tabulate=False))
+    plan = build_plan(plan_sides(stack_facts(stack), StackOptions(tabulate=False)))
     assert stack_eval.current_side(stack, plan, False, False) is plan.sides[False]
     assert len(plan.sides[False].films) == 1 and plan.sides[False].loop is not None
     every = stack_eval.current_side(stack, plan, False, False, index_gradients=True)

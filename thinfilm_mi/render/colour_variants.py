@@ -72,19 +72,19 @@ def with_absorbing(data: SideData) -> SideData:
 COLOUR_CACHE = TableCache()
 
 
-def colour_table(stack, side, side_data):
-    """The :class:`~thinfilm_mi.tabulate.integrated.ColourTable` of the planned side ``side`` of the
-    :class:`~thinfilm_mi.render.film_stack.FilmStack` ``stack`` in RGB/mono variants, shared
-    between stacks with identical optics; ``None`` where the plugin evaluates per
-    channel (no films over an index given per channel). ``side_data(side,
-    transmission, channel)`` gives the side's float64 build data
-    (:class:`~thinfilm_mi.tabulate.base.SideData`; ``channel`` maps media given per channel, by ``id``,
-    to the index of the channel built)."""
+def colour_table(facts, side, side_data):
+    """The :class:`~thinfilm_mi.tabulate.integrated.ColourTable` of the planned side ``side`` of
+    the stack ``facts`` describe (:class:`~thinfilm_mi.render.film_stack.StackFacts`: each
+    medium on the grid) in RGB/mono variants, shared between stacks with identical optics;
+    ``None`` where the plugin evaluates per channel (no films over an index given per
+    channel). ``side_data(side, transmission, channel)`` gives the side's float64 build data
+    (:class:`~thinfilm_mi.tabulate.base.SideData`; ``channel`` maps media given per channel, by
+    ``id``, to the index of the channel built)."""
     channels = colour_channels()
     media = [side.n0] + [f[0] for f in side.films] + [side.exit]
     arrays, per_channel = [], {}
     for ix in media:
-        v = ix.spectral_values(GRID)
+        v = facts.grid[id(ix)]
         if v is None:
             per_channel[id(ix)] = ix.channel_values()
             v = per_channel[id(ix)]
@@ -93,7 +93,7 @@ def colour_table(stack, side, side_data):
                     return None   # per-channel Fresnel of a spatially varying eta/k
                 where = "the substrate" if ix is side.exit else "a medium"
                 raise ThinFilmError(
-                    f"{stack.plugin}: 'eta'/'k' ({where}) vary over the surface, and films "
+                    f"{facts.stack.plugin}: 'eta'/'k' ({where}) vary over the surface, and films "
                     f"lie on it: in the {mitsuba_module().variant()!r} variant a spectrum or a "
                     "constant (number, rgb) is required there, so that the films can "
                     "be integrated over wavelengths at load time (or use a spectral "
@@ -103,20 +103,20 @@ def colour_table(stack, side, side_data):
         return None   # per-channel Fresnel, exactly as Mitsuba's conductor
     transmission = side.transmission and not side.opaque
     axis = LinearAxis()
-    n0 = side.n0.spectral_values(GRID, real=True)
+    n0 = facts.grid[id(side.n0)].real
     if side.exit_real and not per_channel:
-        n_exit = side.exit.spectral_values(GRID, real=True)
+        n_exit = facts.grid[id(side.exit)].real
         if (np.all(n0 == n0[0]) and np.all(n_exit == n_exit[0]) and n_exit[0] < n0[0]):
             axis = LinearAxis(TIR, float(n0[0]), float(n_exit[0]))
     scale_max = fixed_scale = None
-    tex = stack.thickness_texture
+    tex = facts.stack.thickness_texture
     if tex is not None and not tex.is_spatially_varying():
         fixed_scale = max(scalar(tex.eval_1(dr.zeros(mitsuba_module().SurfaceInteraction3f))), 0.0)
     elif tex is not None:
         rng = texture_range(tex, mono=True)
         scale_max = max(rng[1], 0.0) if rng is not None else None
         if scale_max is None:
-            raise ThinFilmError(f"{stack.plugin}: 'thickness': its range cannot be evaluated "
+            raise ThinFilmError(f"{facts.stack.plugin}: 'thickness': its range cannot be evaluated "
                                 f"at load time, which the {mitsuba_module().variant()!r} variant needs "
                                 "(a table over the thickness scale)")
     key = table_key(arrays, side.films, (mitsuba_module().variant(), channels, transmission,

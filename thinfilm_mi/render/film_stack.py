@@ -2,24 +2,51 @@
 :class:`FilmStack`, films (an index and an opaque thickness each) between an ambient
 index and a substrate index (:class:`~thinfilm_mi.render.media.SpectralIndex`), with an
 optional thickness texture; its parameters as ``mi.traverse`` shows them, their
-checks after an edit, and what a hit asks of them (the texture's scale, whether a
-parameter carries gradients). How the stack is planned, built and evaluated:
+checks after an edit, what it is at the moment it is planned (:class:`StackFacts`: the
+films' thicknesses, each medium on Mitsuba's 1 nm grid, which absorb, which films are
+optically opaque), and what a hit asks of it (the texture's scale, whether a parameter
+carries gradients). How the stack is planned, built and evaluated:
 :mod:`~thinfilm_mi.render.stack_plan`, :mod:`~thinfilm_mi.render.stack_build`,
 :mod:`~thinfilm_mi.render.stack_eval`.
 """
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Sequence
 
 import drjit as dr
+import numpy as np
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.media import SpectralIndex
-from thinfilm_mi.render.textures import mitsuba_module, scalar
+from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar
 from thinfilm_mi.tabulate.base import opaque_float
 
-__all__ = ["FilmStack"]
+__all__ = ["FilmStack", "OPAQUE_AMPLITUDE", "StackFacts", "on_grid", "optically_opaque",
+           "stack_facts"]
+
+#: A film is optically opaque when the amplitude of light crossing it once,
+#: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
+#: is below this: what lies beneath then changes r by less than ~1e-9.
+OPAQUE_AMPLITUDE = 1e-9
+
+
+@dataclass(frozen=True, eq=False)
+class StackFacts:
+    """What a :class:`FilmStack` is at the moment it is planned (read once per plan, so
+    after every edit): ``stack`` itself; ``thickness``, its films' thicknesses (nm);
+    ``grid``, each medium's index on Mitsuba's 1 nm grid by ``id`` (:func:`on_grid`);
+    ``real``, whether a medium absorbs nowhere on that grid, by ``id``; ``opaque``,
+    per film, whether it is optically opaque (:func:`optically_opaque`);
+    ``differentiating``, whether a film thickness carries gradients (:func:`stack_facts`)."""
+
+    stack: "FilmStack"
+    thickness: list
+    grid: dict
+    real: dict
+    opaque: list
+    differentiating: bool
 
 
 class FilmStack:
@@ -102,3 +129,34 @@ class FilmStack:
         if not dr.is_diff_v(mitsuba_module().Float):
             return False
         return self.differentiating() or self.index_gradients(si, active)
+
+
+def stack_facts(stack: FilmStack) -> StackFacts:
+    """What ``stack`` is now (:class:`StackFacts`): each medium read on the grid once,
+    for the plan and the build that follow."""
+    grid = {id(ix): on_grid(ix) for ix in stack.media()}
+    thickness = stack.thickness_values()
+    textured = stack.thickness_texture is not None
+    opaque = [optically_opaque(grid[id(ix)], d, textured)
+              for ix, d in zip(stack.indices, thickness)]
+    real = {key: n is not None and not np.any(n.imag) for key, n in grid.items()}
+    return StackFacts(stack, thickness, grid, real, opaque, stack.differentiating())
+
+
+def on_grid(index: SpectralIndex) -> np.ndarray | None:
+    """``index`` on Mitsuba's 1 nm grid (complex float64, as the render kernel of a
+    spectral variant reads it: :meth:`SpectralIndex.spectral_values`), or ``None``
+    where it varies over the surface or is given per channel (an RGB variant's ``rgb``
+    ``eta``/``k``): no one spectrum describes it then."""
+    if index.eta.is_spatially_varying() or index.k.is_spatially_varying():
+        return None
+    return index.spectral_values(GRID)
+
+
+def optically_opaque(n: np.ndarray | None, d: float, textured: bool) -> bool:
+    """Whether a film ``d`` nm thick of the index ``n`` on the grid (:func:`on_grid`)
+    hides what lies beneath it (:data:`OPAQUE_AMPLITUDE`); never under a thickness
+    texture (``textured``), which may thin the film anywhere."""
+    if textured or d <= 0 or n is None:
+        return False
+    return bool(np.max(np.exp(-2.0 * math.pi * n.imag * d / GRID)) < OPAQUE_AMPLITUDE)

@@ -12,7 +12,7 @@ from typing import Any, Sequence
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render import stack_eval
-from thinfilm_mi.render.film_stack import FilmStack
+from thinfilm_mi.render.film_stack import OPAQUE_AMPLITUDE, FilmStack, stack_facts
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.stack_build import STORE_MIN_POINTS, TABLE_CACHE, build_plan, side_data
 from thinfilm_mi.render.stack_plan import (
@@ -20,9 +20,9 @@ from thinfilm_mi.render.stack_plan import (
     DEFAULT_COHERENCE_THICKNESS,
     DEFAULT_SPECTRAL_RESOLUTION,
     DEFAULT_TABLE_ERROR,
-    OPAQUE_AMPLITUDE,
     SidePlan,
     StackOptions,
+    plan_sides,
 )
 from thinfilm_mi.render.tabulation import Route
 
@@ -42,10 +42,11 @@ class KernelStack:
     (``tabulate``, ``table_error``, ``spectral_resolution``, ``coherence_thickness``,
     ``rt_min_films``) are :class:`~thinfilm_mi.render.stack_plan.StackOptions`'.
 
-    What a scene does not need is skipped and the sides that pay for one read a
-    table (:mod:`thinfilm_mi.render.stack_plan`), re-planned and re-built
-    (:func:`~thinfilm_mi.render.stack_build.build_plan`) after every edit
-    (:meth:`parameters_changed`); identical stacks share one table."""
+    The stack is read (:func:`~thinfilm_mi.render.film_stack.stack_facts`),
+    planned from what it is (:func:`~thinfilm_mi.render.stack_plan.plan_sides`: what a
+    scene does not need is skipped, the sides that pay for one read a table) and the
+    plan built (:func:`~thinfilm_mi.render.stack_build.build_plan`), again after every
+    edit (:meth:`parameters_changed`); identical stacks share one table."""
 
     def __init__(self, films: Sequence[tuple[SpectralIndex, float]], ambient: SpectralIndex,
                  substrate: SpectralIndex, thickness_texture=None, *,
@@ -63,13 +64,10 @@ class KernelStack:
             raise ThinFilmError(f"{plugin}: 'tabulate' is true but a 'thickness' texture is "
                                 "given: a table over (angle, wavelength) cannot follow a "
                                 "thickness that varies over the surface (use 'auto' or false)")
-        self._gave_up = frozenset()   # sides whose table could not be built
-        self._build()
-
-    def _build(self) -> None:
-        #: The planned sides with their tables and buffers (a StackPlan).
-        self.planned = build_plan(self.films, self.options, self._gave_up)
-        self._gave_up = self._gave_up | set(self.planned.failed)
+        facts = stack_facts(self.films)
+        plan = plan_sides(facts, self.options)
+        #: The planned sides with their tables and buffers (a built StackPlan).
+        self.planned = build_plan(plan)
 
     def __len__(self) -> int:
         return len(self.films)
@@ -95,7 +93,9 @@ class KernelStack:
         """Refresh after an edit (``keys``, the changed keys, are not needed:
         the plan and its tables are rebuilt from the current values)."""
         self.films.parameters_changed()
-        self._build()
+        facts = stack_facts(self.films)
+        plan = plan_sides(facts, self.options, self.planned.gave_up)
+        self.planned = build_plan(plan)
 
     def thickness_scale_at(self, si, active=True):
         """The thickness texture's value at the hit (>= 0), or ``None`` without one."""

@@ -6,8 +6,9 @@ crossing it either way along one path). So ``R`` seen from the substrate at
 ``θ_s`` is ``R`` seen from the ambient at ``θ_a`` with ``n_a sin θ_a = n_s sin θ_s``
 (Snell's law through the films; beyond the critical angle ``R = 1``), and
 ``T = 1 - R`` on both sides. :mod:`~thinfilm_mi.render.stack_plan` plans
-such a stack (a ``thinfilm_dielectric`` or ``thinfilm_roughdielectric`` lit from
-both sides, spectral variants, the substrate's index at least the ambient's) with
+such a stack (:func:`~thinfilm_mi.render.stack_plan.mirror_applies`: a
+``thinfilm_dielectric`` or ``thinfilm_roughdielectric`` lit from both sides,
+spectral variants, the substrate's index at least the ambient's) with
 one table of ``R`` lit from the ambient (one channel instead of two, one side
 instead of two), and :func:`mirrored_rt` reads it for every lane: one cubic lookup
 per wavelength where two sides of ``R`` and ``T`` took four, with no per-side
@@ -26,41 +27,12 @@ from __future__ import annotations
 from typing import Any
 
 import drjit as dr
-import numpy as np
 
 from thinfilm_mi.render.side_eval import side_response
-from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
+from thinfilm_mi.render.stack_plan import exact_mirrors
+from thinfilm_mi.render.textures import mitsuba_module
 
-__all__ = ["branches", "either_side", "exact_mirrors", "literal_outside",
-           "mirror_applies", "mirrored_rt", "real_on_grid"]
-
-
-
-def real_on_grid(index) -> bool:
-    """Whether a :class:`~thinfilm_mi.render.media.SpectralIndex` has no absorption
-    over 360-830 nm (on the 1 nm grid)."""
-    n = index.spectral_values(GRID)
-    k = n.imag if n is not None else texture_on_grid(index.k)
-    return not np.any(k)
-
-
-def mirror_applies(ambient, films: list, substrate) -> bool:
-    """Whether both sides of these films (``(index, thickness, incoherent)``) may be
-    read from the ambient side's table of ``R``: every medium lossless and the
-    substrate's index nowhere below the ambient's (the ambient side then never
-    totally reflects, and its table has one angle segment)."""
-    if not films or not all(real_on_grid(ix) for ix, _, _ in films):
-        return False
-    if not (real_on_grid(ambient) and real_on_grid(substrate)):
-        return False
-    n_a, n_s = texture_on_grid(ambient.eta), texture_on_grid(substrate.eta)
-    return bool(np.all(n_s >= n_a))
-
-
-def exact_mirrors(ambient, substrate) -> bool:
-    """Whether :func:`mirrored_rt` evaluates a mirrored stack between these media
-    exactly (neither is dispersive: one mapped angle serves every wavelength)."""
-    return all(ix.knots is not None and ix.knots.size == 0 for ix in (ambient, substrate))
+__all__ = ["branches", "either_side", "literal_outside", "mirrored_rt"]
 
 
 def mirrored_rt(side, si, cos_theta, inside: bool | Any, active, transmission: bool):

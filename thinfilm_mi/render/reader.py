@@ -239,11 +239,11 @@ class PluginProperties:
         evaluates, hence what is tabulated; ``plugin`` names the BSDF in what the stack
         reports later (a warning, an edit). Every thin-film BSDF builds its stack here, so
         the stack options are the same for all of them."""
+        options = self.stack_options()
         films = self.films()
         if ambient is None:
             ambient = real_index(self.props.get("ext_ior", DEFAULT_EXT_IOR), "ext_ior")
-        return KernelStack(films, ambient, substrate, sides=sides, plugin=plugin,
-                           **self.stack_options())
+        return KernelStack(films, ambient, substrate, sides=sides, plugin=plugin, **options)
 
     def check_unqueried(self) -> None:
         """Refuse the properties no getter read, named with their values, as Mitsuba

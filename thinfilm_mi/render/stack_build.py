@@ -1,39 +1,31 @@
-"""How a stack's plan is built (no plugin classes here): :func:`build_plan` plans the
-sides of a :class:`~thinfilm_mi.render.film_stack.FilmStack`
-(:func:`~thinfilm_mi.render.stack_plan.plan_sides`) and returns them with what they
-read: in RGB/mono variants their colour tables
-(:func:`~thinfilm_mi.render.colour_variants.colour_table`); elsewhere the verified
-tables the plan wants (:func:`build_tables`: of the powers,
+"""How a stack's plan is built (no plugin classes here): :func:`build_plan` builds
+what a :class:`~thinfilm_mi.render.stack_plan.StackPlan` asks for
+(:func:`~thinfilm_mi.render.stack_plan.plan_sides` decided it) and returns the plan
+with it, without planning anything again: in RGB/mono variants the sides' colour
+tables (:func:`~thinfilm_mi.render.colour_variants.colour_table`); elsewhere the
+verified tables the plan asks for (:func:`build_tables`: of the powers,
 :mod:`thinfilm_mi.tabulate.exact`, or of the Mueller components,
 :mod:`thinfilm_mi.tabulate.mueller`), shared between stacks with identical optics
 (:data:`TABLE_CACHE`, then the table store on disk), and the films' buffers
-(:class:`~thinfilm_mi.render.loop.LoopFilms`) of the sides evaluated exactly.
+(:class:`~thinfilm_mi.render.loop.LoopFilms`) of the sides no table serves.
 """
 from __future__ import annotations
 
 import warnings
+from dataclasses import replace
 
 import drjit as dr
 import numpy as np
 
 from thinfilm_mi.render.colour_variants import colour_channels, colour_table, prepare_gradients
-from thinfilm_mi.render.film_stack import FilmStack
+from thinfilm_mi.render.film_stack import StackFacts
 from thinfilm_mi.render.loop import LoopFilms
 from thinfilm_mi.render.media import SpectralIndex
-from thinfilm_mi.render.stack_plan import (
-    SidePlan,
-    StackOptions,
-    StackPlan,
-    few_films,
-    plan_sides,
-    reads_buffers,
-    wants_tables,
-)
+from thinfilm_mi.render.stack_plan import SidePlan, StackOptions, StackPlan
 from thinfilm_mi.render.tabulation import table_key
-from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar, texture_on_grid
+from thinfilm_mi.render.textures import GRID, mitsuba_module, scalar
 from thinfilm_mi.tabulate import band
 from thinfilm_mi.tabulate.base import BuildReport, SideData, TableCache
-from thinfilm_mi.tabulate.mueller import MUELLER
 from thinfilm_mi.tabulate.policy import MAX_TEXELS
 from thinfilm_mi.tabulate.quantities import POWERS
 from thinfilm_mi.tabulate.store import default_store
@@ -49,57 +41,48 @@ TABLE_CACHE = TableCache()
 STORE_MIN_POINTS = 50_000
 
 
-def build_plan(stack: FilmStack, options: StackOptions, gave_up=frozenset()) -> StackPlan:
-    """The sides of ``stack`` planned with ``options`` and built (see the module);
-    ``gave_up``: the sides whose table ``"auto"`` does not try again (a failed build
-    may spend the whole budget where its rejection cannot be predicted)."""
-    plan = plan_sides(stack, options)
-    if colour_channels() is not None:
-        # RGB and mono variants read integrated colour tables (thinfilm_mi.tabulate.integrated)
-        sides = {inside: side.with_(colour=colour_table(stack, side, side_data))
-                 for inside, side in plan.sides.items()}
-        if dr.is_diff_v(mitsuba_module().Float):
-            prepare_gradients(stack.media())
-        return StackPlan(sides, plan.mirrored)
-    # Polarized variants read tables of the Mueller components
-    # (thinfilm_mi.tabulate.mueller) or evaluate the complex amplitudes
-    # (thinfilm_mi.render.amplitudes; their film loop has no real-amplitude form)
-    quantity = MUELLER if mitsuba_module().is_polarized else POWERS
-    plan = build_tables(stack, options, plan, quantity, gave_up)
-    if not dr.is_jit_v(mitsuba_module().Float):
-        return plan
-    channels = quantity.channels(False)
-    sides = {inside: side.with_(loop=LoopFilms(side.films, side.n0, side.exit))
-             if reads_buffers(plan, side, channels) else side
+def build_plan(plan: StackPlan) -> StackPlan:
+    """What ``plan`` asks for, built (see the module): a new plan, ``plan`` is left as
+    it was given."""
+    if colour_channels() is None:
+        built = build_tables(plan)
+        # A side's table holds T wherever the side asks for it: it serves every call
+        # the side is planned for, and so does the ambient side's where it is mirrored
+        mirror = built.mirrored and built.sides[False].table is not None
+        sides = dict(built.sides)
+        for inside, side in built.sides.items():
+            if side.buffered and side.table is None and not (inside and mirror):
+                sides[inside] = replace(side, loop=LoopFilms(side.films, side.n0, side.exit))
+        return replace(built, sides=sides)
+    # RGB and mono variants read integrated colour tables (thinfilm_mi.tabulate.integrated)
+    facts = plan.facts
+    sides = {inside: replace(side, colour=colour_table(facts, side, side_data))
              for inside, side in plan.sides.items()}
-    return StackPlan(sides, plan.mirrored, plan.failed)
+    if dr.is_diff_v(mitsuba_module().Float):
+        prepare_gradients(facts.stack.media())
+    return replace(plan, sides=sides)
 
 
-def build_tables(stack: FilmStack, options: StackOptions, plan: StackPlan, quantity=POWERS,
-                 gave_up=frozenset()) -> StackPlan:
-    """``plan`` with the tables of ``quantity`` (what they hold:
-    :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`) that it wants
-    (:func:`~thinfilm_mi.render.stack_plan.wants_tables`); none where a thickness
-    carries gradients (every film is read then:
-    :func:`~thinfilm_mi.render.stack_eval.current_side`). Without the ambient side's
-    table a mirrored plan is no longer mirrored: the side lit from the substrate is
-    then planned, and tabulated, on its own."""
-    option = options.tabulate
-    if not wants_tables(stack, options, plan, quantity) or stack.differentiating():
+def build_tables(plan: StackPlan) -> StackPlan:
+    """``plan`` with the tables its sides ask for (``tabulate``; of ``plan.quantity``).
+    Without the ambient side's table a mirrored plan is no longer mirrored: the side
+    lit from the substrate is then tabulated on its own, as the plan decided for that
+    case. A new plan; ``failed`` and ``gave_up`` say which tables could not be built."""
+    if not plan.tables:
         return plan
+    options, stack = plan.options, plan.facts.stack
     sides, mirrored, failed = dict(plan.sides), plan.mirrored, []
     for inside, side in plan.sides.items():
-        if inside and mirrored and sides[False].table is None:
+        if inside and mirrored:
+            if sides[False].table is not None:
+                continue   # read through the ambient side's table
             mirrored = False
-            side = sides[inside] = side.with_(
-                transmission=options.sides[True] and not side.lossless)
-        if side.films and not (option.selective and (
-                inside in gave_up or few_films(stack, options, side, mirrored, quantity))) \
-                and StackPlan(sides, mirrored).mirror_table(side) is None:
-            table, report = side_table(options, side, quantity)
-            sides[inside] = side.with_(table=table, build_report=report)
+        if side.tabulate:
+            table, report = side_table(plan.facts, options, side, plan.quantity)
+            sides[inside] = replace(side, table=table, build_report=report)
             if table is None:
                 failed.append(inside)
+    option = options.tabulate
     if option.required and failed:
         why = "; ".join(sorted({str((sides[i].build_report or {}).get("result"))
                                 for i in failed}))
@@ -107,10 +90,11 @@ def build_tables(stack: FilmStack, options: StackOptions, plan: StackPlan, quant
                       f"within table_error={options.table_error:g} in {MAX_TEXELS} "
                       f"texels and {option.budget_scale:g}x the build budget of 'auto' "
                       f"({why}); it is evaluated exactly", stacklevel=4)
-    return StackPlan(sides, mirrored, failed)
+    return replace(plan, sides=sides, mirrored=mirrored, failed=failed,
+                   gave_up=plan.gave_up | set(failed))
 
 
-def side_table(options: StackOptions, side: SidePlan, quantity=POWERS):
+def side_table(facts: StackFacts, options: StackOptions, side: SidePlan, quantity=POWERS):
     """``(table, report)``: the table of ``side`` (``None`` where none can be) and what
     its build did (a :class:`~thinfilm_mi.tabulate.base.BuildReport`, ``None`` for an
     index that varies over the surface), shared between stacks with identical optics.
@@ -128,15 +112,14 @@ def side_table(options: StackOptions, side: SidePlan, quantity=POWERS):
     later processes.
     """
     mi = mitsuba_module()
-    media = [side.n0] + [f[0] for f in side.films] + [side.exit]
-    values, arrays = {}, []
-    for ix in media:
-        if id(ix) not in values:
-            if ix.eta.is_spatially_varying() or ix.k.is_spatially_varying():
-                return None, None   # an index that varies over the surface: not tabulable
-            values[id(ix)] = (texture_on_grid(ix.eta), texture_on_grid(ix.k))
-        arrays += values[id(ix)]
+    arrays = []
+    for ix in [side.n0] + [f[0] for f in side.films] + [side.exit]:
+        n = facts.grid[id(ix)]
+        if n is None:
+            return None, None   # an index that varies over the surface: not tabulable
+        arrays += [n.real, n.imag]
     transmission = side.transmission and not side.opaque
+    data = side_data(side, transmission, quantity=quantity)
     channels = quantity.channels(transmission)
     option = options.tabulate
     max_texels = quantity.auto_max_floats // channels if option.selective else MAX_TEXELS
@@ -155,7 +138,6 @@ def side_table(options: StackOptions, side: SidePlan, quantity=POWERS):
             TABLE_CACHE.put(key, table)
             return table, BuildReport(result="from the table store", build=report)
 
-    data = side_data(side, transmission, quantity=quantity)
     report = BuildReport()
     table = band.build_table(data, options.table_error, GRID, max_texels,
                              options.spectral_resolution, report=report,

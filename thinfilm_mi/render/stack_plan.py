@@ -1,37 +1,39 @@
 """How a stack is planned (no plugin classes here): the options of a
-:class:`~thinfilm_mi.render.kernel.KernelStack` (:class:`StackOptions`), and per lit
-side what its evaluation skips and reads (:class:`SidePlan`, :func:`plan_sides`).
+:class:`~thinfilm_mi.render.kernel.KernelStack` (:class:`StackOptions`), and from what
+the stack is (:class:`~thinfilm_mi.render.film_stack.StackFacts`) per lit side what its
+evaluation skips and reads (:class:`SidePlan`) and what is built for it
+(:func:`plan_sides`, a :class:`StackPlan`): pure decisions, nothing built.
 
 What a scene does not need is skipped (re-decided after every edit): films of zero
-thickness are dropped; below an optically opaque film (:data:`OPAQUE_AMPLITUDE`)
-nothing is evaluated and ``T = 0``; films thicker than ``coherence_thickness`` are
-averaged incoherently; lossless films need no ``T`` (``1 - R``), and both sides of a
-lossless stack may read the ambient side's table (mirrored,
-:mod:`thinfilm_mi.render.mirror`). Which sides a table pays for
-(:func:`wants_tables`, :func:`few_films`) and which sides read their films from
-buffers (:func:`reads_buffers`) are decided here too; the tables and buffers are
-built by :mod:`thinfilm_mi.render.stack_build`, into a :class:`StackPlan`.
+thickness are dropped; below an optically opaque film nothing is evaluated and
+``T = 0``; films thicker than ``coherence_thickness`` are averaged incoherently;
+lossless films need no ``T`` (``1 - R``), and both sides of a lossless stack may read
+the ambient side's table (mirrored, :func:`mirror_applies`, evaluated by
+:mod:`thinfilm_mi.render.mirror`). Whether tables are built at all
+(:func:`wants_tables`), which sides a table pays for (:func:`few_films`) and which
+sides read their films from buffers where no table serves them (:func:`buffered`) are
+decided here too; :mod:`thinfilm_mi.render.stack_build` builds what the plan asks for.
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import drjit as dr
 import numpy as np
 
-from thinfilm_mi.render import mirror
 from thinfilm_mi.render.colour_variants import colour_channels
-from thinfilm_mi.render.film_stack import FilmStack
+from thinfilm_mi.render.film_stack import OPAQUE_AMPLITUDE, FilmStack, StackFacts
 from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.tabulation import Route, tabulate_option
-from thinfilm_mi.render.textures import GRID, mitsuba_module, texture_on_grid
+from thinfilm_mi.render.textures import mitsuba_module
+from thinfilm_mi.tabulate.mueller import MUELLER
 from thinfilm_mi.tabulate.policy import MIRROR_AUTO_MIN_FILMS
+from thinfilm_mi.tabulate.quantities import POWERS
 
 __all__ = ["BUFFERED_MIN_FILMS", "DEFAULT_COHERENCE_THICKNESS", "DEFAULT_SPECTRAL_RESOLUTION",
            "DEFAULT_TABLE_ERROR", "OPAQUE_AMPLITUDE", "SidePlan", "StackOptions", "StackPlan",
-           "few_films", "full_plan", "optically_opaque", "plan_sides", "reads_buffers",
+           "buffered", "exact_mirrors", "few_films", "full_plan", "mirror_applies", "plan_sides",
            "wants_tables"]
 
 #: Default coherence thickness (nm): thicker films are averaged incoherently.
@@ -43,10 +45,6 @@ DEFAULT_TABLE_ERROR = 1e-3
 #: in wavenumber of this standard deviation at 560 nm (:mod:`thinfilm_mi.tabulate.band`),
 #: narrow enough that broadband light shows no difference in colour.
 DEFAULT_SPECTRAL_RESOLUTION = 1.0
-#: A film is optically opaque when the amplitude of light crossing it once,
-#: ``exp(-2 pi Im(q) d / lambda)`` at normal incidence and the worst wavelength,
-#: is below this: what lies beneath then changes r by less than ~1e-9.
-OPAQUE_AMPLITUDE = 1e-9
 #: Exact sides of this many films read their films from buffers (:class:`LoopFilms`: one
 #: index search per wavelength for all films, a gather per film; unrolled below
 #: :data:`~thinfilm_mi.optics.unpolarized.LOOP_MIN_FILMS` films, a loop from it), in every
@@ -80,14 +78,17 @@ class StackOptions:
 
 @dataclass(frozen=True, eq=False)
 class SidePlan:
-    """How one lighting side of a stack is evaluated, after the skips.
+    """How one lighting side of a stack is evaluated, after the skips, and what is
+    built for it.
 
     ``films`` are ``(SpectralIndex, thickness, incoherent)`` from the side the
     light comes from; ``exit`` is the exit medium (the substrate, the ambient,
     or the first optically opaque film, in which case ``opaque`` is true and
     ``T = 0``); ``lossless``: non-absorbing films under a real incidence medium
-    (``T = 1 - R``, tables hold ``R``). What :mod:`~thinfilm_mi.render.stack_build`
-    builds for the side comes with it: ``table`` (a
+    (``T = 1 - R``, tables hold ``R``). The plan's answers for the build:
+    ``tabulate``, a table of the side is built; ``buffered``, the side reads its
+    films from buffers where no table serves it (:func:`buffered`). What
+    :mod:`~thinfilm_mi.render.stack_build` builds comes with it: ``table`` (a
     :class:`~thinfilm_mi.tabulate.base.Table`) and ``build_report`` (what its build
     did, a :class:`~thinfilm_mi.tabulate.base.BuildReport`), ``loop`` (a
     :class:`~thinfilm_mi.render.loop.LoopFilms` where the films are read from
@@ -102,6 +103,8 @@ class SidePlan:
     opaque: bool
     transmission: bool
     lossless: bool = False
+    tabulate: bool = False
+    buffered: bool = False
     table: Any = None
     build_report: Any = None
     loop: Any = None
@@ -111,21 +114,27 @@ class SidePlan:
     def incoherent(self) -> list[bool]:
         return [f[2] for f in self.films]
 
-    def with_(self, **changes) -> "SidePlan":
-        """This plan with ``changes`` (a built table, a loop; a new object)."""
-        return replace(self, **changes)
 
-
+@dataclass(frozen=True, eq=False)
 class StackPlan:
     """The planned sides of a stack: ``sides`` maps ``inside`` to its :class:`SidePlan`;
     ``mirrored``: the side lit from the substrate reads the ambient side's table
-    (:mod:`thinfilm_mi.render.mirror`); ``failed``: the sides whose table could not be
-    built."""
+    (:mod:`thinfilm_mi.render.mirror`); what the build reads: ``facts`` (the
+    :class:`~thinfilm_mi.render.film_stack.StackFacts` planned from), ``options``
+    (:class:`StackOptions`), ``tables`` (whether tables are built at all),
+    ``quantity`` (what they hold, a :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`
+    entry); after the build, ``failed``: the sides whose table could not be built, and
+    ``gave_up``: those whose table ``"auto"`` does not try again (a failed build may
+    spend the whole budget where its rejection cannot be predicted)."""
 
-    def __init__(self, sides: dict, mirrored: bool, failed: list | None = None):
-        self.sides = sides
-        self.mirrored = mirrored
-        self.failed = list(failed or [])
+    sides: dict
+    mirrored: bool
+    facts: StackFacts | None = None
+    options: StackOptions | None = None
+    tables: bool = False
+    quantity: Any = POWERS
+    failed: list = field(default_factory=list)
+    gave_up: frozenset = frozenset()
 
     def mirror_table(self, side: SidePlan):
         """The table that serves ``side`` lit from the substrate through the ambient
@@ -138,17 +147,6 @@ class StackPlan:
         if every one reads a table, ``"exact"`` if none, else ``"mixed"``."""
         return Route.of([s.table is not None or self.mirror_table(s) is not None
                          for s in self.sides.values() if s.films])
-
-
-def optically_opaque(index: SpectralIndex, d: float, textured: bool) -> bool:
-    """Whether a film of ``index``, ``d`` nm thick, hides what lies beneath it
-    (:data:`OPAQUE_AMPLITUDE`); never under a thickness texture (``textured``), which
-    may thin the film anywhere."""
-    if textured or d <= 0:
-        return False
-    n = index.spectral_values(GRID)
-    k = n.imag if n is not None else texture_on_grid(index.k)
-    return bool(np.max(np.exp(-2.0 * math.pi * k * d / GRID)) < OPAQUE_AMPLITUDE)
 
 
 def side_plan(stack: FilmStack, inside: bool, transmission: bool, films: list, opaque: list,
@@ -172,35 +170,73 @@ def full_plan(stack: FilmStack, inside: bool, transmission: bool) -> SidePlan:
     return side_plan(stack, inside, transmission, films, [False] * len(films))
 
 
-def plan_sides(stack: FilmStack, options: StackOptions) -> StackPlan:
-    """The sides of ``stack`` that ``options.sides`` asks for, after the skips (see
-    the module), with nothing built yet."""
+def mirror_applies(facts: StackFacts, films: list) -> bool:
+    """Whether both sides of these films (``(index, thickness, incoherent)``) may be
+    read from the ambient side's table of ``R``: every medium lossless and the
+    substrate's index nowhere below the ambient's (the ambient side then never
+    totally reflects, and its table has one angle segment)."""
+    ambient, substrate = facts.stack.ambient, facts.stack.substrate
+    if not films or not all(facts.real[id(ix)] for ix in [ambient, substrate]
+                            + [ix for ix, _, _ in films]):
+        return False
+    return bool(np.all(facts.grid[id(substrate)].real >= facts.grid[id(ambient)].real))
+
+
+def exact_mirrors(ambient: SpectralIndex, substrate: SpectralIndex) -> bool:
+    """Whether a mirrored stack between these media is evaluated exactly without a
+    table (:func:`~thinfilm_mi.render.mirror.mirrored_rt`): neither is dispersive, so
+    one mapped angle serves every wavelength."""
+    return all(ix.knots is not None and ix.knots.size == 0 for ix in (ambient, substrate))
+
+
+def plan_sides(facts: StackFacts, options: StackOptions, gave_up=frozenset()) -> StackPlan:
+    """The sides of the stack ``facts`` describe that ``options.sides`` asks for, after
+    the skips (see the module), with what is built for them decided (nothing built
+    yet); ``gave_up``: the sides whose table ``"auto"`` does not try again."""
+    stack = facts.stack
     # Zero-thickness films dropped; opacity decided once per film for all sides.
-    kept = [(ix, d, dv) for ix, d, dv in
-            zip(stack.indices, stack.thickness, stack.thickness_values()) if dv > 0]
-    films = [(ix, d, dv > options.coherence_thickness) for ix, d, dv in kept]
-    textured = stack.thickness_texture is not None
-    opaque = [optically_opaque(ix, dv, textured) for ix, _, dv in kept]
+    kept = [(ix, d, dv, op) for ix, d, dv, op in
+            zip(stack.indices, stack.thickness, facts.thickness, facts.opaque) if dv > 0]
+    films = [(ix, d, dv > options.coherence_thickness) for ix, d, dv, _ in kept]
+    opaque = [op for _, _, _, op in kept]
     # Spectral variants: lossless films need no T (1 - R); both sides of a lossless
     # stack come from the ambient side's table of R or recursion (render.mirror)
     polarized = mitsuba_module().is_polarized
-    spectral = colour_channels() is None and not polarized
-    real = spectral and bool(films) and all(mirror.real_on_grid(ix) for ix, _, _ in films)
-    lossless = {i: real and (not i or mirror.real_on_grid(stack.substrate)) for i in options.sides}
+    colour = colour_channels() is not None
+    spectral = not colour and not polarized
+    real = spectral and bool(films) and all(facts.real[id(ix)] for ix, _, _ in films)
+    lossless = {i: real and (not i or facts.real[id(stack.substrate)]) for i in options.sides}
     mirrored = (set(options.sides) == {False, True} and spectral
-                and mirror.mirror_applies(stack.ambient, films, stack.substrate))
+                and mirror_applies(facts, films))
     sides = {inside: side_plan(stack, inside, t and not lossless[inside], films, opaque,
                                lossless[inside])
              for inside, t in options.sides.items()}
-    return StackPlan(sides, mirrored)
+    # Polarized variants read tables of the Mueller components
+    # (thinfilm_mi.tabulate.mueller) or evaluate the complex amplitudes
+    # (thinfilm_mi.render.amplitudes; their film loop has no real-amplitude form)
+    quantity = MUELLER if polarized else POWERS
+    tables = (not colour and not facts.differentiating
+              and wants_tables(stack, options, sides, mirrored, quantity))
+    selective = options.tabulate.selective
+    jit = dr.is_jit_v(mitsuba_module().Float)
+    # The side lit from the substrate of a mirrored plan is tabulated only where the
+    # ambient side's table is not built (then it is planned on its own)
+    sides = {inside: replace(
+                 side, tabulate=tables and bool(side.films) and not (selective and (
+                     inside in gave_up or few_films(stack, options, side, mirrored and not inside,
+                                                    quantity))),
+                 buffered=not colour and jit and buffered(side))
+             for inside, side in sides.items()}
+    return StackPlan(sides, mirrored, facts, options, tables, quantity, gave_up=frozenset(gave_up))
 
 
 def few_films(stack: FilmStack, options: StackOptions, side: SidePlan, mirrored: bool,
               quantity) -> bool:
     """``tabulate="auto"``: whether ``side`` has fewer films than a table of it pays
     for (``quantity``: what the table would hold, a
-    :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES` entry)."""
-    if mirrored and mirror.exact_mirrors(stack.ambient, stack.substrate):
+    :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES` entry; ``mirrored``: the table
+    serves both sides)."""
+    if mirrored and exact_mirrors(stack.ambient, stack.substrate):
         return len(side.films) < MIRROR_AUTO_MIN_FILMS
     rt = side.transmission and not side.opaque
     if rt and options.rt_min_films is not None:
@@ -208,29 +244,22 @@ def few_films(stack: FilmStack, options: StackOptions, side: SidePlan, mirrored:
     return len(side.films) < quantity.auto_min_films(rt)
 
 
-def wants_tables(stack: FilmStack, options: StackOptions, plan: StackPlan, quantity) -> bool:
-    """Whether tables are built for ``plan`` at all: ``tabulate`` true, or ``"auto"``
-    in vectorised variants (in scalar variants every call is Python anyway and the
-    load-time build would dominate) without a thickness texture, where some side
-    has the films a table pays for (:func:`few_films`)."""
+def wants_tables(stack: FilmStack, options: StackOptions, sides: dict, mirrored: bool,
+                 quantity) -> bool:
+    """Whether tables are built for the planned ``sides`` at all: ``tabulate`` true, or
+    ``"auto"`` in vectorised variants (in scalar variants every call is Python anyway
+    and the load-time build would dominate) without a thickness texture, where some
+    side has the films a table pays for (:func:`few_films`)."""
     option = options.tabulate
     return option.builds and (not option.selective or (
         stack.thickness_texture is None and dr.is_jit_v(mitsuba_module().Float)
-        and not all(few_films(stack, options, s, plan.mirrored, quantity)
-                    for s in plan.sides.values())))
+        and not all(few_films(stack, options, s, mirrored, quantity) for s in sides.values())))
 
 
-def reads_buffers(plan: StackPlan, side: SidePlan, reflection_channels: int) -> bool:
+def buffered(side: SidePlan) -> bool:
     """Whether ``side`` (JIT variants) reads its films from buffers
-    (:class:`~thinfilm_mi.render.loop.LoopFilms`): a side whose table serves the calls
-    its plan is for (``R``, and ``T`` where the plan asks for it) does not evaluate its
-    films (other calls fall back to the unrolled films), nor does one with an
-    incoherent film or an index without knots; ``reflection_channels``: the channels
-    of a table of ``R`` alone."""
-    served = (side.table is not None and (side.table.channels > reflection_channels
-                                          or side.opaque or not side.transmission
-                                          or side.lossless)
-              ) or plan.mirror_table(side) is not None
-    return (not served and len(side.films) >= BUFFERED_MIN_FILMS
-            and not any(side.incoherent)
+    (:class:`~thinfilm_mi.render.loop.LoopFilms`) where no table serves the calls its
+    plan is for: not a side of fewer than :data:`BUFFERED_MIN_FILMS` films, nor one
+    with an incoherent film or an index without knots."""
+    return (len(side.films) >= BUFFERED_MIN_FILMS and not any(side.incoherent)
             and all(ix.knots is not None for ix, _, _ in side.films))
