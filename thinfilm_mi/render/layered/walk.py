@@ -172,9 +172,8 @@ class RandomWalk:
             more = active & (depth + 1 < max_bounces)
             # the link to the reverse sample: the next vertex's term by the other strategy
             link = more & v_ok
-            f_c = base.eval(ctx, si_b, v_bar, link)
+            f_c, p_c = base.eval_pdf(ctx, si_b, v_bar, link)
             with dr.suspend_grad(when=replay):
-                p_c = base.pdf(ctx, si_b, v_bar, link)
                 w_link = dr.select(link, power_heuristic(p_v, p_c), 0.0)
                 linked = beta * f_c * w_link
                 gathered = dr.select(active, gathered + beta * e * mis + linked * rev_d, gathered)
