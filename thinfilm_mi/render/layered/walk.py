@@ -10,18 +10,20 @@ inner direction of ``ω_o``: next-event estimation through the smooth top, which
 ``ω_o'`` to ``ω_o`` deterministically); then the base is sampled, ``w``, weight ``g``, and
 the walk goes on reflected by the underside: ``β_{k+1} = β_k g R_in(θ_w) A(w)²``,
 ``w_{k+1} = (-w_x, -w_y, w_z)``. The first term is exact (``w_0`` is fixed); later ones
-are unbiased estimates of the interreflection series. **Links**: each later term, the
-integral ``∫ f_b(w_k, w) cos θ_w U(w̄) f_b(w̄, ω_o') cos θ_o' dw`` over the direction that
-reaches vertex ``k+1``, is estimated by two strategies combined by Veach's power heuristic:
-the walk's own sample (its density ``p_f``: the base's at ``w_k``), and a *reverse sample*
-``v`` drawn once per walk from the base at ``ω_o'`` (its non-delta lobes; density ``p_v``:
-an exact density too, by which pbrt-v4's ``LayeredBxDF`` pre-samples its exit), linked from
-every vertex: ``β_k f_b(w_k, v̄) cos θ_v U(v) f_b(v, ω_o') cos θ_o' / p_v``. A glossy base
-whose walk is trapped by total internal reflection reaches ``ω_o'``'s lobe by the link
-rather than by the chance that its own sample falls there. A delta step (density a Dirac)
-is the walk's alone. Russian roulette from :data:`RR_DEPTH` vertices on, of walks whose
+are unbiased estimates of the interreflection series. **The link**: the second vertex's
+term, the integral ``∫ f_b(ω_i', w) cos θ_w U(w̄) f_b(w̄, ω_o') cos θ_o' dw`` over the
+direction that reaches it, is estimated by two strategies combined by Veach's power
+heuristic: the walk's own sample (its density ``p_f``: the base's at ``ω_i'``), and a
+*reverse sample* ``v`` drawn from the base at ``ω_o'`` (its non-delta lobes; density
+``p_v``: an exact density too, as pbrt-v4's ``LayeredBxDF`` pre-samples its exit), linked
+from the first vertex: ``f_b(ω_i', v̄) cos θ_v U(v) f_b(v, ω_o') cos θ_o' / p_v``. The
+light a glossy base sends beyond the critical angle of ``ω_o'``'s lobe, which total
+internal reflection traps, reaches ``ω_o'`` by the link rather than by the chance that the
+walk's own sample falls there. Later vertices have no link (each would cost two more calls
+of the base per vertex, for paths already spread by a bounce). A delta step (a Dirac
+density) is the walk's alone. Russian roulette from :data:`RR_DEPTH` vertices on, of walks whose
 throughput is below :data:`ROULETTE_BELOW` (:func:`roulette`; unbiased); the walk stops
-after ``max_bounces`` base vertices: the paths with more are dropped (links included).
+after ``max_bounces`` base vertices: the paths with more are dropped (the link too where ``N = 1``).
 For a Lambertian base of albedo ``ρ`` each vertex sends back ``ρ R̄`` of what it receives
 (``R̄``: the underside's hemispherical reflectance), so the dropped energy is at most ``(ρ R̄)^N /
 (1 - ρ R̄)`` of the light that entered: ``0.596^64/0.404 ≈ 1e-14`` for a bare ``η = 1.5``
@@ -102,10 +104,8 @@ class RandomWalk:
         Gradients: the walk runs detached, then again with the same random numbers
         (:meth:`_walk` given ``total``), adding per vertex what the parameters change there, as
         Mitsuba's ``prb`` replays a path: ``dW = Σ_j β_j de_j + Σ_j dlog(g_j r_j) (W -
-        W_{≤j}) + C dr`` with ``e_j`` vertex ``j``'s own terms (the base's ``eval`` towards
-        ``ω_o'``, MIS-weighted, and towards the reverse sample, times the link's factor
-        ``r = U(v) f_b(v, ω_o') cos θ_o' / p_v`` held fixed), ``C`` the coefficient the links
-        sum to (``W``'s share in ``r``, whose derivative enters once), ``g_j r_j`` the step's
+        W_{≤j})`` with ``e_j`` vertex ``j``'s own terms (the base's ``eval`` towards
+        ``ω_o'``, MIS-weighted, and at the first vertex the link), ``g_j r_j`` the step's
         base weight (the base's ``eval`` over its detached pdf at the sampled
         direction: sampling decisions are detached; at a delta vertex, whose ``eval`` is
         0, the replayed sample's weight times its pdf) and underside, and ``W - W_{≤j}``
@@ -129,8 +129,8 @@ class RandomWalk:
         return total + (surrogate - dr.detach(surrogate))
 
     def _reverse(self, ctx_mode, si, wo_in, rng, active, replay):
-        """The walk's reverse sample: ``v`` drawn once from the base at ``ω_o'`` (its
-        non-delta lobes), as the next vertex's direction of every link; returns ``(v̄,
+        """The walk's reverse sample: ``v`` drawn from the base at ``ω_o'`` (its non-delta
+        lobes), the second vertex's direction of the link; returns ``(v̄,
         p_v, r, ok)`` with ``v̄ = (-v_x, -v_y, v_z)`` (the direction the linking vertex
         sends the light to), ``p_v`` its density and ``r = U(v) e(v) / p_v`` (the
         underside, then the base's ``eval`` at ``v`` towards ``ω_o'``; attached in the
@@ -160,24 +160,25 @@ class RandomWalk:
         rng = mi.PCG32(size=1, initstate=mi.UInt64(seed[0]), initseq=mi.UInt64(seed[1]))
         zero = dr.zeros(mi.Spectrum)
         v_bar, p_v, rev, v_ok = self._reverse(ctx_mode, si, wo_in, rng, active, replay)
-        rev_d, si_o = dr.detach(rev), base_interaction(si, wo_in)
+        si_o = base_interaction(si, wo_in)
 
-        def cond(acc, gathered, coef, beta, mis, w, depth, rng, active):
+        def cond(acc, gathered, beta, mis, w, depth, rng, active):
             return active
 
-        def body(acc, gathered, coef, beta, mis, w, depth, rng, active):
+        def body(acc, gathered, beta, mis, w, depth, rng, active, first=False):
             alive = active
             si_b = base_interaction(si, w)
             e = base.eval(ctx, si_b, wo_in, active)
             more = active & (depth + 1 < max_bounces)
-            # the link to the reverse sample: the next vertex's term by the other strategy
-            link = more & v_ok
-            f_c, p_c = base.eval_pdf(ctx, si_b, v_bar, link)
-            with dr.suspend_grad(when=replay):
+            linked = zero
+            if first:
+                # the link to the reverse sample: the second vertex's term by the other strategy
+                link = more & v_ok
+                f_c, p_c = base.eval_pdf(ctx, si_b, v_bar, link)
                 w_link = dr.select(link, power_heuristic(p_v, p_c), 0.0)
-                linked = beta * f_c * w_link
-                gathered = dr.select(active, gathered + beta * e * mis + linked * rev_d, gathered)
-                coef = dr.select(active, coef + linked, coef)
+                linked = beta * f_c * rev * w_link
+            with dr.suspend_grad(when=replay):
+                gathered = dr.select(active, gathered + beta * e * mis + linked, gathered)
                 depth = depth + 1
                 s1 = rng.next_float32()
                 s2 = mi.Point2f(rng.next_float32(), rng.next_float32())
@@ -188,39 +189,42 @@ class RandomWalk:
                 # along w_next and reflected at the underside
                 w_next = mi.Vector3f(-bs.wo.x, -bs.wo.y, cos)
                 step = g * self.layer.underside(si, w_next, active)
-                # the next vertex's own term, weighted against the link that reaches it
-                p_r = base.pdf(ctx_s, si_o, w_next, active & logical_not(
-                    mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)))
-                mis_next = power_heuristic(bs.pdf, p_r)
+                mis_next = dr.select(active, 1.0, mis)
+                if first:
+                    # the second vertex's own term, weighted against the link that reaches it
+                    p_r = base.pdf(ctx_s, si_o, w_next, active & logical_not(
+                        mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)))
+                    mis_next = power_heuristic(bs.pdf, p_r)
             if replay:
                 acc = mi.Spectrum(acc + self._replayed(ctx, si, si_b, bs, (s1, s2), w_next,
                                                        total - gathered, active)
-                                  + dr.select(alive, beta * e * mis + beta * f_c * w_link * rev_d,
-                                              zero))
+                                  + dr.select(alive, beta * e * mis + linked, zero))
             else:
                 acc = gathered
             with dr.suspend_grad(when=replay):
                 beta = dr.select(active, beta * step, zero)
                 beta, active = roulette(beta, depth, rng, active, self.layer.mode.polarized)
-            return acc, gathered, coef, beta, mis_next, w_next, depth, rng, active
+            return acc, gathered, beta, mis_next, w_next, depth, rng, active
 
-        acc0, gathered0, coef0, beta0 = (mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(zero),
-                                         mi.Spectrum(1.0))
+        acc0, gathered0, beta0, loop0 = (mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(1.0),
+                                         mi.Spectrum(zero))
         if self.layer.mode.polarized:
             # Mueller matrices that start as literals (zeros, the identity) fill in one
             # entry per product along the walk, so Dr.Jit would find the loop state still
             # changing when it records the loop a second time (a principled base): start
             # them as evaluated values
-            dr.make_opaque(acc0, gathered0, coef0, beta0)
-        state = (acc0, gathered0, coef0, beta0, mi.Float(1.0), mi.Vector3f(w0), mi.UInt32(0),
-                 rng, mi.Bool(active))
-        labels = ("acc", "gathered", "coef", "beta", "mis", "w", "depth", "rng", "active")
+            dr.make_opaque(acc0, gathered0, beta0, loop0)
+        # the first vertex, with its link, before the loop (whose vertices have none); the
+        # loop sums from zero (the replay's loop takes no differentiable input)
+        first = body(acc0, gathered0, beta0, mi.Float(1.0), mi.Vector3f(w0), mi.UInt32(0),
+                     rng, mi.Bool(active), first=True)
+        labels = ("acc", "gathered", "beta", "mis", "w", "depth", "rng", "active")
         # max_iterations=-1: the replay is a sum of per-vertex terms (Dr.Jit's fast path
         # for reverse-mode differentiation of such loops)
-        out = dr.while_loop(state, cond, body, labels=labels,
-                            max_iterations=-1 if replay else None)
-        # the links' shared factor r: its gradients once, through the coefficient they sum to
-        return out[0] + out[2] * (rev - rev_d) if replay else out[0]
+        rest = dr.while_loop((loop0,) + first[1:], cond, body, labels=labels,
+                             max_iterations=-1 if replay else None)
+        # the walk's sum is what it gathered; the replay's, the first vertex's and the loop's
+        return first[0] + rest[0] if replay else rest[1]
 
     def _replayed(self, ctx, si, si_b, bs, numbers, w_next, after, active):
         """A vertex's step in the replay: ``dlog(g r) (W - W_{≤j})`` (``after``: what the
