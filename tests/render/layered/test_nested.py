@@ -50,13 +50,13 @@ def test_an_invisible_top_samples_the_nested_bsdf_alone():
 
 @pytest.mark.parametrize("base, share", [
     ({"type": "diffuse", "reflectance": 0.5}, MIXTURE_BOUNDS[1]),   # ν = 1: the top bound
-    ({"type": "roughconductor", "alpha": 0.3}, (0.55, 0.7)),        # ν ≈ 3
+    ({"type": "roughconductor", "alpha": 0.3}, (0.55, 0.75)),       # ν ≈ 2
     ({"type": "roughconductor", "alpha": 0.02}, MIXTURE_BOUNDS[0]),  # ν in the hundreds
 ])
 def test_the_cosine_share_falls_with_the_lobes_peak(base, share):
     """The probe's share ``c = clip(0.8 - 0.15 ln ν)``: the top bound over a Lambertian
     (``ν = p π / cos = 1`` exactly), the bottom one over a near mirror, between them over
-    α 0.3 (its two probe samples at normal incidence have ``ν`` of 2-4: ``c`` 0.59-0.70)."""
+    α 0.3 (its two probe samples at normal incidence have ``ν`` near 2: ``c`` 0.69)."""
     c = coating(bsdf=base).coating
     _, got = c.probe(mi.TransportMode.Radiance, interaction(1.0), True)
     got = scalar(got)

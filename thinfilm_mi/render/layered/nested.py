@@ -98,7 +98,8 @@ __all__ = ["MIXTURE_BOUNDS", "MIXTURE_SLOPE", "PROBE", "ALBEDO_FLOOR", "NestedEs
 MIXTURE_BOUNDS = (0.2, 0.8)
 #: How fast ``c`` falls with the base lobe's peak ``ν`` (per e-fold): 0.8 for a Lambertian
 #: or a lobe as broad, 0.45 at ``ν = 10``, 0.2 from ``ν ≈ 55`` (a ``roughconductor``'s
-#: α 0.3 at normal incidence has ``ν ≈ 3``, α 0.05 ``ν ≈ 100``).
+#: α 0.3 under a 1.5 coat at normal incidence: ``ν ≈ 2``, α 0.12 ``ν ≈ 11``, α 0.05 more than
+#: 55).
 MIXTURE_SLOPE = 0.15
 #: The probe's fixed numbers ``(sample1, sample2)``: two stratified samples of the base
 #: (one picks a ``principled``'s lobes too unevenly for its albedo).
