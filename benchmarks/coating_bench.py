@@ -13,7 +13,8 @@ edits without recompilation.
 The scene is the sphere of ``timing.py`` (radius 1 on a diffuse floor under a
 constant emitter, ``path``, box filter). The sphere's BSDF is one of :data:`BASES`
 (``diffuse``, ``roughconductor`` α 0.3 on Al, ``principled``), alone or under the coating
-:data:`COAT` (``int_ior`` 1.5, the films ``"SiO2 500; TiO2 80"``, default settings). The
+:data:`COAT` (``int_ior`` 1.5, the films ``"SiO2 500; TiO2 80"``, default settings) with
+each top of :data:`TOPS` (today the smooth one): a row per top and base. The
 coating's Mitsuba counterpart is its base alone (Mitsuba has no coating of films), which
 is what part 1 times; against ``plastic`` (no films over ``diffuse``), in the polarized
 variant and at other depths: ``plugin_bench.py`` and ``render_bench.py``. This bench adds
@@ -92,14 +93,31 @@ BASES = [
     ("`principled`", {"type": "principled", "roughness": 0.4,
                       "base_color": {"type": "rgb", "value": [0.6, 0.05, 0.05]}}),
 ]
+#: (label, the coating's properties that make its top, the interface plugin of the explicit
+#: geometry's outer sphere): every table has a row per top and base (:func:`cases`)
+TOPS = [
+    ("smooth", {}, {"type": "thinfilm_dielectric"}),
+]
 #: the sphere's radius less the base sphere's in the explicit geometry (the sphere's is 1)
 GAP = 0.01
 CENTER = (0.0, 0.2, 0.0)
 NOISE_DEPTH = 64
 
 
-def coated(base: dict) -> dict:
-    return {"type": "thinfilm_coating", **COAT, "bsdf": base}
+def cases() -> list:
+    """``(label, base, top)`` of every row: each top of :data:`TOPS` over each base of
+    :data:`BASES` (the label names the top where it is not smooth)."""
+    return [(label if name == "smooth" else f"{label}, {name} top", base, (own, geometry))
+            for name, own, geometry in TOPS for label, base in BASES]
+
+
+SMOOTH = TOPS[0][1:]
+
+
+def coated(base: dict, top: tuple = SMOOTH) -> dict:
+    """``thinfilm_coating`` of :data:`COAT` with the top ``top`` (a :data:`TOPS` entry's
+    properties) over ``base``."""
+    return {"type": "thinfilm_coating", **COAT, **top[0], "bsdf": base}
 
 
 def lit_scene(bsdf: dict, res: int, spp: int) -> dict:
@@ -114,10 +132,10 @@ def lit_scene(bsdf: dict, res: int, spp: int) -> dict:
     return d
 
 
-def geometry_scene(base: dict, res: int, spp: int) -> dict:
-    """The coating as geometry: the films on a ``thinfilm_dielectric`` sphere around the base."""
-    d = lit_scene({"type": "thinfilm_dielectric", "layers": COAT["layers"],
-                   "int_ior": COAT["int_ior"]}, res, spp)
+def geometry_scene(base: dict, res: int, spp: int, top: tuple = SMOOTH) -> dict:
+    """The coating as geometry: the films on a sphere of the top's interface plugin (a
+    ``thinfilm_dielectric`` for the smooth top) around the base."""
+    d = lit_scene({**top[1], "layers": COAT["layers"], "int_ior": COAT["int_ior"]}, res, spp)
     d["base"] = {"type": "sphere", "center": list(CENTER), "radius": 1.0 - GAP, "bsdf": base}
     return d
 
@@ -165,13 +183,14 @@ def steady_child(variant: str, repeats: int, res: int, spp: int, n_edits: int) -
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
     own_table_store()
-    bases = [mi.load_dict(sphere_scene(base, res, spp)) for _, base in BASES]
-    coated_loaders = [lambda base=base: mi.load_dict(sphere_scene(coated(base), res, spp))
-                      for _, base in BASES]
+    bases = [mi.load_dict(sphere_scene(base, res, spp)) for _, base, _ in cases()]
+    coated_loaders = [lambda base=base, top=top: mi.load_dict(sphere_scene(coated(base, top),
+                                                                           res, spp))
+                      for _, base, top in cases()]
     rows = pair_rounds(bases, coated_loaders, repeats, progress=variant)
     out = {"steady": [{"label": label, "base": row["native"], "coated": row["ours"],
                        "wall_ratio": row["wall_ratio"], "ratio": row["ratio"]}
-                      for (label, _), row in zip(BASES, rows)],
+                      for (label, _, _), row in zip(cases(), rows)],
            "edits": edits(mi.load_dict(sphere_scene(coated(BASES[-1][1]), res, spp)), n_edits)}
     print(json.dumps(out))
 
@@ -202,11 +221,11 @@ def noise_child(variant: str, res: int, spp: int, ref_factor: int) -> None:
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
     out = []
-    for label, base in BASES:
+    for label, base, top in cases():
         # each scene is loaded alone (see steady_child: a live Python BSDF is traced by every
         # render); loads after the first hit the kernel cache
-        dicts = {"coating": lit_scene(coated(base), res, spp),
-                 "geometry": geometry_scene(base, res, spp)}
+        dicts = {"coating": lit_scene(coated(base, top), res, spp),
+                 "geometry": geometry_scene(base, res, spp, top)}
         per_render, mask = {}, None
         for name, d in dicts.items():
             scene = mi.load_dict(d)
@@ -254,9 +273,9 @@ def first_child(which: str, index: int, res: int, spp: int) -> None:
     mi.set_variant("llvm_ad_spectral")
     import thinfilm_mi  # noqa: F401
     warnings.simplefilter("ignore")
-    base = BASES[index][1]
+    _, base, top = cases()[index]
     t0 = time.perf_counter()
-    scene = mi.load_dict(sphere_scene(coated(base) if which == "coated" else base, res, spp))
+    scene = mi.load_dict(sphere_scene(coated(base, top) if which == "coated" else base, res, spp))
     t1 = time.perf_counter()
     render_sync(scene, seed=0)
     print(json.dumps({"load": t1 - t0, "render": time.perf_counter() - t1}))
@@ -264,7 +283,7 @@ def first_child(which: str, index: int, res: int, spp: int) -> None:
 
 def first_images(repeats: int, res: int, spp: int) -> list:
     out = []
-    for index, (label, _) in enumerate(BASES):
+    for index, (label, _, _) in enumerate(cases()):
         size = ["--res", str(res), "--spp", str(spp)]
         for which in ("base", "coated"):      # the kernel cache warm; tables built per process
             child(__file__, "--first-child", which, str(index), *size)
@@ -295,7 +314,7 @@ def markdown(data: dict, args) -> str:
                   f"rounds of the CPU-time ratio of back-to-back renders:", "",
                   "| base | " + " | ".join(f"`{v}`" for v in variants) + " |",
                   "|---|" + "---:|" * len(variants)]
-        for i, (label, _) in enumerate(BASES):
+        for i, (label, _, _) in enumerate(cases()):
             cells = [f"{steady[v]['steady'][i]['ratio']:.2f}× ({steady[v]['steady'][i]['coated']:.2f} s "
                      f"against {steady[v]['steady'][i]['base']:.2f} s wall)" for v in variants]
             lines.append(f"| {label} | " + " | ".join(cells) + " |")
@@ -320,7 +339,7 @@ def markdown(data: dict, args) -> str:
                   f"crossings too):", "",
                   "| base | variant | coating: spp, s, RMSE | geometry: spp, s, RMSE | efficiency | "
                   "high-spp images apart | their means apart |", "|---|---|---|---|---:|---:|---:|"]
-        for i, (label, _) in enumerate(BASES):
+        for i, (label, _, _) in enumerate(cases()):
             for v, rows in noise.items():
                 row = rows[i]
                 c, g = row["coating"], row["geometry"]

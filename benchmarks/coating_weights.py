@@ -1,7 +1,7 @@
 """The spread of ``thinfilm_coating``'s sample weights against its base's own.
 
     python benchmarks/coating_weights.py [--samples 1000000] [--variant llvm_ad_spectral]
-                                         [--json]
+                                         [--json] [--compare BEFORE.json]
 
 A path tracer multiplies its throughput by ``sample()``'s weight: heavy weights are the
 fireflies of a render. For each base of :data:`BASES`, alone and under the coating
@@ -9,12 +9,21 @@ fireflies of a render. For each base of :data:`BASES`, alone and under the coati
 draws --samples calls of ``sample()`` with independent uniform numbers at one wavelength
 (550 nm: every lane of the spectrum carries it, so a weight is one number) and reports
 the variance of the weights, the largest, and the share of the total weight carried by
-weights over :data:`HEAVY` (the energy a render gets from rare, bright samples).
+weights over :data:`HEAVY` (the energy a render gets from rare, bright samples), and the
+process CPU seconds of the coating's draws (after one untimed call: the kernel compiled).
+
+--compare reads the --json output of an earlier run (another commit, the same
+--samples) and prints its coating figures beside these: before and after a change of the
+estimator, e.g.::
+
+    git stash; python benchmarks/coating_weights.py --json > /tmp/before.json; git stash pop
+    python benchmarks/coating_weights.py --compare /tmp/before.json
 """
 from __future__ import annotations
 
 import argparse
 import json
+import time
 
 import numpy as np
 
@@ -23,6 +32,7 @@ COAT = {"layers": "TiO2 80; SiO2 120", "int_ior": 1.5}
 #: (label, the nested BSDF)
 BASES = [
     ("roughconductor α 0.3", {"type": "roughconductor", "alpha": 0.3}),
+    ("roughconductor Al, α 0.3", {"type": "roughconductor", "material": "Al", "alpha": 0.3}),
     ("principled grey, roughness 0.3", {"type": "principled", "roughness": 0.3,
                                         "base_color": {"type": "rgb", "value": 0.5}}),
     ("diffuse 0.5", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}}),
@@ -54,6 +64,14 @@ def weights(bsdf, cos_theta: float, n: int, seed: int = 7):
     return np.nan_to_num(w)
 
 
+def timed(bsdf, cos_theta: float, n: int) -> float:
+    """Process CPU seconds of ``n`` draws (the kernel compiled by an untimed call first)."""
+    weights(bsdf, cos_theta, n, seed=11)
+    start = time.process_time()
+    weights(bsdf, cos_theta, n, seed=12)
+    return time.process_time() - start
+
+
 def stats(w: np.ndarray) -> dict:
     total = float(w.sum())
     heavy = float(w[w > HEAVY].sum())
@@ -66,6 +84,8 @@ def main() -> None:
     parser.add_argument("--samples", type=int, default=1_000_000)
     parser.add_argument("--variant", default="llvm_ad_spectral")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
+    parser.add_argument("--compare", metavar="BEFORE.json",
+                        help="an earlier run's --json output, printed beside this one")
     args = parser.parse_args()
     import mitsuba as mi
 
@@ -79,17 +99,42 @@ def main() -> None:
         for c in COSINES:
             rows.append({"base": label, "cos_theta_i": c,
                          "alone": stats(weights(alone, c, args.samples)),
-                         "coating": stats(weights(coat, c, args.samples))})
+                         "coating": {**stats(weights(coat, c, args.samples)),
+                                     "seconds": timed(coat, c, args.samples)}})
     if args.json:
         print(json.dumps(rows, indent=1))
         return
-    print(f"| base | cos θ_i | base alone: variance, max | coating: variance, max, "
-          f"share of weight in weights > {HEAVY:g} |")
-    print("|---|---|---|---|")
+    print(table(rows, load_rows(args.compare) if args.compare else None))
+
+
+def load_rows(path: str) -> dict:
+    """An earlier run's rows by (base, cos θ_i)."""
+    with open(path, encoding="utf-8") as f:
+        return {(r["base"], r["cos_theta_i"]): r for r in json.load(f)}
+
+
+def cells(c: dict) -> str:
+    """A coating's figures: variance, max, heavy share, seconds (where measured)."""
+    seconds = f", {c['seconds']:.2f} s" if "seconds" in c else ""
+    return f"{c['variance']:.3f}, {c['max']:.1f}, {100 * c['heavy_share']:.2f} %{seconds}"
+
+
+def table(rows: list, before: dict | None) -> str:
+    """The markdown table; with ``before``, the earlier run's coating column first."""
+    head = (f"coating: variance, max, share of weight in weights > {HEAVY:g}, CPU seconds of "
+            f"the draws")
+    cols = ["base", "cos θ_i", "base alone: variance, max"]
+    cols += [f"before, {head}", f"after, {head}"] if before else [head]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for r in rows:
-        a, c = r["alone"], r["coating"]
-        print(f"| {r['base']} | {r['cos_theta_i']:.1f} | {a['variance']:.3f}, {a['max']:.2f} | "
-              f"{c['variance']:.3f}, {c['max']:.1f}, {100 * c['heavy_share']:.2f} % |")
+        a = r["alone"]
+        line = [r["base"], f"{r['cos_theta_i']:.1f}", f"{a['variance']:.3f}, {a['max']:.2f}"]
+        if before:
+            old = before.get((r["base"], r["cos_theta_i"]))
+            line.append(cells(old["coating"]) if old else "–")
+        line.append(cells(r["coating"]))
+        lines.append("| " + " | ".join(line) + " |")
+    return "\n".join(lines)
 
 
 if __name__ == "__main__":

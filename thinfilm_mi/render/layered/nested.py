@@ -33,26 +33,39 @@ else the random walk (:class:`~thinfilm_mi.render.layered.walk.RandomWalk`).
 delta round trips, and the walk samples delta vertices as any other
 (:mod:`thinfilm_mi.render.layered.delta`).
 
-**Sampling** (:meth:`NestedEstimator.sample`): the delta lobe with probability ``P_R =
-(R̄ + T̄ b̄) / (R̄ + T̄)`` (spectral means at ``θ_i``; ``b̄``: the mean of ``B_δ(ω_i')``
-sampled with fixed numbers, 0 for a base without delta lobes: deterministic, so ``pdf``
-repeats it), weight the delta lobe over ``P_R``; 1 over a pure-delta base (no component
-1). Otherwise a direction is drawn from a deterministic mixture
-(:meth:`NestedEstimator.base_pdf`, its exact density)::
+**Sampling** (:meth:`NestedEstimator.sample`): a *probe* first (:meth:`NestedEstimator.probe`):
+the base sampled at ``ω_i'`` with the fixed numbers :data:`PROBE` (its non-delta lobes),
+whose mean weight ``ā`` estimates the base's albedo and whose density over a Lambertian's
+at the sampled directions, ``ν = p_b π / cos θ`` (1 for a Lambertian, large for a narrow
+lobe), its lobe's peak. The delta lobe is picked with probability ``P_R = (R̄ + T̄ b̄) /
+(R̄ + T̄ b̄ + T̄ ā_e)`` (spectral means at ``θ_i``; ``b̄``: the mean of ``B_δ(ω_i')``
+sampled with fixed numbers, 0 for a base without delta lobes; ``ā_e = ā η⁻² / (1 - ā (1 -
+η⁻²))``: the share of the light entering a Lambertian ``ā`` under the coat that leaves
+it, ``η⁻²`` its escape cone's share; ``ā`` at least :data:`ALBEDO_FLOOR`), so that the
+delta lobe's weight and the base's are both near the layer's albedo; weight the delta lobe
+over ``P_R``; 1 over a pure-delta base (no component 1). Otherwise a direction is drawn
+from a mixture (:meth:`NestedEstimator.base_pdf`, its exact density)::
 
-    p(ω_o) = (1 - P_R) [ (1 - c) p_b(ω_i', ω_o') (η_e/η_c)² cos θ_o / cos θ_o' + c cos θ_o / π ]
+    p(ω_o) = (1 - P_R) [ (1 - c) p_f(ω_o') (η_e/η_c)² cos θ_o / cos θ_o' + c cos θ_o / π ]
 
 the base sampled at ``ω_i'`` (its non-delta lobes only,
-:meth:`~thinfilm_mi.render.layered.bottom.NestedBottom.smooth_context`, in both) and
-refracted out (a base direction beyond the critical angle is a failed sample: ``p`` then
-integrates to less than one, as the sampler's mass does), or a cosine lobe for the light
-the interreflections spread (``c``: :data:`MIXTURE`). The weight is the sum's estimate of
-``f cos θ_o`` divided by ``p``: ``sample``, ``eval`` and ``pdf`` are consistent by
-construction, ``pdf`` is the true density of ``sample`` (Mitsuba's chi2 test passes), and
-MIS weights built from it sum to one in both strategies. (Were ``p`` only an
-approximation of the sampler's density, as pbrt's layered pdf is, the sum would still be
-unbiased: the BSDF strategy estimates ``∫ w(ω) f cos L`` for any deterministic ``w`` when
-its weight is an unbiased estimate of ``f cos / p_true``, the light strategy the rest.)
+:meth:`~thinfilm_mi.render.layered.bottom.NestedBottom.smooth_context`) and refracted out,
+a direction beyond the critical cosine ``μ_c`` *folded* into the escape cone first
+(:func:`fold`: ``μ' = μ_c + (μ_c - μ)(1 - μ_c)/μ_c``, the same azimuth; light trapped by
+total internal reflection leaves after more bounces, near the cone's rim, where the fold
+puts it), so no sample fails: ``p_f(w) = p_b(w) + p_b(unfold(w)) μ_c / (1 - μ_c)``; or a
+cosine lobe for the light the interreflections spread, with the share ``c = clip(0.8 -
+0.15 ln ν, 0.2, 0.8)`` (:data:`MIXTURE_BOUNDS`, :data:`MIXTURE_SLOPE`): most of it over
+a broad lobe, whose own samples cover the cosine's directions too, little over a narrow
+one, whose light the cosine lobe would give heavy weights. ``P_R`` and ``c`` are
+deterministic functions of ``ω_i`` (the probe's numbers are fixed), so ``pdf`` repeats
+them. The weight is the sum's estimate of ``f cos θ_o`` divided by ``p``: ``sample``,
+``eval`` and ``pdf`` are consistent by construction, ``pdf`` is the true density of
+``sample`` (Mitsuba's chi2 test passes), and MIS weights built from it sum to one in both
+strategies. (Were ``p`` only an approximation of the sampler's density, as pbrt's layered
+pdf is, the sum would still be unbiased: the BSDF strategy estimates ``∫ w(ω) f cos L``
+for any deterministic ``w`` when its weight is an unbiased estimate of ``f cos / p_true``,
+the light strategy the rest.)
 
 **Polarized variants**: every factor of a path is a Mueller matrix in Mitsuba's implicit
 Stokes bases of the directions the light travels
@@ -68,22 +81,58 @@ from __future__ import annotations
 
 import drjit as dr
 
-from thinfilm_mi.render.layered.bottom import base_context, base_interaction
+from thinfilm_mi.render.layered.bottom import base_context, base_interaction, intensity
 from thinfilm_mi.render.layered.delta import DeltaBase
 from thinfilm_mi.render.layered.forms import closed_form
 from thinfilm_mi.render.layered.walk import RandomWalk, eval_seed, logical_not, sample_seed
 from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.render.variant import spectral_mean
-from thinfilm_mi.tabulate.base import opaque_float
 
-__all__ = ["MIXTURE", "NestedEstimator", "sum_estimator"]
+__all__ = ["MIXTURE_BOUNDS", "MIXTURE_SLOPE", "PROBE", "ALBEDO_FLOOR", "NestedEstimator",
+           "sum_estimator", "critical_cosine", "fold", "unfold"]
 
-#: The cosine lobe's share ``c`` of the sampling mixture: every direction a bounce can
-#: reach keeps a density (a narrow glossy base would otherwise leave the interreflected
-#: light to rare, heavy samples), and the base's own lobe keeps half. Any fixed value in
-#: (0, 1) keeps the estimate unbiased and ``pdf`` exact; it only moves the noise between
-#: glossy and diffuse-looking light. 0 where the top is invisible.
-MIXTURE = 0.5
+#: The bounds of the cosine lobe's share ``c`` of the sampling mixture: every direction a
+#: bounce can reach keeps a density, and the base's own lobe keeps a fifth. Any ``c`` in
+#: (0, 1) that depends on ``ω_i`` only keeps the estimate unbiased and ``pdf`` exact; it only
+#: moves the noise between glossy and diffuse-looking light.
+MIXTURE_BOUNDS = (0.2, 0.8)
+#: How fast ``c`` falls with the base lobe's peak ``ν`` (per e-fold): 0.8 for a Lambertian
+#: or a lobe as broad, 0.45 at ``ν = 10``, 0.2 from ``ν ≈ 55`` (a ``roughconductor``'s
+#: α 0.3 under a 1.5 coat at normal incidence: ``ν ≈ 2``, α 0.12 ``ν ≈ 11``, α 0.05 more than
+#: 55).
+MIXTURE_SLOPE = 0.15
+#: The probe's fixed numbers ``(sample1, sample2)``: two stratified samples of the base
+#: (one picks a ``principled``'s lobes too unevenly for its albedo).
+PROBE = ((0.25, (0.3, 0.25)), (0.75, (0.8, 0.75)))
+#: The least albedo the probe reports, so that ``P_R < 1`` where the base may reflect
+#: light the probe's two samples missed.
+ALBEDO_FLOOR = 0.05
+
+
+def critical_cosine(eta):
+    """``μ_c = cos θ_c``, beyond which light under a top of relative index ``eta``
+    (``η_c/η_e``) is totally reflected; 0 where ``eta <= 1`` (no total reflection)."""
+    return dr.select(eta > 1, dr.safe_sqrt(1.0 - dr.rcp(dr.square(eta))), 0.0)
+
+
+def _with_cosine(w, mu):
+    """``w`` turned about the normal's azimuth to the cosine ``mu``."""
+    mi = mitsuba_module()
+    k = dr.safe_sqrt((1.0 - dr.square(mu)) / dr.maximum(1.0 - dr.square(w.z), 1e-12))
+    return mi.Vector3f(w.x * k, w.y * k, mu)
+
+
+def fold(w, mu_c):
+    """An inner direction beyond the critical cosine (``0 < w.z < μ_c``) folded into the
+    escape cone: ``μ' = μ_c + (μ_c - μ)(1 - μ_c)/μ_c``, the same azimuth (its density is
+    multiplied by ``μ_c / (1 - μ_c)``)."""
+    return _with_cosine(w, mu_c + (mu_c - w.z) * (1.0 - mu_c) / dr.maximum(mu_c, 1e-6))
+
+
+def unfold(w, mu_c):
+    """The direction beyond the critical cosine that :func:`fold` maps to ``w`` (in the
+    escape cone)."""
+    return _with_cosine(w, mu_c - (w.z - mu_c) * mu_c / dr.maximum(1.0 - mu_c, 1e-6))
 
 
 def sum_estimator(layer):
@@ -124,7 +173,6 @@ class NestedEstimator:
         #: no films between equal indices: the nested BSDF itself (times the coat's
         #: absorption), bit for bit
         self.invisible = self.top.invisible
-        self.mix = opaque_float(0.0 if self.invisible else MIXTURE)
         if self.sum is not None:
             self.sum.refresh()
 
@@ -196,12 +244,35 @@ class NestedEstimator:
                 value = value * a
         return dr.select(active, value, dr.zeros(mi.Spectrum))
 
-    def prob_reflect(self, ctx_mode, si, top_i, active):
-        """``P_R``: the spectral mean of the delta lobe against that of ``R + T``, the delta
-        lobe's mean estimated as ``R̄ + T̄ b̄`` with ``b̄`` the mean of the base's delta
-        reflectance at ``ω_i'`` sampled with fixed numbers (0 for a base without delta
-        lobes): a deterministic function of the directions, the same in ``sample`` and
-        ``pdf``; detached (a sampling decision divides the weight as a constant)."""
+    def probe(self, ctx_mode, si, active):
+        """``(ā, c)``: the base's albedo at ``ω_i'`` and the cosine lobe's share of the
+        mixture, from samples of its non-delta lobes at the fixed numbers :data:`PROBE`
+        (module docstring); deterministic in ``ω_i``, detached (sampling decisions)."""
+        mi = mitsuba_module()
+        wi_in, ok = self.top.inward(si.wi)
+        ok = active & ok
+        ctx = self.bottom.smooth_context(ctx_mode)
+        si_b = base_interaction(si, wi_in)
+        albedo, peak = mi.Float(0.0), mi.Float(0.0)
+        with dr.suspend_grad():
+            for s1, s2 in PROBE:
+                bs, g = self.bottom.bsdf.sample(ctx, si_b, mi.Float(s1), mi.Point2f(*s2), ok)
+                hit = ok & (bs.pdf > 0) & (bs.wo.z > 0)
+                albedo += dr.select(hit, spectral_mean(intensity(g, self.mode.polarized)), 0.0)
+                peak += dr.select(hit, bs.pdf * dr.pi / dr.maximum(bs.wo.z, 1e-3), 0.0)
+        albedo = dr.clip(albedo / len(PROBE), ALBEDO_FLOOR, 1.0)
+        low, high = MIXTURE_BOUNDS
+        share = dr.clip(high - MIXTURE_SLOPE * dr.log(dr.maximum(peak / len(PROBE), 1.0)),
+                        low, high)
+        return dr.detach(albedo), dr.detach(share)
+
+    def prob_reflect(self, ctx_mode, si, top_i, albedo, active):
+        """``P_R``: the delta lobe's spectral mean ``R̄ + T̄ b̄`` (``b̄``: the mean of the
+        base's delta reflectance at ``ω_i'`` sampled with fixed numbers, 0 for a base
+        without delta lobes) against it plus the base's ``T̄ ā_e`` (module docstring;
+        ``albedo``: the probe's ``ā``): a deterministic function of the directions, the
+        same in ``sample`` and ``pdf``; detached (a sampling decision divides the weight as
+        a constant)."""
         mi = mitsuba_module()
         pr = spectral_mean(mi.UnpolarizedSpectrum(top_i.R))
         pt = spectral_mean(mi.UnpolarizedSpectrum(top_i.T))
@@ -209,18 +280,27 @@ class NestedEstimator:
         if self.delta is not None:
             wi_in, ok = self.top.inward(si.wi)
             delta = pr + pt * self.delta.mean(ctx_mode, si, wi_in, active & ok)
-        total = pr + pt
+        escape = self.top.inv_eta2
+        total = delta + pt * albedo * escape / (1.0 - albedo * (1.0 - escape))
         return dr.detach(dr.select(total > 0, delta / dr.select(total > 0, total, 1.0), 1.0))
 
-    def base_pdf(self, ctx_mode, si, wo, active):
-        """The non-delta density at ``wo`` without the factor ``1 - P_R``."""
+    def base_pdf(self, ctx_mode, si, wo, share, active):
+        """The non-delta density at ``wo`` without the factor ``1 - P_R`` (``share``: the
+        cosine lobe's, from :meth:`probe`)."""
         ctx = self.bottom.smooth_context(ctx_mode)
         wi_in, ok_i = self.top.inward(si.wi)
         wo_in, ok_o = self.top.inward(wo)
         ok = active & ok_i & ok_o & (wo.z > 0)
-        p_b = self.bottom.bsdf.pdf(ctx, base_interaction(si, wi_in), wo_in, ok)
+        si_b = base_interaction(si, wi_in)
+        p_b = self.bottom.bsdf.pdf(ctx, si_b, wo_in, ok)
+        # the base's directions beyond the critical cosine that fold onto wo_in
+        mu_c = critical_cosine(self.top.eta_f)
+        pre = unfold(wo_in, mu_c)
+        ok_f = ok & (mu_c > 0) & (pre.z > 0)
+        p_f = self.bottom.bsdf.pdf(ctx, si_b, pre, ok_f)
+        p_b = p_b + dr.select(ok_f, p_f * mu_c / dr.maximum(1.0 - mu_c, 1e-6), 0.0)
         jac = self.top.inv_eta2 * wo.z / dr.maximum(wo_in.z, 1e-12)
-        p = (1.0 - self.mix) * p_b * jac + self.mix * wo.z * dr.inv_pi
+        p = (1.0 - share) * p_b * jac + share * wo.z * dr.inv_pi
         return dr.select(ok, p, 0.0)
 
     # -- the BSDF interface ----------------------------------------------------
@@ -235,8 +315,9 @@ class NestedEstimator:
         if self.invisible:
             return self._sample_invisible(ctx, si, sample1, sample2, active, has_delta, has_base)
         top_i = self.top.unpolarized(si, si.wi.z, active, inside=False, transmission=True)
+        albedo, share = self.probe(ctx.mode, si, active) if has_base else (None, None)
         if has_delta and has_base:
-            p_r = self.prob_reflect(ctx.mode, si, top_i, active)
+            p_r = self.prob_reflect(ctx.mode, si, top_i, albedo, active)
         else:
             p_r = mi.Float(1.0 if has_delta else 0.0)
         sel_r = active & (sample1 < p_r)
@@ -255,17 +336,19 @@ class NestedEstimator:
             weight = dr.select(sel_r, delta, weight)
         if has_base:
             s = (sample1 - p_r) / dr.select(p_r < 1, 1.0 - p_r, 1.0)
-            cosine = sel_b & (s < self.mix)
-            s_b = (s - self.mix) / dr.select(self.mix < 1, 1.0 - self.mix, 1.0)
+            cosine = sel_b & (s < share)
+            s_b = (s - share) / (1.0 - share)
             wi_in, _ = self.top.inward(si.wi)
             ctx_b = self.bottom.smooth_context(ctx.mode)
             bs_b, _ = self.bottom.bsdf.sample(ctx_b, base_interaction(si, wi_in), dr.clip(s_b, 0.0, 1.0),
                                        sample2, sel_b & logical_not(cosine))
-            out, leaves = self.top.outward(bs_b.wo)
+            mu_c = critical_cosine(self.top.eta_f)
+            trapped = (bs_b.wo.z > 0) & (bs_b.wo.z < mu_c)
+            out, leaves = self.top.outward(dr.select(trapped, fold(bs_b.wo, mu_c), bs_b.wo))
             wo_b = dr.select(cosine, mi.warp.square_to_cosine_hemisphere(sample2), out)
             ok = sel_b & (cosine | (leaves & (bs_b.wo.z > 0) & (bs_b.pdf > 0)))
             wo = dr.select(sel_b, wo_b, wo)
-            pdf = (1.0 - p_r) * self.base_pdf(ctx.mode, si, wo, ok)
+            pdf = (1.0 - p_r) * self.base_pdf(ctx.mode, si, wo, share, ok)
             f = self.transmitted(ctx.mode, si, wo, seed, ok & (pdf > 0), top_i)
             weight = dr.select(ok & (pdf > 0), f / dr.select(pdf > 0, pdf, 1.0), weight)
             sel_b = ok & (pdf > 0)
@@ -334,7 +417,8 @@ class NestedEstimator:
         if want_value:
             value = self.transmitted(ctx.mode, si, wo, eval_seed(si.wi, wo), active, top_i)
         if want_pdf:
-            pdf = self.base_pdf(ctx.mode, si, wo, active)
+            albedo, share = self.probe(ctx.mode, si, active)
+            pdf = self.base_pdf(ctx.mode, si, wo, share, active)
             if has_delta:
-                pdf = pdf * (1.0 - self.prob_reflect(ctx.mode, si, top_i, active))
+                pdf = pdf * (1.0 - self.prob_reflect(ctx.mode, si, top_i, albedo, active))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)

@@ -10,10 +10,21 @@ inner direction of ``ω_o``: next-event estimation through the smooth top, which
 ``ω_o'`` to ``ω_o`` deterministically); then the base is sampled, ``w``, weight ``g``, and
 the walk goes on reflected by the underside: ``β_{k+1} = β_k g R_in(θ_w) A(w)²``,
 ``w_{k+1} = (-w_x, -w_y, w_z)``. The first term is exact (``w_0`` is fixed); later ones
-are unbiased estimates of the interreflection series. Russian roulette from
-:data:`RR_DEPTH` bounces on (survival ``q = min(max β, 0.95)``, ``β /= q``: unbiased);
-the walk stops after ``max_bounces`` base vertices: the paths with more are dropped. For
-a Lambertian base of albedo ``ρ`` each vertex sends back ``ρ R̄`` of what it receives
+are unbiased estimates of the interreflection series. **The link**: the second vertex's
+term, the integral ``∫ f_b(ω_i', w) cos θ_w U(w̄) f_b(w̄, ω_o') cos θ_o' dw`` over the
+direction that reaches it, is estimated by two strategies combined by Veach's power
+heuristic: the walk's own sample (its density ``p_f``: the base's at ``ω_i'``), and a
+*reverse sample* ``v`` drawn from the base at ``ω_o'`` (its non-delta lobes; density
+``p_v``: an exact density too, as pbrt-v4's ``LayeredBxDF`` pre-samples its exit), linked
+from the first vertex: ``f_b(ω_i', v̄) cos θ_v U(v) f_b(v, ω_o') cos θ_o' / p_v``. The
+light a glossy base sends beyond the critical angle of ``ω_o'``'s lobe, which total
+internal reflection traps, reaches ``ω_o'`` by the link rather than by the chance that the
+walk's own sample falls there. Later vertices have no link (each would cost two more calls
+of the base per vertex, for paths already spread by a bounce). A delta step (a Dirac
+density) is the walk's alone. Russian roulette from :data:`RR_DEPTH` vertices on, of walks whose
+throughput is below :data:`ROULETTE_BELOW` (:func:`roulette`; unbiased); the walk stops
+after ``max_bounces`` base vertices: the paths with more are dropped (the link too where ``N = 1``).
+For a Lambertian base of albedo ``ρ`` each vertex sends back ``ρ R̄`` of what it receives
 (``R̄``: the underside's hemispherical reflectance), so the dropped energy is at most ``(ρ R̄)^N /
 (1 - ρ R̄)`` of the light that entered: ``0.596^64/0.404 ≈ 1e-14`` for a bare ``η = 1.5``
 coat over white. A base that sends its light beyond the critical angle meets ``R_in = 1``
@@ -31,14 +42,16 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.layered.bottom import base_interaction, intensity
 from thinfilm_mi.render.textures import mitsuba_module
 
-__all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "RandomWalk", "eval_seed", "sample_seed",
-           "logical_not"]
+__all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "ROULETTE_BELOW", "RandomWalk", "eval_seed",
+           "sample_seed", "logical_not", "power_heuristic", "roulette"]
 
 #: Default cap on the base vertices of a walk (``max_bounces``); its bias is stated in
 #: the module docstring.
 DEFAULT_MAX_BOUNCES = 64
 #: Russian roulette starts after this many base vertices.
 RR_DEPTH = 3
+#: Russian roulette plays walks whose throughput is below this (pbrt's threshold).
+ROULETTE_BELOW = 0.25
 
 
 def logical_not(mask):
@@ -91,7 +104,8 @@ class RandomWalk:
         Gradients: the walk runs detached, then again with the same random numbers
         (:meth:`_walk` given ``total``), adding per vertex what the parameters change there, as
         Mitsuba's ``prb`` replays a path: ``dW = Σ_j β_j de_j + Σ_j dlog(g_j r_j) (W -
-        W_{≤j})`` with ``e_j`` the base's ``eval`` towards ``ω_o'``, ``g_j r_j`` the step's
+        W_{≤j})`` with ``e_j`` vertex ``j``'s own terms (the base's ``eval`` towards
+        ``ω_o'``, MIS-weighted, and at the first vertex the link), ``g_j r_j`` the step's
         base weight (the base's ``eval`` over its detached pdf at the sampled
         direction: sampling decisions are detached; at a delta vertex, whose ``eval`` is
         0, the replayed sample's weight times its pdf) and underside, and ``W - W_{≤j}``
@@ -114,73 +128,139 @@ class RandomWalk:
         surrogate = self._walk(ctx_mode, si, w0, wo_in, seed, active, total)
         return total + (surrogate - dr.detach(surrogate))
 
+    def _reverse(self, ctx_mode, si, wo_in, rng, active, replay):
+        """The walk's reverse sample: ``v`` drawn from the base at ``ω_o'`` (its non-delta
+        lobes), the second vertex's direction of the link; returns ``(v̄,
+        p_v, r, ok)`` with ``v̄ = (-v_x, -v_y, v_z)`` (the direction the linking vertex
+        sends the light to), ``p_v`` its density and ``r = U(v) e(v) / p_v`` (the
+        underside, then the base's ``eval`` at ``v`` towards ``ω_o'``; attached in the
+        replay, ``v`` and ``p_v`` never)."""
+        mi = mitsuba_module()
+        base = self.layer.base
+        with dr.suspend_grad():
+            s1 = rng.next_float32()
+            s2 = mi.Point2f(rng.next_float32(), rng.next_float32())
+            bs, _ = base.sample(self.layer.bottom.smooth_context(ctx_mode),
+                                base_interaction(si, wo_in), s1, s2, active)
+        ok = active & (bs.wo.z > 0) & (bs.pdf > 0)
+        with dr.suspend_grad(when=not replay):
+            e = base.eval(mi.BSDFContext(ctx_mode), base_interaction(si, bs.wo), wo_in, ok)
+            r = self.layer.underside(si, bs.wo, ok) * e / dr.select(ok, bs.pdf, 1.0)
+        mirrored = mi.Vector3f(-bs.wo.x, -bs.wo.y, bs.wo.z)
+        return mirrored, bs.pdf, dr.select(ok, r, dr.zeros(mi.Spectrum)), ok
+
     def _walk(self, ctx_mode, si, w0, wo_in, seed, active, total):
         """The walk (``total`` None), or its replay carrying the gradients (``total``: the
         detached walk's sum)."""
         mi = mitsuba_module()
         ctx = mi.BSDFContext(ctx_mode)
+        ctx_s = self.layer.bottom.smooth_context(ctx_mode)
         base, max_bounces = self.layer.base, self.layer.max_bounces
         replay = total is not None
         rng = mi.PCG32(size=1, initstate=mi.UInt64(seed[0]), initseq=mi.UInt64(seed[1]))
         zero = dr.zeros(mi.Spectrum)
+        v_bar, p_v, rev, v_ok = self._reverse(ctx_mode, si, wo_in, rng, active, replay)
+        si_o = base_interaction(si, wo_in)
 
-        def cond(acc, gathered, beta, w, depth, rng, active):
+        def cond(acc, gathered, beta, mis, w, depth, rng, active):
             return active
 
-        def body(acc, gathered, beta, w, depth, rng, active):
+        def body(acc, gathered, beta, mis, w, depth, rng, active, first=False):
             alive = active
             si_b = base_interaction(si, w)
             e = base.eval(ctx, si_b, wo_in, active)
+            more = active & (depth + 1 < max_bounces)
+            linked = zero
+            if first:
+                # the link to the reverse sample: the second vertex's term by the other strategy
+                link = more & v_ok
+                f_c, p_c = base.eval_pdf(ctx, si_b, v_bar, link)
+                w_link = dr.select(link, power_heuristic(p_v, p_c), 0.0)
+                linked = beta * f_c * rev * w_link
             with dr.suspend_grad(when=replay):
-                gathered = dr.select(active, gathered + beta * e, gathered)
+                gathered = dr.select(active, gathered + beta * e * mis + linked, gathered)
                 depth = depth + 1
                 s1 = rng.next_float32()
                 s2 = mi.Point2f(rng.next_float32(), rng.next_float32())
                 bs, g = base.sample(ctx, si_b, s1, s2, active)
                 cos = bs.wo.z
-                active = active & (cos > 0) & (depth < max_bounces) & (bs.pdf > 0)
+                active = more & (cos > 0) & (bs.pdf > 0)
                 # the light that reached the base along -bs.wo left the previous vertex
                 # along w_next and reflected at the underside
                 w_next = mi.Vector3f(-bs.wo.x, -bs.wo.y, cos)
                 step = g * self.layer.underside(si, w_next, active)
+                mis_next = dr.select(active, 1.0, mis)
+                if first:
+                    # the second vertex's own term, weighted against the link that reaches it
+                    p_r = base.pdf(ctx_s, si_o, w_next, active & logical_not(
+                        mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)))
+                    mis_next = power_heuristic(bs.pdf, p_r)
             if replay:
-                # this vertex's terms (their values do not matter: only their gradients)
-                e_r = base.eval(ctx, si_b, bs.wo, active)
-                if self.layer.delta is not None:
-                    # eval has no delta part: a delta vertex's value is the replayed
-                    # sample's weight times its pdf (the lobe's probability), so that the
-                    # base's delta parameters (a conductor's eta, k) keep their gradients
-                    bs_a, g_a = base.sample(ctx, si_b, s1, s2, active)
-                    e_r = dr.select(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta),
-                                    g_a * bs_a.pdf, e_r)
-                g_r = e_r / dr.detach(dr.select(bs.pdf > 0, bs.pdf, 1.0)) \
-                    * self.layer.underside(si, w_next, active)
-                live = dr.detach(g_r) != 0
-                ratio = dr.select(live, g_r / dr.select(live, dr.detach(g_r), 1.0), 0.0)
-                acc = mi.Spectrum(acc + dr.select(active, ratio * (total - gathered), zero)
-                                  + dr.select(alive, beta * e, zero))
+                acc = mi.Spectrum(acc + self._replayed(ctx, si, si_b, bs, (s1, s2), w_next,
+                                                       total - gathered, active)
+                                  + dr.select(alive, beta * e * mis + linked, zero))
             else:
                 acc = gathered
             with dr.suspend_grad(when=replay):
                 beta = dr.select(active, beta * step, zero)
-                w = w_next
-                q = dr.minimum(dr.max(intensity(beta, self.layer.mode.polarized)), 0.95)
-                roulette = active & (depth >= RR_DEPTH)
-                u = rng.next_float32()
-                active = active & (logical_not(roulette) | (u < q)) & (q > 0)
-                beta = dr.select(roulette, beta / dr.select(q > 0, q, 1.0), beta)
-            return acc, gathered, beta, w, depth, rng, active
+                beta, active = roulette(beta, depth, rng, active, self.layer.mode.polarized)
+            return acc, gathered, beta, mis_next, w_next, depth, rng, active
 
-        acc0, gathered0, beta0 = mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(1.0)
+        acc0, gathered0, beta0, loop0 = (mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(1.0),
+                                         mi.Spectrum(zero))
         if self.layer.mode.polarized:
             # Mueller matrices that start as literals (zeros, the identity) fill in one
             # entry per product along the walk, so Dr.Jit would find the loop state still
             # changing when it records the loop a second time (a principled base): start
             # them as evaluated values
-            dr.make_opaque(acc0, gathered0, beta0)
-        state = (acc0, gathered0, beta0, mi.Vector3f(w0), mi.UInt32(0), rng, mi.Bool(active))
-        labels = ("acc", "gathered", "beta", "w", "depth", "rng", "active")
+            dr.make_opaque(acc0, gathered0, beta0, loop0)
+        # the first vertex, with its link, before the loop (whose vertices have none); the
+        # loop sums from zero (the replay's loop takes no differentiable input)
+        first = body(acc0, gathered0, beta0, mi.Float(1.0), mi.Vector3f(w0), mi.UInt32(0),
+                     rng, mi.Bool(active), first=True)
+        labels = ("acc", "gathered", "beta", "mis", "w", "depth", "rng", "active")
         # max_iterations=-1: the replay is a sum of per-vertex terms (Dr.Jit's fast path
         # for reverse-mode differentiation of such loops)
-        return dr.while_loop(state, cond, body, labels=labels,
-                             max_iterations=-1 if replay else None)[0]
+        rest = dr.while_loop((loop0,) + first[1:], cond, body, labels=labels,
+                             max_iterations=-1 if replay else None)
+        # the walk's sum is what it gathered; the replay's, the first vertex's and the loop's
+        return first[0] + rest[0] if replay else rest[1]
+
+    def _replayed(self, ctx, si, si_b, bs, numbers, w_next, after, active):
+        """A vertex's step in the replay: ``dlog(g r) (W - W_{≤j})`` (``after``: what the
+        detached walk gathered after this vertex), ``g`` the base's ``eval`` at the sampled
+        direction over its detached pdf (at a delta vertex, whose ``eval`` is 0, the
+        replayed sample's weight times its pdf, so that the base's delta parameters, a
+        conductor's eta and k, keep their gradients) and ``r`` the underside."""
+        mi = mitsuba_module()
+        base = self.layer.base
+        e_r = base.eval(ctx, si_b, bs.wo, active)
+        if self.layer.delta is not None:
+            bs_a, g_a = base.sample(ctx, si_b, numbers[0], numbers[1], active)
+            e_r = dr.select(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta), g_a * bs_a.pdf, e_r)
+        g_r = e_r / dr.detach(dr.select(bs.pdf > 0, bs.pdf, 1.0)) \
+            * self.layer.underside(si, w_next, active)
+        live = dr.detach(g_r) != 0
+        ratio = dr.select(live, g_r / dr.select(live, dr.detach(g_r), 1.0), 0.0)
+        return dr.select(active, ratio * after, dr.zeros(mi.Spectrum))
+
+
+def power_heuristic(p, q):
+    """Veach's power heuristic (exponent 2) of the strategy of density ``p`` against one
+    of density ``q``; detached."""
+    p2, q2 = dr.square(dr.detach(p)), dr.square(dr.detach(q))
+    return dr.select(p2 > 0, p2 / dr.select(p2 > 0, p2 + q2, 1.0), 0.0)
+
+
+def roulette(beta, depth, rng, active, polarized: bool):
+    """Russian roulette from :data:`RR_DEPTH` vertices on, of walks whose throughput is
+    below :data:`ROULETTE_BELOW`: survival ``q = max β / ROULETTE_BELOW``, ``β /= q``
+    (unbiased; a walk above it goes on: trapped light keeps its weight rather than gaining
+    ``1/q`` at every vertex). Returns ``(β, active)``."""
+    mi = mitsuba_module()
+    b = dr.max(intensity(beta, polarized))
+    play = active & (depth >= RR_DEPTH) & (b < ROULETTE_BELOW)
+    q = b / ROULETTE_BELOW
+    u = rng.next_float32()
+    active = active & (logical_not(play) | (u < q)) & (b > 0)
+    return dr.select(play, beta / dr.select(q > 0, q, 1.0), beta), mi.Bool(active)
