@@ -43,7 +43,7 @@ the light's side sampler at the same inner direction, so that they sum to one.
 ``p_b``: the base's non-delta lobes at the mean refraction ``ω_i'`` refracted out (the
 smooth estimator's lobe); the cosine lobe for the interreflections. ``w_R = P_R + (1 -
 P_R)(1 - c) b̄``, ``w_B = (1 - P_R)(1 - c)(1 - b̄)``, ``w_C = (1 - P_R) c`` with ``P_R``
-the spectral mean of the stack's ``R(θ_i)``, ``c`` :data:`~thinfilm_mi.render.layered.nested.MIXTURE`
+the spectral mean of the stack's ``R(θ_i)``, ``c`` :data:`ROUGH_MIXTURE`
 and ``b̄`` the base's mean delta reflectance (1 over a pure-delta base: its light leaves
 about the mirror direction, spread by the two crossings, narrower than the top's own
 reflection). The weight is the walk's estimate of ``f cos θ_o`` over ``p``, so that
@@ -61,13 +61,18 @@ from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.layered.bottom import base_interaction, intensity
 from thinfilm_mi.render.layered.delta import DeltaBase
 from thinfilm_mi.render.layered.engine import Layered
-from thinfilm_mi.render.layered.nested import MIXTURE, NestedEstimator
+from thinfilm_mi.render.layered.nested import NestedEstimator
 from thinfilm_mi.render.layered.walk import RR_DEPTH, eval_seed, logical_not, sample_seed
 from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.base import opaque_float
 
-__all__ = ["RoughEstimator", "RoughLayered", "power_heuristic", "ratio"]
+__all__ = ["ROUGH_MIXTURE", "RoughEstimator", "RoughLayered", "power_heuristic", "ratio"]
+
+#: The cosine lobe's share ``c`` of the rough top's sampling mixture. Any fixed value in
+#: (0, 1) keeps ``pdf`` exact; the smooth top fits its share per direction from a probe of
+#: the base (:mod:`~thinfilm_mi.render.layered.nested`), which the rough top does not use yet.
+ROUGH_MIXTURE = 0.5
 
 
 def ratio(x):
@@ -124,7 +129,7 @@ class RoughEstimator:
         self.plugin = plugin
         #: the base's delta reflection (its mean weighs the sampling mixture), or ``None``
         self.delta = DeltaBase(self) if bottom.has_delta else None
-        self.mix = opaque_float(MIXTURE)
+        self.mix = opaque_float(ROUGH_MIXTURE)
         self.refresh()
 
     stack = property(lambda self: self.top.stack, doc="The top's ``KernelStack``.")
