@@ -118,3 +118,12 @@ def test_no_plugin_constructor_swaps_the_file_resolver(monkeypatch):
             params[key] = float(np.ravel(np.array(params[key]))[0]) * 1.1
     params.update()
     assert calls == []
+
+
+def test_loads_between_one_thread_renders_never_hang():
+    # the scene-hash sequence (load on two threads, render on one): every run of it
+    # hung while constructors updated resampled spectra through mi.traverse; a load takes
+    # ~1 s, so 240 s is a hang, not a slow machine
+    out = subprocess.run([sys.executable, str(HERE / "load_sequence_child.py"), str(ROOT)],
+                         capture_output=True, text=True, timeout=240)
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-800:]

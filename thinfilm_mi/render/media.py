@@ -80,12 +80,12 @@ class SpectralIndex:
         self.uniform_grid = resampling.grid
         for part, values, data_values in (("eta", resampling.values.real, data.real),
                                           ("k", resampling.values.imag, data.imag)):
-            tex = getattr(self, part)
-            if tex.class_name() != "RegularSpectrum":
+            if getattr(self, part).class_name() != "RegularSpectrum":
                 continue   # a uniform k = 0
-            tp = mi.traverse(tex)
-            tp["values"] = mi.Float(values.astype(np.float32))
-            tp.update()
+            # a new spectrum, not an update through mi.traverse: this runs in plugin
+            # constructors, which Mitsuba runs on its loader threads, where an update's
+            # evaluation waits on the pool that runs the loader (a deadlock)
+            setattr(self, part, regular(values))
             self.arrays[part] = {"wavelengths": mi.Float(data_grid.astype(np.float32)),
                                  "values": mi.Float(data_values.astype(np.float32))}
             self._written[part] = _snapshot(self.arrays[part])
