@@ -106,16 +106,20 @@ with ``ω'`` the directions refracted into the coat (Snell's law at the mean ind
 ``A`` Beer–Lambert and ``(η_e/η_c)²`` the radiance factor of Mitsuba's ``plastic``. The
 interreflections are estimated, unbiased for any base, by a position-free random walk
 (Guo et al. 2018, pbrt-v4's ``LayeredBxDF``): next-event estimation through the smooth
-top at every base vertex, the base sampled between them, Russian roulette after 3
-vertices, at most ``max_bounces`` vertices. ``eval`` seeds its random numbers from a
+top at every base vertex, the first vertex's next term also reached from a sample of the
+base at the exit direction (the two combined by the power heuristic), the base sampled
+between vertices, Russian roulette after 3 vertices of walks whose throughput fell below
+0.25, at most ``max_bounces`` vertices. ``eval`` seeds its random numbers from a
 hash of the directions and ``sample`` from its sample, so both are deterministic. Over
 Mitsuba's ``diffuse`` without ``coat_sigma_a``, in spectral and polarized variants, the
 walk is replaced by its closed form, ``ρ/π cos θ_o' / (1 - ρ R_dh)`` with the underside's
 hemispherical reflectance ``R_dh`` (``thinfilm_diffuse``'s model ``"exact"``): no walk
 noise (``thinfilm_mi/render/layered/forms.py``). ``sample`` picks the delta lobe with
-probability ``(R̄ + T̄ b̄)/(R̄ + T̄)`` (``b̄``: the base's mean delta reflectance, 0 without
-one); otherwise it draws from a fixed mixture of the base's own non-delta lobes refracted
-out and a cosine lobe, and weighs the direction by the walk's ``f cos θ_o`` over the
+a probability from the stack's mean ``R̄``, ``T̄`` and a probe of the base at ``ω_i'`` (its
+mean delta reflectance and albedo, from two samples with fixed numbers); otherwise it
+draws from a mixture of the base's own non-delta lobes refracted out (those beyond the
+critical angle folded back into the escape cone) and a cosine lobe whose share the probe
+sets per direction, and weighs the direction by the walk's ``f cos θ_o`` over the
 mixture's density, which is what ``pdf``
 returns (so ``sample``, ``eval`` and ``pdf`` agree, and MIS weights sum to one). With no
 films and ``int_ior`` equal to ``ext_ior`` the plugin returns the nested BSDF itself

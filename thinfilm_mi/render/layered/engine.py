@@ -2,8 +2,8 @@
 bottom, the light between them summed by an estimator, as pbrt-v4's ``LayeredBxDF<Top,
 Bottom>`` (of which its ``CoatedDiffuse`` and ``CoatedConductor`` are instances).
 
-* the top (:mod:`thinfilm_mi.render.layered.top`): a smooth thin-film stack, ``R`` and ``T``
-  from both sides, exact or tabulated;
+* the top (:mod:`thinfilm_mi.render.layered.top`): a thin-film stack, ``R`` and ``T``
+  from both sides, exact or tabulated, smooth (delta lobes) or on rough microfacets;
 * the bottom (:mod:`thinfilm_mi.render.layered.bottom`): a diffuse base (Lambertian or
   Oren–Nayar) or any nested Mitsuba BSDF;
 * the estimator: over a diffuse bottom, a closed form of
@@ -12,9 +12,11 @@ Bottom>`` (of which its ``CoatedDiffuse`` and ``CoatedConductor`` are instances)
   estimator of :mod:`thinfilm_mi.render.layered.nested`, whose sum over paths is the
   base's closed form where it has one (:data:`~thinfilm_mi.render.layered.forms.CLOSED_FORMS`),
   else the random walk (:mod:`thinfilm_mi.render.layered.walk`), and whose base's delta
-  lobes add the delta-base chain (:mod:`thinfilm_mi.render.layered.delta`).
+  lobes add the delta-base chain (:mod:`thinfilm_mi.render.layered.delta`); under a rough
+  top, the walk of :mod:`thinfilm_mi.render.layered.rough`.
 
-The engine gives the plugin its components (0: the delta reflection; 1: the bottom's
+The engine gives the plugin its components (0: the top's reflection, a delta lobe under a
+smooth top; 1: the bottom's
 reflection lobes through the top, absent over a pure-delta bottom), tells the estimator
 which of them a context enables, and routes the parameters: the top's, the estimator's
 own, the bottom's, in that order.
