@@ -63,7 +63,7 @@ def scene(config: str, res=256, spp=16) -> dict:
 def build() -> None:
     import mitsuba as mi
 
-    from thinfilm_mi.render import kernel as K
+    from thinfilm_mi.render import stack_build
     print("\n### Band-limited builds (default settings)\n")
     print("| films | load (s) | result | table | rounds (nu x nv: err_u, err_v) "
           "| exact evaluations | colour check ΔE2000 (D65 / A / F11) |")
@@ -72,7 +72,7 @@ def build() -> None:
     d["layers"] = d["layers"].replace("2.3 ", "2.31 ")
     mi.load_dict(d)                      # compiles the build kernels
     for L in (10, 30):
-        K.TABLE_CACHE.clear()
+        stack_build.TABLE_CACHE.clear()
         t = time.perf_counter()
         b = mi.load_dict(bsdf(L, "default"))
         dt = time.perf_counter() - t

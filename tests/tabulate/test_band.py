@@ -12,7 +12,7 @@ import pytest
 
 import thinfilm_mi as tf
 from tests.support.stacks import benchmark_layers, benchmark_thicknesses
-from thinfilm_mi.render import kernel as K
+from thinfilm_mi.render import stack_build, stack_plan
 from thinfilm_mi.render.textures import GRID
 from thinfilm_mi.tabulate import axes, policy
 from thinfilm_mi.tabulate import band as band_tables
@@ -35,11 +35,11 @@ def _resonant_side(monkeypatch, films=10):
         return build(side, *args, **kwargs)
 
     monkeypatch.setattr(tables, "build_exact_table", capture)
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     with pytest.warns(UserWarning):
         mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "layers": layers,
                       "ext_ior": 1.0, "tabulate": True, "spectral_resolution": 0.0})
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     return captured["side"]
 
 
@@ -106,14 +106,14 @@ def test_band_limiting_is_off_by_default_and_leaves_thin_stacks_alone(monkeypatc
     """Default settings: no band-limited table (the resonant stack is evaluated
     exactly); with a resolution, a 3-film stack keeps its table of the exact
     values (band-limiting only applies where that fails)."""
-    assert K.DEFAULT_SPECTRAL_RESOLUTION == 1.0
-    K.TABLE_CACHE.clear()
+    assert stack_plan.DEFAULT_SPECTRAL_RESOLUTION == 1.0
+    stack_build.TABLE_CACHE.clear()
     b = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "tabulate": True,
                       "layers": "2.3 130; 1.46 101; 2.3 105", "spectral_resolution": 1.0})
     assert b.stack.mode() == "table"
     report = b.stack.plan[False].build_report
     assert report["result"] == "table" and report["resolution"] == 0.0
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
 
 
 def test_near_zeros_finds_a_narrow_pole():
@@ -164,7 +164,7 @@ def test_band_table_of_a_side_lit_from_inside_glass():
     # the build data of the inside side is taken from the plan, not from a load)
     bsdf = mi.load_dict({"type": "thinfilm_dielectric", "int_ior": 1.5, "ext_ior": 1.0,
                          "layers": layers, "tabulate": False})
-    inside = K.side_data(bsdf.stack.plan[True], True)
+    inside = stack_build.side_data(bsdf.stack.plan[True], True)
     assert np.all(np.asarray(inside.n0(np.array([500.0]))) > 1.2) and inside.transmission
     table = band_tables.build_band_table(inside, 1e-3, GRID, policy.MAX_TEXELS, 1.0)
     assert table is not None and table.axis.name == "tir" and table.channels == 2
@@ -200,7 +200,7 @@ def test_band_builds_on_parallel_loader_threads():
         f'<shape type="sphere"><point name="center" value="{j}, 0, 0"/>'
         f'<bsdf type="thinfilm_conductor"><string name="material" value="Al"/>'
         f'<string name="layers" value="{s}"/></bsdf></shape>' for j, s in enumerate(stacks))
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     scene = mi.load_string(f'<scene version="3.0.0">{shapes}</scene>', parallel=True)
     got = {}
     for shape in scene.shapes():
@@ -208,10 +208,10 @@ def test_band_builds_on_parallel_loader_threads():
         assert table is not None and table.resolution > 0
         got[round(float(shape.bbox().center().x))] = np.array(table.texture.tensor())
     for j, s in enumerate(stacks):
-        K.TABLE_CACHE.clear()
+        stack_build.TABLE_CACHE.clear()
         b = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "layers": s})
         np.testing.assert_array_equal(got[j], np.array(b.stack.plan[False].table.texture.tensor()))
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
 
 
 def test_near_zeros_with_exponents_match_the_unscaled_function():
@@ -241,11 +241,11 @@ def test_amplitudes_stay_in_range_at_any_depth(monkeypatch):
 
     monkeypatch.setattr(tables, "build_exact_table", capture)
     layers = benchmark_layers(1000)
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     with pytest.warns(UserWarning):
         mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "layers": layers,
                       "ext_ior": 1.0, "tabulate": True, "spectral_resolution": 0.0})
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     side = captured["side"]
     wl = np.linspace(400.0, 700.0, 301)
     cos = np.tile([1.0, 0.3], wl.size)
@@ -286,7 +286,7 @@ def test_a_sheared_table_of_r_and_t_matches_a_brute_force_convolution():
     sampled at the plain wavenumbers, errs by 1e-2 or more."""
     b = mi.load_dict({"type": "thinfilm_dielectric", "layers": benchmark_layers(30), "int_ior": 1.5,
                       "tabulate": False})
-    side = K.side_data(b.stack.plan[False], True)
+    side = stack_build.side_data(b.stack.plan[False], True)
     table = band_tables.build_band_table(side, 1e-3, GRID, policy.MAX_TEXELS, 1.0)
     assert table is not None and table.shear is not None and table.channels == 2
     sig = band_tables.sigma_nu(1.0)

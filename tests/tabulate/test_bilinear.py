@@ -12,8 +12,8 @@ import thinfilm_mi as tf
 from tests.support.kernels import interaction
 from tests.support.stacks import benchmark_layers
 from tests.support.tables import F32, random_points, ref_R
-from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.render import stack_build, stack_plan
 from thinfilm_mi.render.textures import GRID
 from thinfilm_mi.tabulate import band, bilinear, quantities
 from thinfilm_mi.tabulate.base import BILINEAR, CUBIC
@@ -32,7 +32,7 @@ CASES = [
 
 
 def _load(props):
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     return mi.load_dict(dict(props, tabulate=True))
 
 
@@ -53,9 +53,9 @@ def test_resampled_tables_match_float64_within_their_error(props, inside, axis):
     side = bsdf.stack.plan[inside]
     table = side.table
     assert table.interpolation is BILINEAR and table.axis.name == axis
-    assert max(table.factors) > 1 and table.error <= K.DEFAULT_TABLE_ERROR
+    assert max(table.factors) > 1 and table.error <= stack_plan.DEFAULT_TABLE_ERROR
     assert side.build_report["interpolation"] == "linear"
-    assert side.build_report["spline_error"] <= bilinear.SPLINE_SHARE * K.DEFAULT_TABLE_ERROR
+    assert side.build_report["spline_error"] <= bilinear.SPLINE_SHARE * stack_plan.DEFAULT_TABLE_ERROR
     cos, wls = random_points(20000, seed=5)
     transmission = table.channels > 1
     out = bsdf.stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32)),
@@ -81,11 +81,11 @@ def test_the_resampling_follows_its_spline(props, inside, axis):
     wavelength axis. The float32 term: both lookups round their coordinates."""
     bsdf = _load(props)
     side = bsdf.stack.plan[inside]
-    data = K.side_data(side, side.transmission and not side.opaque)
-    spline = band.build_table(data, bilinear.SPLINE_SHARE * K.DEFAULT_TABLE_ERROR, GRID,
-                              resolution=K.DEFAULT_SPECTRAL_RESOLUTION)
+    data = stack_build.side_data(side, side.transmission and not side.opaque)
+    spline = band.build_table(data, bilinear.SPLINE_SHARE * stack_plan.DEFAULT_TABLE_ERROR, GRID,
+                              resolution=stack_plan.DEFAULT_SPECTRAL_RESOLUTION)
     assert spline.interpolation is CUBIC and spline.axis.name == axis
-    fine = bilinear.resample(spline, data, K.DEFAULT_TABLE_ERROR, 1 << 22)
+    fine = bilinear.resample(spline, data, stack_plan.DEFAULT_TABLE_ERROR, 1 << 22)
     assert fine is not None and fine.interpolation is BILINEAR
     assert (fine.nu, fine.nv) == (spline.nu, spline.nv)
     cos, wls = random_points(20000, seed=6)
@@ -110,15 +110,15 @@ def test_a_table_over_the_cap_stays_a_spline(monkeypatch):
     bsdf = _load(props)
     side = bsdf.stack.plan[inside]
     fine = side.table
-    data = K.side_data(side, False)
-    spline = band.build_table(data, bilinear.SPLINE_SHARE * K.DEFAULT_TABLE_ERROR, GRID)
-    assert bilinear.resample(spline, data, K.DEFAULT_TABLE_ERROR, fine.nbytes // 4 - 1) is None
+    data = stack_build.side_data(side, False)
+    spline = band.build_table(data, bilinear.SPLINE_SHARE * stack_plan.DEFAULT_TABLE_ERROR, GRID)
+    assert bilinear.resample(spline, data, stack_plan.DEFAULT_TABLE_ERROR, fine.nbytes // 4 - 1) is None
     assert bilinear.resample(spline, data, spline.error, 1 << 22) is None     # no budget left
     monkeypatch.setattr(quantities.PowersQuantity, "linear_max_floats", 1000)
     capped = _load(props).stack.plan[inside]
     assert capped.table.interpolation is CUBIC
     assert capped.build_report["interpolation"] == "cubic"
-    assert capped.table.error <= bilinear.SPLINE_SHARE * K.DEFAULT_TABLE_ERROR
+    assert capped.table.error <= bilinear.SPLINE_SHARE * stack_plan.DEFAULT_TABLE_ERROR
     assert quantities.QUANTITIES["mueller"].linear_max_floats == 0
 
 
@@ -193,5 +193,5 @@ def test_default_tables_against_tmm_on_random_stacks():
             worst, where = error, f"{layers} on {metal}"
     print(f"\nworst |R - tmm| of {24 - len(band)} tables of exact values: {worst:.2g} ({where}); "
           f"{len(band)} band-limited")
-    assert worst <= K.DEFAULT_TABLE_ERROR
+    assert worst <= stack_plan.DEFAULT_TABLE_ERROR
     assert len(band) <= 4 and worst > 1e-4   # tables of the exact values, and their error

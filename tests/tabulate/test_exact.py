@@ -13,8 +13,8 @@ from tests.support.kernels import compiled, interaction
 from tests.support.stacks import benchmark_layers
 from tests.support.tables import F32, STACK, f32, random_points, ref_R
 from thinfilm_mi.optics import unpolarized
-from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.render import stack_build, stack_plan
 from thinfilm_mi.tabulate import axes, policy, quantities
 
 pytestmark = pytest.mark.usefixtures("llvm")
@@ -293,7 +293,7 @@ def test_probe_sizes_the_first_table_and_rejects_hopeless_stacks():
     alone, for a small fraction of the evaluations a failing build used to spend
     (up to policy.MAX_BUILD_POINTS). (``spectral_resolution`` 0: no band-limited
     table is tried after it; tests/tabulate/test_band.py covers those.)"""
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
     assert bsdf.stack.mode() == "table"
@@ -319,7 +319,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     fits the cache (the 1 nm resolution damps the fringes of these 3 µm of optical
     thickness by exp(-2 π² (σ_ν 2 Σ n d)²) < 1 %, yet the table is 160x824)."""
     layers = "2.3 800; 1.46 800"
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     big = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al",
                         "tabulate": True})
     table = big.stack.plan[False].table
@@ -331,7 +331,7 @@ def test_auto_keeps_only_tables_that_fit_the_cache():
     assert auto.stack.plan[False].build_report["rounds"] == 0   # the probe's estimate alone
     auto = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Al"})
     table = auto.stack.plan[False].table
-    assert table is not None and table.resolution == K.DEFAULT_SPECTRAL_RESOLUTION
+    assert table is not None and table.resolution == stack_plan.DEFAULT_SPECTRAL_RESOLUTION
     assert table.texels <= policy.AUTO_MAX_TEXELS and table.error <= 1e-3
 
 
@@ -366,10 +366,10 @@ def test_deep_stacks_build_through_the_film_loop(layers, monkeypatch):
         calls.append(k["film_n_min"])
         return loop(*a, **k)
     monkeypatch.setattr(quantities.POWERS, "rt_loop", counted)
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": layers, "material": "Cu",
                          "tabulate": True})
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     table = bsdf.stack.plan[False].table
     assert table is not None and bsdf.stack.plan[False].build_report["result"] == "table"
     assert len(layers.split(";")) >= tabulate_base.BUILD_LOOP_MIN_FILMS and calls

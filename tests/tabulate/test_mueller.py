@@ -17,7 +17,7 @@ from tests.support.polarized import polarized_variant, pytestmark  # noqa: F401 
 from tests.support.stacks import benchmark_thicknesses
 from thinfilm_mi.optics.core import Cx
 from thinfilm_mi.optics.incoherent_mueller import incoherent_mueller
-from thinfilm_mi.render import kernel as K
+from thinfilm_mi.render import stack_build
 from thinfilm_mi.render.amplitudes import polarized_response
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR
 from thinfilm_mi.tabulate import axes, band
@@ -62,7 +62,7 @@ def _render_components(stack, inside, cos, wls) -> np.ndarray:
 
 def _exact_components(stack, inside, cos, wls) -> np.ndarray:
     """The float64 components the table was built from (its side's build data)."""
-    data = K.side_data(stack.plan[inside], True, quantity=MUELLER)
+    data = stack_build.side_data(stack.plan[inside], True, quantity=MUELLER)
     out = []
     for wl in wls:
         w = np.asarray(wl, np.float64)
@@ -147,7 +147,7 @@ def test_band_limited_mueller_rows_match_a_brute_force_convolution():
     resonance errs by ~1e-3 or more); measured <= 1.3e-5."""
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "eta": 1.2, "k": 7.0, "ext_ior": 1.0,
                          "layers": layers(10, 50.0, 200.0), "tabulate": False})
-    data = K.side_data(bsdf.stack.plan[False], False, quantity=MUELLER)
+    data = stack_build.side_data(bsdf.stack.plan[False], False, quantity=MUELLER)
     rows = band.Rows(data, axes.BAND, 1.0)
     xs = np.array([0.0, 0.55])
     vals = rows.values(xs)

@@ -7,8 +7,8 @@ import pytest
 import thinfilm_mi as tf
 from tests.support.kernels import interaction
 from tests.support.tables import F32, STACK, random_points, ref_R
-from thinfilm_mi.render import kernel as K
 from thinfilm_mi.render import media as media_mod
+from thinfilm_mi.render import stack_build
 
 pytestmark = pytest.mark.usefixtures("llvm")
 
@@ -19,10 +19,10 @@ def test_a_poor_first_estimate_is_refined_to_the_target(monkeypatch):
     reference within the verified error (tolerance as in the first test)."""
     from thinfilm_mi.tabulate import exact as tables
     monkeypatch.setattr(tables, "_estimate", lambda *a, **k: (16, 16))
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     bsdf = mi.load_dict({"type": "thinfilm_conductor", "layers": STACK, "material": "Cu",
                          "tabulate": True})
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     table = bsdf.stack.plan[False].table
     assert table is not None and table.error <= 1e-3
     assert bsdf.stack.plan[False].build_report["rounds"] > 1

@@ -25,7 +25,7 @@ import pytest
 
 import thinfilm_mi  # noqa: F401  (registers the plugins)
 from tests.support.stacks import benchmark_layers, sphere_scene
-from thinfilm_mi.render import kernel as K
+from thinfilm_mi.render import stack_build
 from thinfilm_mi.tabulate import store
 
 
@@ -41,9 +41,9 @@ def tables(tmp_path, monkeypatch):
     """The store on, in a temporary directory, and this process's cache empty."""
     path = tmp_path / "tables"
     monkeypatch.setenv(store.ENVIRONMENT, str(path))
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     yield path
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
 
 
 BSDF = {"type": "thinfilm_conductor", "material": "Al", "layers": benchmark_layers(10)}
@@ -61,7 +61,7 @@ def test_a_stored_table_is_read_back_bit_for_bit_and_renders_the_same_image(tabl
     assert len(list(tables.glob("*.npz"))) == 1
     image = np.array(mi.render(built, seed=3))
 
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     again = mi.load_dict(sphere_scene(BSDF))
     second = again.shapes()[0].bsdf()
     report = second.stack.plan[False].build_report
@@ -95,7 +95,7 @@ def test_a_stack_found_not_tabulable_is_stored_too(tables):
     b = mi.load_dict(d)
     assert b.stack.mode() == "exact"
     assert b.stack.plan[False].build_report["result"] == "rejected by the probe"
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     b = mi.load_dict(d)
     report = b.stack.plan[False].build_report
     assert b.stack.mode() == "exact"
@@ -106,7 +106,7 @@ def test_a_stack_found_not_tabulable_is_stored_too(tables):
 def test_cheap_builds_are_not_stored(tables):
     b = mi.load_dict({"type": "thinfilm_conductor", "material": "Al", "layers": "1.46 120; 2.3 80"})
     assert b.stack.mode() == "table"
-    assert b.stack.plan[False].build_report["points"] < K.STORE_MIN_POINTS
+    assert b.stack.plan[False].build_report["points"] < stack_build.STORE_MIN_POINTS
     assert not tables.exists() or not list(tables.glob("*.npz"))
 
 
@@ -135,17 +135,17 @@ def test_a_damaged_file_is_removed_and_the_table_rebuilt(tables, damage):
         meta = np.frombuffer(json.dumps(plain).encode(), dtype=np.uint8)
         with open(path, "wb") as fh:
             np.savez(fh, values=values.astype(np.float32), meta=meta)
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     b = mi.load_dict(BSDF)
     assert b.stack.plan[False].build_report["result"] == "table"     # built again
     (path,) = tables.glob("*.npz")                                    # and stored again
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     assert mi.load_dict(BSDF).stack.plan[False].build_report["result"] == "from the table store"
 
 
 def test_tables_of_other_code_are_not_read(tables, monkeypatch):
     mi.load_dict(BSDF)
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     monkeypatch.setattr(store, "code_fingerprint", lambda: "other code")
     assert mi.load_dict(BSDF).stack.plan[False].build_report["result"] == "table"
     assert len(list(tables.glob("*.npz"))) == 2
@@ -167,10 +167,10 @@ def test_an_unwritable_store_is_skipped(tmp_path, monkeypatch):
     blocker = tmp_path / "a file"
     blocker.write_text("not a directory")
     monkeypatch.setenv(store.ENVIRONMENT, str(blocker / "tables"))
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     b = mi.load_dict(BSDF)
     assert b.stack.plan[False].build_report["result"] == "table"
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
 
 
 def test_the_store_is_bounded_least_recently_used_first(tmp_path):
@@ -201,11 +201,11 @@ def test_a_stored_factor_table_is_read_back_bit_for_bit_and_renders_the_same_ima
     built = mi.load_dict(sphere_scene(DIFFUSE))
     first = built.shapes()[0].bsdf()
     assert first.coated.table.report["result"] == "table"
-    assert first.coated.table.report["points"] >= K.STORE_MIN_POINTS
+    assert first.coated.table.report["points"] >= stack_build.STORE_MIN_POINTS
     assert len(list(tables.glob("*.npz"))) == 1
     image = np.array(mi.render(built, seed=3))
 
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     again = mi.load_dict(sphere_scene(DIFFUSE))
     second = again.shapes()[0].bsdf()
     report = second.coated.table.report
@@ -235,7 +235,7 @@ def test_a_damaged_factor_table_file_is_removed_and_the_table_rebuilt(tables, da
     arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), dtype=np.uint8)
     with open(path, "wb") as fh:
         np.savez(fh, **arrays)
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     assert mi.load_dict(DIFFUSE).coated.table.report["result"] == "table"      # built again
-    K.TABLE_CACHE.clear()
+    stack_build.TABLE_CACHE.clear()
     assert mi.load_dict(DIFFUSE).coated.table.report["result"] == "from the table store"

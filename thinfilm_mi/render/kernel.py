@@ -12,11 +12,10 @@ from typing import Any, Sequence
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render import stack_eval
-from thinfilm_mi.render.film_stack import OPAQUE_AMPLITUDE, FilmStack, stack_facts
+from thinfilm_mi.render.film_stack import FilmStack, stack_facts
 from thinfilm_mi.render.media import SpectralIndex
-from thinfilm_mi.render.stack_build import STORE_MIN_POINTS, TABLE_CACHE, build_plan, side_data
+from thinfilm_mi.render.stack_build import build_plan
 from thinfilm_mi.render.stack_plan import (
-    BUFFERED_MIN_FILMS,
     DEFAULT_COHERENCE_THICKNESS,
     DEFAULT_SPECTRAL_RESOLUTION,
     DEFAULT_TABLE_ERROR,
@@ -26,9 +25,7 @@ from thinfilm_mi.render.stack_plan import (
 )
 from thinfilm_mi.render.tabulation import Route
 
-__all__ = ["DEFAULT_COHERENCE_THICKNESS", "DEFAULT_SPECTRAL_RESOLUTION", "DEFAULT_TABLE_ERROR",
-           "BUFFERED_MIN_FILMS", "KernelStack", "OPAQUE_AMPLITUDE", "STORE_MIN_POINTS",
-           "SidePlan", "TABLE_CACHE", "side_data"]
+__all__ = ["KernelStack"]
 
 
 class KernelStack:
