@@ -12,8 +12,7 @@
 * :mod:`thinfilm_mi.render.colour_variants` -- colour tables and gradients in RGB/mono variants.
 * :mod:`thinfilm_mi.render.textures` -- Mitsuba textures made and read by the plugins.
 * :mod:`thinfilm_mi.render.params` -- validation of ``mi.traverse`` edits.
-* :mod:`thinfilm_mi.render.reader` -- the one reader of a plugin's properties
-  (:mod:`thinfilm_mi.render.props`: its form for code that passes the bare properties).
+* :mod:`thinfilm_mi.render.reader` -- the one reader of a plugin's properties.
 * :mod:`thinfilm_mi.render.microfacet` -- the microfacet pieces the rough plugins share.
 """
 from thinfilm_mi.render.kernel import KernelStack

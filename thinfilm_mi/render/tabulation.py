@@ -44,7 +44,7 @@ class TabulateOption:
 AUTO = TabulateOption("auto", builds=True, selective=True, budget_scale=1.0)
 ALWAYS = TabulateOption("true", builds=True, selective=False, budget_scale=REQUESTED_BUDGET_SCALE)
 NEVER = TabulateOption("false", builds=False, selective=False, budget_scale=1.0)
-#: The ``tabulate`` values a stack accepts (as :func:`~thinfilm_mi.render.props.tabulate_from_props`
+#: The ``tabulate`` values a stack accepts (as :meth:`~thinfilm_mi.render.reader.PluginProperties.tabulate`
 #: gives them) and their options.
 TABULATE_OPTIONS = {"auto": AUTO, True: ALWAYS, False: NEVER}
 

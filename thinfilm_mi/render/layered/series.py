@@ -51,7 +51,7 @@ def series_estimator(model, films, ext, base, bottom, options: dict, mode,
     (``[(SpectralIndex, thickness nm)]``, outside in) between the ambient ``ext`` and the
     base medium ``base`` (``SpectralIndex``) over ``bottom`` (a
     :class:`~thinfilm_mi.render.layered.bottom.DiffuseBottom`); ``options``: the stack's
-    options (:func:`~thinfilm_mi.render.props.stack_options_from_props`); ``mode``: the
+    options (:meth:`~thinfilm_mi.render.reader.PluginProperties.stack_options`); ``mode``: the
     variant's :mod:`~thinfilm_mi.render.modes` mode; ``plugin`` names the BSDF in errors."""
     coating, exit_medium, film_n, film_n_thickness = model.split(films, ext, base)
     # RGB/mono: only k_r from the colour table; t enters through the diffuse table
