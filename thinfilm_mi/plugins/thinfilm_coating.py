@@ -187,9 +187,7 @@ from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.layered.bottom import NestedBottom
 from thinfilm_mi.render.layered.coat import CoatMedium
-from thinfilm_mi.render.layered.engine import Layered
-from thinfilm_mi.render.layered.nested import NestedEstimator
-from thinfilm_mi.render.layered.rough import RoughEstimator, RoughLayered
+from thinfilm_mi.render.layered.engine import layered
 from thinfilm_mi.render.layered.top import RoughTop, SmoothTop
 from thinfilm_mi.render.layered.walk import DEFAULT_MAX_BOUNCES
 from thinfilm_mi.render.microfacet import DISTRIBUTIONS, Microfacet
@@ -204,10 +202,12 @@ NAME = "thinfilm_coating"
 DEFAULT_COAT_IOR = 1.5
 
 
-def rough_top(read, stack):
-    """The top's :class:`~thinfilm_mi.render.microfacet.Microfacet`, or ``None`` for the
-    smooth top: no roughness given, or every one given a number equal to 0. A rough top
-    needs a refraction (different mean indices), as ``thinfilm_roughdielectric``."""
+def coat_top(read, stack, mode):
+    """The top: ``stack`` on the microfacets of the roughness read (a
+    :class:`~thinfilm_mi.render.layered.top.RoughTop`), or the smooth
+    :class:`~thinfilm_mi.render.layered.top.SmoothTop` where no roughness is given or every
+    one is a number equal to 0. A rough top needs a refraction (different mean indices), as
+    ``thinfilm_roughdielectric``."""
     names = [n for n in ("alpha", "alpha_u", "alpha_v") if n in read]
     values = [read.value(n) for n in names]
     numbers = [finite_number(f"'{n}'", v, 0.0, MAX_ALPHA, also=" or a texture")
@@ -216,20 +216,20 @@ def rough_top(read, stack):
     if len(numbers) == len(names) and not any(numbers):
         read.choice("distribution", DISTRIBUTIONS)
         read.boolean("sample_visible", True)
-        return None
+        return SmoothTop(stack, mode)
     microfacet = Microfacet(read)
     if stack.substrate.mean_real() == stack.ambient.mean_real():
         raise ThinFilmError(f"a rough top ({', '.join(f'{n}={v!r}' for n, v in zip(names, values))}) "
                             f"needs 'int_ior' ({stack.substrate.label}) and 'ext_ior' "
                             f"({stack.ambient.label}) to differ: a rough interface without "
                             "refraction is undefined")
-    return microfacet
+    return RoughTop(stack, mode, microfacet)
 
 
 class ThinFilmCoating(mi.BSDF):
     """The ``thinfilm_coating`` plugin: its properties read into a
-    :class:`~thinfilm_mi.render.layered.engine.Layered` (:attr:`layered`): a smooth top over
-    the nested BSDF, which does the work."""
+    :class:`~thinfilm_mi.render.layered.engine.Layered` (:attr:`layered`): a smooth or rough
+    top over the nested BSDF, which does the work."""
 
     def __init__(self, props):
         with plugin_boundary(NAME):
@@ -239,21 +239,14 @@ class ThinFilmCoating(mi.BSDF):
             base = read.nested_bsdf()
             interior = read.index("int_ior", DEFAULT_COAT_IOR)
             stack = read.kernel_stack(interior, sides={False: True, True: False}, plugin=NAME)
-            microfacet = rough_top(read, stack)
+            top = coat_top(read, stack, mode)
             sigma_a = read.factor("coat_sigma_a")
             thickness = read.number("coat_thickness", 1.0, 0.0)
             bounces = read.integer("max_bounces", DEFAULT_MAX_BOUNCES, 1)
             read.check_unqueried()
-            bottom, medium = NestedBottom(base), CoatMedium(sigma_a, thickness, NAME)
-            if microfacet is None:
-                top = SmoothTop(stack, mode)
-                estimator = NestedEstimator(top, bottom, medium, mode, bounces, NAME)
-                #: the layered engine (render/layered/)
-                self.layered = Layered(top, bottom, estimator)
-            else:
-                top = RoughTop(stack, mode, microfacet)
-                estimator = RoughEstimator(top, bottom, medium, mode, bounces, NAME)
-                self.layered = RoughLayered(top, bottom, estimator)
+            #: the layered engine (render/layered/): the top over the nested BSDF
+            self.layered = layered(top, NestedBottom(base), CoatMedium(sigma_a, thickness, NAME),
+                                   mode, NAME, max_bounces=bounces)
         # smooth top: component 0 the stack's reflection and the base's all-delta chains,
         # component 1 absent over a pure-delta base (a pure delta BSDF); rough top:
         # component 0 the top's glossy reflection, component 1 the light that crosses it
@@ -268,7 +261,8 @@ class ThinFilmCoating(mi.BSDF):
         self.guard = ParameterGuard(self, NAME)
 
     coating = property(lambda self: self.layered.estimator,
-                       doc="The estimator (:class:`~thinfilm_mi.render.layered.nested.NestedEstimator`).")
+                       doc="The estimator (:class:`~thinfilm_mi.render.layered.nested.NestedEstimator`, "
+                           "or :class:`~thinfilm_mi.render.layered.rough.RoughEstimator` under a rough top).")
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         return self.layered.sample(ctx, si, sample1, sample2, active)

@@ -302,9 +302,9 @@ import mitsuba as mi
 from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.render import modes
 from thinfilm_mi.render.layered.bottom import DiffuseBottom, albedo
-from thinfilm_mi.render.layered.engine import Layered
+from thinfilm_mi.render.layered.engine import layered
 from thinfilm_mi.render.layered.models import DIFFUSE_MODELS
-from thinfilm_mi.render.layered.series import series_estimator
+from thinfilm_mi.render.layered.series import series_parts
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR
 from thinfilm_mi.render.orennayar import OrenNayar
 from thinfilm_mi.render.params import ParameterGuard
@@ -337,11 +337,11 @@ class ThinFilmDiffuse(mi.BSDF):
             options = dict(read.stack_options(), plugin=NAME)
             rough = OrenNayar(read, NAME)   # roughness: render/orennayar.py
             read.check_unqueried()
-            bottom = DiffuseBottom(reflectance, rough)
-            estimator = series_estimator(model, films, ext, base, bottom, options, modes.current(),
-                                         NAME)
-        #: the layered engine (render/layered/)
-        self.layered = Layered(estimator.top, bottom, estimator)
+            mode = modes.current()
+            top, film_n, own = series_parts(model, films, ext, base, options, mode)
+            #: the layered engine (render/layered/): the films over the diffuse base
+            self.layered = layered(top, DiffuseBottom(reflectance, rough), film_n, mode, NAME,
+                                   **own)
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
         self.m_components = self.layered.components()

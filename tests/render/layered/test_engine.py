@@ -1,7 +1,7 @@
-"""thinfilm_mi.render.layered.engine: the components a bottom gives the engine, the lobes a
-context enables, the order of the parameters (the top's, the estimator's, the bottom's),
-and an edit through the engine, which must give the BSDF freshly loaded with the new
-value, bit for bit."""
+"""thinfilm_mi.render.layered.engine: the components a top names over a bottom, the
+registry of estimators, the lobes a context enables, the order of the parameters (the
+top's, the estimator's, the bottom's), and an edit through the engine, which must give the
+BSDF freshly loaded with the new value, bit for bit."""
 from __future__ import annotations
 
 import mitsuba as mi
@@ -11,6 +11,8 @@ import pytest
 mi.set_variant("llvm_ad_spectral")
 import thinfilm_mi  # noqa: E402,F401
 from tests.support.layered import LOSSLESS, coating, interaction  # noqa: E402
+from thinfilm_mi.errors import ThinFilmError  # noqa: E402
+from thinfilm_mi.render.layered.engine import layered  # noqa: E402
 
 
 @pytest.fixture(autouse=True)
@@ -30,6 +32,30 @@ def test_components_follow_the_bottom(base, second):
     front = mi.BSDFFlags.FrontSide
     want = [mi.BSDFFlags.DeltaReflection | front] + ([] if second is None else [second | front])
     assert b.layered.components() == want and b.component_count() == len(want)
+
+
+@pytest.mark.parametrize("base, second", [
+    ({"type": "conductor"}, mi.BSDFFlags.GlossyReflection),
+    ({"type": "diffuse"}, mi.BSDFFlags.DiffuseReflection),
+    ({"type": "plastic"}, mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.GlossyReflection),
+])
+def test_a_rough_top_names_glossy_components(base, second):
+    """Under a rough top component 0 is the top's glossy reflection and component 1 is
+    always there: a delta bottom's light leaves it glossy."""
+    b = coating(bsdf=base, alpha=0.2)
+    front = mi.BSDFFlags.FrontSide
+    assert b.layered.components() == [mi.BSDFFlags.GlossyReflection | front, second | front]
+    ctx = mi.BSDFContext()
+    ctx.component = 1
+    assert b.layered.enabled(ctx) == (False, True)
+
+
+def test_the_registry_refuses_a_pair_it_has_no_estimator_for():
+    """A rough top over a diffuse bottom has no estimator: named, not guessed."""
+    rough = coating(alpha=0.2).layered.top
+    bottom = mi.load_dict({"type": "thinfilm_diffuse"}).layered.bottom
+    with pytest.raises(ThinFilmError, match="no estimator sums a RoughTop over a DiffuseBottom"):
+        layered(rough, bottom, None, rough.mode, "test")
 
 
 @pytest.mark.parametrize("component, enabled", [(None, (True, True)), (0, (True, False)),

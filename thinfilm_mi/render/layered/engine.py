@@ -6,7 +6,8 @@ Bottom>`` (of which its ``CoatedDiffuse`` and ``CoatedConductor`` are instances)
   from both sides, exact or tabulated, smooth (delta lobes) or on rough microfacets;
 * the bottom (:mod:`thinfilm_mi.render.layered.bottom`): a diffuse base (Lambertian or
   Oren–Nayar) or any nested Mitsuba BSDF;
-* the estimator: over a diffuse bottom, a closed form of
+* the estimator, registered by the kinds of the top and the bottom (:data:`ESTIMATORS`,
+  :func:`layered` builds the engine): over a diffuse bottom, a closed form of
   :data:`~thinfilm_mi.render.layered.models.DIFFUSE_MODELS`
   (:class:`~thinfilm_mi.render.layered.series.SeriesEstimator`); over a nested BSDF, the
   estimator of :mod:`thinfilm_mi.render.layered.nested`, whose sum over paths is the
@@ -15,45 +16,62 @@ Bottom>`` (of which its ``CoatedDiffuse`` and ``CoatedConductor`` are instances)
   lobes add the delta-base chain (:mod:`thinfilm_mi.render.layered.delta`); under a rough
   top, the walk of :mod:`thinfilm_mi.render.layered.rough`.
 
-The engine gives the plugin its components (0: the top's reflection, a delta lobe under a
-smooth top; 1: the bottom's
-reflection lobes through the top, absent over a pure-delta bottom), tells the estimator
+The engine gives the plugin its components, as the top names them
+(:meth:`~thinfilm_mi.render.layered.top.Top.components`; 0: the top's reflection, a delta
+lobe under a smooth top, a glossy one under a rough top; 1: the bottom's reflection lobes
+through the top, absent over a pure-delta bottom under a smooth top), tells the estimator
 which of them a context enables, and routes the parameters: the top's, the estimator's
 own, the bottom's, in that order.
 """
 from __future__ import annotations
 
-from thinfilm_mi.render.textures import mitsuba_module
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render.layered.bottom import DiffuseBottom, NestedBottom
+from thinfilm_mi.render.layered.nested import NestedEstimator
+from thinfilm_mi.render.layered.rough import RoughEstimator
+from thinfilm_mi.render.layered.series import SeriesEstimator
+from thinfilm_mi.render.layered.top import RoughTop, SmoothTop
 
-__all__ = ["Layered"]
+__all__ = ["ESTIMATORS", "Layered", "layered"]
+
+#: The estimators by the classes of the top and the bottom they sum over, each built as
+#: ``estimator(top, bottom, medium, mode, plugin, **own)`` (``own``: its own options).
+ESTIMATORS = {
+    (SmoothTop, NestedBottom): NestedEstimator,
+    (RoughTop, NestedBottom): RoughEstimator,
+    (SmoothTop, DiffuseBottom): SeriesEstimator,
+}
+
+
+def layered(top, bottom, medium, mode, plugin: str, **own) -> "Layered":
+    """The engine of ``top`` over ``bottom`` through ``medium`` (what lies between them:
+    the coat medium, or the paper's film ``N``), summed by the estimator registered for
+    their classes (:data:`ESTIMATORS`) with its own options ``own``; ``mode``:
+    :func:`thinfilm_mi.render.modes.current`; ``plugin`` names the BSDF in errors."""
+    estimator = ESTIMATORS.get((type(top), type(bottom)))
+    if estimator is None:
+        raise ThinFilmError(f"{plugin}: no estimator sums a {type(top).__name__} over a "
+                            f"{type(bottom).__name__}")
+    return Layered(top, bottom, estimator(top, bottom, medium, mode, plugin, **own))
 
 
 class Layered:
-    """``top`` over ``bottom``, summed by ``estimator`` (which holds both: its
-    ``sample(ctx, si, s1, s2, active, has_delta, has_base)``, ``eval_pdf(ctx, si, wo,
-    active, has_delta, has_base, want_value, want_pdf)``, ``traverse``,
+    """``top`` over ``bottom``, summed by ``estimator`` (built by :func:`layered`; it holds
+    both: its ``sample(ctx, si, s1, s2, active, has_top, has_base)``, ``eval_pdf(ctx, si,
+    wo, active, has_top, has_base, want_value, want_pdf)``, ``traverse``,
     ``parameters_changed(keys)`` and ``describe()``)."""
 
     def __init__(self, top, bottom, estimator):
         self.top, self.bottom, self.estimator = top, bottom, estimator
 
     def components(self) -> list:
-        """The components' flags: the delta reflection, and the bottom's lobes (if any)."""
-        mi = mitsuba_module()
-        components = [mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide]
-        if self.bottom.lobes:
-            lobes = mi.BSDFFlags.Empty
-            for lobe in self.bottom.lobes:
-                lobes = lobes | lobe
-            components.append(lobes | mi.BSDFFlags.FrontSide)
-        return components
+        """The components' flags, as the top names them over the bottom."""
+        return self.top.components(self.bottom)
 
     def enabled(self, ctx):
-        """``(has_delta, has_base)``: whether ``ctx`` enables component 0, resp. one of
-        the bottom's lobes as component 1."""
-        mi = mitsuba_module()
-        return (ctx.is_enabled(mi.BSDFFlags.DeltaReflection, 0),
-                any(ctx.is_enabled(lobe, 1) for lobe in self.bottom.lobes))
+        """``(has_top, has_base)``: whether ``ctx`` enables component 0, resp. one of
+        the lobes of component 1."""
+        return self.top.enabled(ctx, self.bottom)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         return self.estimator.sample(ctx, si, sample1, sample2, active, *self.enabled(ctx))

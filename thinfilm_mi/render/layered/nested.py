@@ -82,7 +82,7 @@ from __future__ import annotations
 import drjit as dr
 
 from thinfilm_mi.render.layered.bottom import base_context, base_interaction, intensity
-from thinfilm_mi.render.layered.delta import DeltaBase
+from thinfilm_mi.render.layered.coated import CoatedEstimator
 from thinfilm_mi.render.layered.forms import closed_form
 from thinfilm_mi.render.layered.walk import RandomWalk, eval_seed, logical_not, sample_seed
 from thinfilm_mi.render.textures import mitsuba_module
@@ -141,54 +141,30 @@ def sum_estimator(layer):
     return closed_form(layer) or RandomWalk(layer)
 
 
-class NestedEstimator:
+class NestedEstimator(CoatedEstimator):
     """The layered BSDF of ``top`` (a :class:`~thinfilm_mi.render.layered.top.SmoothTop`,
     whose substrate is the coat medium) over ``bottom`` (a
     :class:`~thinfilm_mi.render.layered.bottom.NestedBottom`), through ``medium`` (a
-    :class:`~thinfilm_mi.render.layered.coat.CoatMedium`); at most ``max_bounces`` base
-    vertices a path; ``mode``: :func:`thinfilm_mi.render.modes.current`."""
+    :class:`~thinfilm_mi.render.layered.coat.CoatMedium`), its sum over paths :attr:`sum`
+    (:func:`sum_estimator`); the rest as :class:`~thinfilm_mi.render.layered.coated.CoatedEstimator`."""
 
-    def __init__(self, top, bottom, medium, mode, max_bounces: int, plugin: str):
-        self.top, self.bottom, self.medium = top, bottom, medium
-        self.mode = mode
-        self.max_bounces = int(max_bounces)
-        self.plugin = plugin
-        #: the base's delta reflection (:class:`~thinfilm_mi.render.layered.delta.DeltaBase`),
-        #: or ``None`` where it has none
-        self.delta = DeltaBase(self) if bottom.has_delta else None
+    def __init__(self, top, bottom, medium, mode, plugin: str, max_bounces: int):
         self.sum = None
-        self.refresh()
+        super().__init__(top, bottom, medium, mode, plugin, max_bounces)
         #: the sum over paths (:func:`sum_estimator`)
         self.sum = sum_estimator(self)
 
-    # the parts, for inspection
-    stack = property(lambda self: self.top.stack, doc="The top's ``KernelStack``.")
-    base = property(lambda self: self.bottom.bsdf, doc="The nested BSDF.")
     form = property(lambda self: None if isinstance(self.sum, RandomWalk) else self.sum,
                     doc="The closed form of the sum, or ``None`` (the walk).")
 
     def refresh(self) -> None:
         """Re-derive the load-time quantities after an edit (the top refreshed first)."""
-        self.medium.refresh()
+        super().refresh()
         #: no films between equal indices: the nested BSDF itself (times the coat's
         #: absorption), bit for bit
         self.invisible = self.top.invisible
         if self.sum is not None:
             self.sum.refresh()
-
-    def traverse(self, callback) -> None:
-        """The coat medium's parameters (the top and the bottom expose their own)."""
-        self.medium.traverse(callback)
-
-    def parameters_changed(self, keys) -> None:
-        """:meth:`refresh` after an edit of ``keys`` (the top refreshed first)."""
-        self.refresh()
-
-    def describe(self) -> str:
-        """The stack, the media and the base, for ``to_string``."""
-        stack = self.top.stack
-        return (f"  layers = {stack.describe()},\n  int_ior = {stack.substrate.label},\n"
-                f"  ext_ior = {stack.ambient.label},\n  bsdf = {self.bottom.describe()}\n")
 
     # -- pieces ----------------------------------------------------------------
     def underside(self, si, arrive, active):
@@ -201,17 +177,6 @@ class NestedEstimator:
         r = self.top.crossing(resp.R, resp.reflection, arrive, leave)
         a = self.medium.attenuation(si, arrive.z, active)
         return r if a is None else r * a * a
-
-    def tracks_gradients(self, si, active) -> bool:
-        """Whether a parameter of the top, the coat medium or the nested BSDF carries
-        gradients (AD variants; decided when the kernel is traced)."""
-        mi = mitsuba_module()
-        if not dr.is_diff_v(mi.Float):
-            return False
-        own = self.medium.values(si, active)
-        if self.top.carries_gradients(si, active) or any(dr.grad_enabled(v) for v in own):
-            return True
-        return self.bottom.carries_gradients()
 
     def transmitted(self, ctx_mode, si, wo, seed, active, top_i=None):
         """The estimate of the base part of ``f cos θ_o`` (outer ``si.wi``, ``wo``) by the

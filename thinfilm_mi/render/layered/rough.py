@@ -3,8 +3,8 @@ r"""The estimator under a rough top (no plugin classes here): ``thinfilm_coating
 on the microfacets of a rough interface) over a
 :class:`~thinfilm_mi.render.layered.bottom.NestedBottom`, through a
 :class:`~thinfilm_mi.render.layered.coat.CoatMedium` (Guo, Hašan, Yan and Zhao 2018;
-pbrt-v4's ``LayeredBxDF``), and the engine that names its components
-(:class:`RoughLayered`).
+pbrt-v4's ``LayeredBxDF``; the top names the engine's components: 0 its glossy reflection,
+1 the light that crosses it, :meth:`~thinfilm_mi.render.layered.top.RoughTop.crossed_lobes`).
 
 **The estimate** of ``f cos θ_o`` (:meth:`RoughEstimator.eval_pdf`; ``ω_i``, ``ω_o``
 outside; the top's directions in its own frame, the coat medium below, ``f_t`` its lobes
@@ -59,15 +59,13 @@ import drjit as dr
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.layered.bottom import base_interaction, intensity
-from thinfilm_mi.render.layered.delta import DeltaBase
-from thinfilm_mi.render.layered.engine import Layered
-from thinfilm_mi.render.layered.nested import NestedEstimator
+from thinfilm_mi.render.layered.coated import CoatedEstimator
 from thinfilm_mi.render.layered.walk import RR_DEPTH, eval_seed, logical_not, sample_seed
 from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.base import opaque_float
 
-__all__ = ["ROUGH_MIXTURE", "RoughEstimator", "RoughLayered", "power_heuristic", "ratio"]
+__all__ = ["ROUGH_MIXTURE", "RoughEstimator", "power_heuristic", "ratio"]
 
 #: The cosine lobe's share ``c`` of the rough top's sampling mixture. Any fixed value in
 #: (0, 1) keeps ``pdf`` exact; the smooth top fits its share per direction from a probe of
@@ -88,69 +86,19 @@ def power_heuristic(p, q):
     return dr.select(total > 0, p2 / dr.select(total > 0, total, 1.0), 0.0)
 
 
-class RoughLayered(Layered):
-    """The engine over a rough top: component 0 is the top's glossy reflection, component
-    1 the light that crosses it (the base's non-delta lobes, and glossy light where the
-    base has a delta reflection: the rough top spreads it)."""
-
-    def base_lobes(self) -> tuple:
-        """The lobes of component 1."""
-        mi = mitsuba_module()
-        lobes = tuple(self.bottom.lobes)
-        if self.bottom.has_delta and mi.BSDFFlags.GlossyReflection not in lobes:
-            lobes = lobes + (mi.BSDFFlags.GlossyReflection,)
-        return lobes
-
-    def components(self) -> list:
-        mi = mitsuba_module()
-        extra = mi.BSDFFlags.FrontSide | self.top.microfacet.flags
-        lobes = mi.BSDFFlags.Empty
-        for lobe in self.base_lobes():
-            lobes = lobes | lobe
-        return [mi.BSDFFlags.GlossyReflection | extra, lobes | extra]
-
-    def enabled(self, ctx):
-        """``(has_top, has_base)``: whether ``ctx`` enables component 0, resp. 1."""
-        mi = mitsuba_module()
-        return (ctx.is_enabled(mi.BSDFFlags.GlossyReflection, 0),
-                any(ctx.is_enabled(lobe, 1) for lobe in self.base_lobes()))
-
-
-class RoughEstimator:
+class RoughEstimator(CoatedEstimator):
     """The layered BSDF of ``top`` (a :class:`~thinfilm_mi.render.layered.top.RoughTop`)
     over ``bottom`` (a :class:`~thinfilm_mi.render.layered.bottom.NestedBottom`) through
-    ``medium``; at most ``max_bounces`` base vertices a path; ``mode``:
-    :func:`thinfilm_mi.render.modes.current`."""
+    ``medium``; the rest as :class:`~thinfilm_mi.render.layered.coated.CoatedEstimator`."""
 
-    def __init__(self, top, bottom, medium, mode, max_bounces: int, plugin: str):
-        self.top, self.bottom, self.medium = top, bottom, medium
-        self.mode = mode
-        self.max_bounces = int(max_bounces)
-        self.plugin = plugin
-        #: the base's delta reflection (its mean weighs the sampling mixture), or ``None``
-        self.delta = DeltaBase(self) if bottom.has_delta else None
+    def __init__(self, top, bottom, medium, mode, plugin: str, max_bounces: int):
+        super().__init__(top, bottom, medium, mode, plugin, max_bounces)
+        #: the cosine lobe's share of the sampling mixture (:data:`ROUGH_MIXTURE`)
         self.mix = opaque_float(ROUGH_MIXTURE)
-        self.refresh()
-
-    stack = property(lambda self: self.top.stack, doc="The top's ``KernelStack``.")
-    base = property(lambda self: self.bottom.bsdf, doc="The nested BSDF.")
-
-    def refresh(self) -> None:
-        """Re-derive the load-time quantities after an edit (the top refreshed first)."""
-        self.medium.refresh()
-
-    #: the coat medium's parameters (the top and the bottom expose their own), whether a
-    #: parameter of the top, the medium or the base carries gradients, and the refresh
-    #: after an edit: the smooth estimator's (they read ``top``, ``medium``, ``bottom`` and
-    #: :meth:`refresh` alone)
-    traverse = NestedEstimator.traverse
-    tracks_gradients = NestedEstimator.tracks_gradients
-    parameters_changed = NestedEstimator.parameters_changed
 
     def describe(self) -> str:
-        """The stack, the media and the base (the smooth estimator's), then the roughness,
-        for ``to_string``."""
-        return NestedEstimator.describe(self) + self.top.microfacet.describe()
+        """The stack, the media and the base, then the roughness, for ``to_string``."""
+        return super().describe() + self.top.microfacet.describe()
 
     # -- pieces ----------------------------------------------------------------
     def absorb(self, si, cos, active):

@@ -8,7 +8,9 @@ written in ``thinfilm_diffuse``'s doc block).
 As pbrt-v4's ``CoatedDiffuseBxDF`` is its ``LayeredBxDF`` over a diffuse bottom, a
 :class:`SeriesEstimator` gives the BSDF's samples, values and pdfs, its load-time terms
 (``R_dh``, ``T_hemi``, the RGB/mono tables, ``R_dh``'s derivatives), film ``N``'s
-parameters and their edits; :func:`series_estimator` builds one from the films.
+parameters and their edits; :func:`series_parts` makes its top, medium (film ``N``) and
+options from the films, for the engine's
+:func:`~thinfilm_mi.render.layered.engine.layered`.
 """
 from __future__ import annotations
 
@@ -41,18 +43,20 @@ from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.hemispherical import DerivativeTable
 from thinfilm_mi.tabulate.policy import COATING_RT_MIN_FILMS
 
-__all__ = ["SeriesEstimator", "series_estimator"]
+__all__ = ["SeriesEstimator", "series_parts"]
 
 
-def series_estimator(model, films, ext, base, bottom, options: dict, mode,
-                     plugin: str) -> "SeriesEstimator":
-    """The :class:`SeriesEstimator` of ``model`` (a
-    :class:`~thinfilm_mi.render.layered.models.DiffuseModel`) for ``films``
+def series_parts(model, films, ext, base, options: dict, mode):
+    """``(top, medium, own)``: the parts of ``model``'s (a
+    :class:`~thinfilm_mi.render.layered.models.DiffuseModel`) layer for ``films``
     (``[(SpectralIndex, thickness nm)]``, outside in) between the ambient ``ext`` and the
-    base medium ``base`` (``SpectralIndex``) over ``bottom`` (a
-    :class:`~thinfilm_mi.render.layered.bottom.DiffuseBottom`); ``options``: the stack's
-    options (:meth:`~thinfilm_mi.render.reader.PluginProperties.stack_options`); ``mode``: the
-    variant's :mod:`~thinfilm_mi.render.modes` mode; ``plugin`` names the BSDF in errors."""
+    base medium ``base`` (``SpectralIndex``), for
+    :func:`~thinfilm_mi.render.layered.engine.layered`: the
+    :class:`~thinfilm_mi.render.layered.top.SmoothTop` of its coating, the paper's film ``N``
+    under it (``(SpectralIndex, thickness)``, or ``(None, None)``) and the
+    :class:`SeriesEstimator`'s own options; ``options``: the stack's
+    (:meth:`~thinfilm_mi.render.reader.PluginProperties.stack_options`); ``mode``: the
+    variant's :mod:`~thinfilm_mi.render.modes` mode."""
     coating, exit_medium, film_n, film_n_thickness = model.split(films, ext, base)
     # RGB/mono: only k_r from the colour table; t enters through the diffuse table
     stack = KernelStack(coating, ext, exit_medium, sides={False: not mode.integrated},
@@ -60,8 +64,8 @@ def series_estimator(model, films, ext, base, bottom, options: dict, mode,
     base_ratio = model.base_ratio(ext, base)
     bare = not films and (not base_ratio or np.array_equal(
         base.spectral_values(GRID, real=True), ext.spectral_values(GRID, real=True)))
-    return SeriesEstimator(model, SmoothTop(stack, mode), bottom, (film_n, film_n_thickness),
-                           base_ratio, bare, options["thickness_texture"], mode, plugin)
+    return SmoothTop(stack, mode), (film_n, film_n_thickness), dict(
+        model=model, base_ratio=base_ratio, bare=bare, texture=options["thickness_texture"])
 
 
 class _FilmParameters:
@@ -84,22 +88,23 @@ class _FilmParameters:
 
 class SeriesEstimator:
     """The closed form of ``model`` (a :class:`~thinfilm_mi.render.layered.models.DiffuseModel`)
-    for ``top`` (a :class:`~thinfilm_mi.render.layered.top.SmoothTop`) over film ``N``
-    (``film_n``: ``(SpectralIndex, thickness)``, or ``(None, None)``) and ``bottom`` (a
-    :class:`~thinfilm_mi.render.layered.bottom.DiffuseBottom`); ``base_ratio``: whether
-    ``t`` carries ``n_0/n_b``; ``bare``: no films and no interface; ``texture``: the
-    ``thickness`` texture or ``None``. Built by :func:`series_estimator`.
+    for ``top`` (a :class:`~thinfilm_mi.render.layered.top.SmoothTop`) over the medium
+    ``medium``, the paper's film ``N`` (``(SpectralIndex, thickness)``, or ``(None, None)``),
+    and ``bottom`` (a :class:`~thinfilm_mi.render.layered.bottom.DiffuseBottom`);
+    ``base_ratio``: whether ``t`` carries ``n_0/n_b``; ``bare``: no films and no interface;
+    ``texture``: the ``thickness`` texture or ``None`` (:func:`series_parts` gives the
+    parts).
 
     Component 0 is the top's delta reflection, component 1 the diffuse lobe. :attr:`bare`:
     no films and no interface (the base medium is the ambient): exactly Mitsuba's
     ``diffuse`` (or the rough base alone), with no stack work."""
 
-    def __init__(self, model, top, bottom, film_n, base_ratio: bool, bare: bool, texture,
-                 mode, plugin: str):
+    def __init__(self, top, bottom, medium, mode, plugin: str, model, base_ratio: bool,
+                 bare: bool, texture):
         self.model, self.mode, self.plugin = model, mode, plugin
         self.top, self.bottom = top, bottom
         self.texture = texture
-        self.film_n, self.film_n_thickness = film_n
+        self.film_n, self.film_n_thickness = medium
         #: t carries n_0/n_b (a base medium unlike the ambient)
         self.base_ratio = base_ratio
         #: no films and no interface (a base medium of the ambient's index): Mitsuba's diffuse

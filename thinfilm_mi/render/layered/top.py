@@ -14,6 +14,8 @@ hemisphere; :func:`outward` is its inverse.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from functools import reduce
+from operator import or_
 
 import drjit as dr
 import numpy as np
@@ -101,6 +103,35 @@ class Top(ABC):
     def describe(self) -> str:
         """The top, for ``to_string``."""
 
+    @abstractmethod
+    def reflection_lobe(self):
+        """The ``BSDFFlags`` lobe of the top's reflection (the engine's component 0)."""
+
+    @abstractmethod
+    def crossed_lobes(self, bottom) -> tuple:
+        """The lobes of the light that crosses the top to ``bottom`` and back (the engine's
+        component 1; none: no such component)."""
+
+    @abstractmethod
+    def side_flags(self):
+        """The ``BSDFFlags`` every component carries besides its lobes."""
+
+    def components(self, bottom) -> list:
+        """The engine's components' flags over ``bottom``: 0 the top's reflection, 1 the
+        light that crosses it (absent where :meth:`crossed_lobes` has none)."""
+        side = self.side_flags()
+        components = [self.reflection_lobe() | side]
+        lobes = self.crossed_lobes(bottom)
+        if lobes:
+            components.append(reduce(or_, lobes) | side)
+        return components
+
+    def enabled(self, ctx, bottom):
+        """``(has_top, has_base)``: whether ``ctx`` enables component 0, resp. one of the
+        lobes of component 1."""
+        return (ctx.is_enabled(self.reflection_lobe(), 0),
+                any(ctx.is_enabled(lobe, 1) for lobe in self.crossed_lobes(bottom)))
+
 
 class SmoothTop(Top):
     """The smooth thin-film stack ``stack`` (a :class:`~thinfilm_mi.render.kernel.KernelStack`,
@@ -164,6 +195,18 @@ class SmoothTop(Top):
     def describe(self) -> str:
         """The stack, for ``to_string``."""
         return self.stack.describe()
+
+    def reflection_lobe(self):
+        """A delta reflection."""
+        return mitsuba_module().BSDFFlags.DeltaReflection
+
+    def crossed_lobes(self, bottom) -> tuple:
+        """The bottom's own lobes (its delta reflection joins component 0)."""
+        return tuple(bottom.lobes)
+
+    def side_flags(self):
+        """The front side."""
+        return mitsuba_module().BSDFFlags.FrontSide
 
 
 class RoughTop(SmoothTop):
@@ -274,3 +317,20 @@ class RoughTop(SmoothTop):
     def describe(self) -> str:
         """The stack and the roughness, for ``to_string``."""
         return f"{self.stack.describe()}, {self.microfacet.describe().strip().rstrip(',')}"
+
+    def reflection_lobe(self):
+        """A glossy reflection."""
+        return mitsuba_module().BSDFFlags.GlossyReflection
+
+    def crossed_lobes(self, bottom) -> tuple:
+        """The bottom's non-delta lobes, and glossy light where it has a delta reflection
+        (the rough top spreads it)."""
+        mi = mitsuba_module()
+        lobes = tuple(bottom.lobes)
+        if bottom.has_delta and mi.BSDFFlags.GlossyReflection not in lobes:
+            lobes = lobes + (mi.BSDFFlags.GlossyReflection,)
+        return lobes
+
+    def side_flags(self):
+        """The front side and the roughness's (``Anisotropic`` or none)."""
+        return mitsuba_module().BSDFFlags.FrontSide | self.microfacet.flags
