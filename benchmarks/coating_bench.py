@@ -14,7 +14,8 @@ The scene is the sphere of ``timing.py`` (radius 1 on a diffuse floor under a
 constant emitter, ``path``, box filter). The sphere's BSDF is one of :data:`BASES`
 (``diffuse``, ``roughconductor`` α 0.3 on Al, ``principled``), alone or under the coating
 :data:`COAT` (``int_ior`` 1.5, the films ``"SiO2 500; TiO2 80"``, default settings) with
-each top of :data:`TOPS` (today the smooth one): a row per top and base. The
+each top of :data:`TOPS` (the smooth one, and a rough one of α 0.2: the films on Beckmann
+microfacets): a row per top and base. The
 coating's Mitsuba counterpart is its base alone (Mitsuba has no coating of films), which
 is what part 1 times; against ``plastic`` (no films over ``diffuse``), in the polarized
 variant and at other depths: ``plugin_bench.py`` and ``render_bench.py``. This bench adds
@@ -40,7 +41,8 @@ what only the coating has: its noise against the geometry it stands for, and its
    geometry reaches only by chance: next-event estimation cannot cross its smooth top):
    the coated sphere against the coating as geometry, as in
    ``tests/cross/test_coating_geometry.py``: a ``thinfilm_dielectric`` sphere (the films,
-   ``ext_ior`` -> ``int_ior``) around a sphere :data:`GAP` smaller that carries the base
+   ``ext_ior`` -> ``int_ior``; a ``thinfilm_roughdielectric`` of the same α under a rough
+   top) around a sphere :data:`GAP` smaller that carries the base
    (max depth 64 leaves the walk between the two its bounces). The coating renders
    --noise-spp samples in T seconds (median of 3); the geometry gets the spp that fill the
    same T by its own median time per render (CPU seconds, after a render at that sample
@@ -97,6 +99,7 @@ BASES = [
 #: geometry's outer sphere): every table has a row per top and base (:func:`cases`)
 TOPS = [
     ("smooth", {}, {"type": "thinfilm_dielectric"}),
+    ("rough α 0.2", {"alpha": 0.2}, {"type": "thinfilm_roughdielectric", "alpha": 0.2}),
 ]
 #: the sphere's radius less the base sphere's in the explicit geometry (the sphere's is 1)
 GAP = 0.01
@@ -327,7 +330,8 @@ def markdown(data: dict, args) -> str:
         lines += [f"**Noise at equal time against the explicit geometry** ({args.noise_res}×"
                   f"{args.noise_res}, max depth {NOISE_DEPTH}, the sky and an area light as in "
                   f"`scenes/include/stage.xml`): the coated sphere at {args.noise_spp} spp against "
-                  f"a `thinfilm_dielectric` sphere around the base sphere ({GAP} smaller) given the "
+                  f"a `thinfilm_dielectric` sphere (a `thinfilm_roughdielectric` of the same α under a "
+                  f"rough top) around the base sphere ({GAP} smaller) given the "
                   f"same CPU seconds; RMSE over the sphere's pixels relative to their mean, each "
                   f"against its own scene at {args.ref_factor}× its samples. Efficiency = RMSE² × "
                   f"time of the geometry over that of the coating (> 1: the coating is the more "
