@@ -549,7 +549,7 @@ class Rows:
 
     def __init__(self, side: SideData, axis: AngleAxis, resolution: float,
                  spacing: float = V_SPACING, extent: tuple | None = None):
-        self.side, self.axis, self.resolution = side, axis, resolution
+        self.side, self.axis, self.resolution, self.spacing = side, axis, resolution, spacing
         self.sigma = sigma_nu(resolution)
         #: what is tabulated: the side's quantity (the powers, or the Mueller
         #: components, :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`)
@@ -1000,6 +1000,8 @@ def _rounds(rows: Rows, shear: Shear | None, spacing: float, nu: int, budget: Bu
     ``error`` is met, the colour check fails or the budget is spent."""
     axis, last, per_row = rows.axis, None, 0.0
     for _ in range(MAX_ROUNDS + 1):
+        if shear is None and spacing != rows.spacing:    # a finer v axis: every row again
+            rows = Rows(rows.side, axis, rows.resolution, spacing)
         nv = rows.nv if shear is None else _sheared_nv(shear, rows.sigma, spacing)
         xn, xm = axis.rows(nu)
         coords = np.concatenate((xn, xm))
@@ -1042,11 +1044,10 @@ def _rounds(rows: Rows, shear: Shear | None, spacing: float, nu: int, budget: Bu
                 # would compute afresh
                 factor = 2.0
             nu, last = axis.segments * (int(math.ceil((nu // axis.segments - 1) * factor)) + 1), (nu, err_u)
-        if err_v > 0.5 * error:      # a finer v axis (unsheared: every row again)
+        if err_v > 0.5 * error:      # a finer v axis (unsheared: new rows next round)
             spacing *= 0.75 * (0.5 * error / err_v) ** 0.25
             if shear is None:
                 budget.spend(rows.points)
-                rows = Rows(rows.side, axis, rows.resolution, spacing)
     stats["result"] = "over budget"
     return None
 
