@@ -84,20 +84,6 @@ _cache: dict[Any, Material] = {}
 _cache_lock = threading.Lock()
 
 
-def _check_range(mat: Material, spec: Any, require_range) -> Material:
-    if require_range is None or mat.constant is not None:
-        return mat
-    lo, hi = require_range
-    a, b = mat.wavelength_range
-    if lo < a * (1 - RANGE_RTOL) or hi > b * (1 + RANGE_RTOL):
-        raise MaterialError(
-            f"material {spec!r}: its data cover {a:g}-{b:g} nm, not the required {lo:g}-{hi:g} nm "
-            "(Mitsuba's spectral range); choose a dataset that does, e.g. from "
-            "'python -m thinfilm_mi materials', or pass require_range=None for numpy-only use"
-        )
-    return mat
-
-
 def _suggest(text: str) -> str:
     names = {}
     for key, canon in short_names().items():
@@ -112,39 +98,52 @@ def _suggest(text: str) -> str:
     return f"; did you mean {', '.join(repr(x) for x in out[:5])}?" if out else ""
 
 
-def _resolve_string(text: str) -> Material:
-    s = text.strip()
+def _constant(spec: Any) -> complex | None:
+    """The constant index ``spec`` gives (a number, or a string such as ``"1.46"`` or
+    ``"0.42+2.47j"``), or ``None`` where it names a material; refuses what is neither."""
+    if isinstance(spec, bool):
+        raise MaterialError(f"material: expected a number or a name, got {spec!r}")
+    if isinstance(spec, (int, float, complex, np.number)):
+        return complex(spec)
+    if isinstance(spec, str):
+        text = spec.strip().replace(" ", "")
+        if re.fullmatch(r"[0-9eE.+\-ij()]+", text) and re.search(r"[0-9]", text):
+            try:
+                return complex(text.replace("i", "j"))
+            except ValueError:
+                return None
+        return None
+    if not isinstance(spec, os.PathLike):
+        raise MaterialError(f"material: expected a number, a name or a file, got {spec!r}")
+    return None
+
+
+def _source(spec: Any) -> tuple:
+    """``(key, load)``: what a material name or file ``spec`` names, read once: its
+    cache key (``None``: not cached, e.g. a file that is not there, whose ``load``
+    raises a clear error) and the loader of its :class:`Material`."""
+    s = "" if isinstance(spec, os.PathLike) else spec.strip()
     if s.lower().startswith("mitsuba:"):
-        return load_mitsuba(s.split(":", 1)[1].strip())
-    if is_material_file(s):
-        return load_file(Path(s).expanduser())
-    canon = short_names().get(normalise_name(s))
-    if canon is not None:
-        return load_builtin(canon)
-    if s.count("/") == 2:
-        return load_ri_page(s)
-    raise MaterialError(f"material: unknown material {text!r}{_suggest(s)} "
-                        "(see 'python -m thinfilm_mi materials'; also accepted: a number like 1.46 or "
-                        "0.42+2.47j, shelf/book/page of refractiveindex.info, mitsuba:NAME, a .csv/.spd/.yml file)")
-
-
-def _cache_key(spec: Any):
+        name = s.split(":", 1)[1].strip()
+        return ("mitsuba", name.lower()), lambda: load_mitsuba(name)
     if isinstance(spec, os.PathLike) or is_material_file(spec):
         path = Path(os.fspath(spec).strip()).expanduser()
+        source = Path(os.fspath(spec)) if isinstance(spec, os.PathLike) else path
         try:
             st = path.stat()
-            return ("file", str(path.resolve()), st.st_mtime_ns, st.st_size)
+            key = ("file", str(path.resolve()), st.st_mtime_ns, st.st_size)
         except OSError:
-            return None  # not there: load_file raises a clear error
-    s = spec.strip()
-    if s.lower().startswith("mitsuba:"):
-        return ("mitsuba", s.split(":", 1)[1].strip().lower())
+            key = None
+        return key, lambda: load_file(source)
     canon = short_names().get(normalise_name(s))
     if canon is not None:
-        return ("builtin", canon)
+        return ("builtin", canon), lambda: load_builtin(canon)
     if s.count("/") == 2:
-        return ("ri", tuple(p.strip().replace(" ", "_").lower() for p in s.split("/")))
-    return None
+        return (("ri", tuple(p.strip().replace(" ", "_").lower() for p in s.split("/"))),
+                lambda: load_ri_page(s))
+    raise MaterialError(f"material: unknown material {spec!r}{_suggest(s)} "
+                        "(see 'python -m thinfilm_mi materials'; also accepted: a number like 1.46 or "
+                        "0.42+2.47j, shelf/book/page of refractiveindex.info, mitsuba:NAME, a .csv/.spd/.yml file)")
 
 
 def resolve(spec: Any, *, require_range: tuple[float, float] | None = SPECTRAL_RANGE) -> Material:
@@ -160,30 +159,33 @@ def resolve(spec: Any, *, require_range: tuple[float, float] | None = SPECTRAL_R
     """
     if isinstance(spec, Material):
         return spec
-    if isinstance(spec, bool):
-        raise MaterialError(f"material: expected a number or a name, got {spec!r}")
-    if isinstance(spec, (int, float, complex, np.number)):
-        return ConstantMaterial(complex(spec))
-    if isinstance(spec, str):
-        text = spec.strip().replace(" ", "")
-        if re.fullmatch(r"[0-9eE.+\-ij()]+", text) and re.search(r"[0-9]", text):
-            try:
-                value = complex(text.replace("i", "j"))
-            except ValueError:
-                value = None
-            if value is not None:  # validated outside the try: MaterialError is a ValueError
-                return ConstantMaterial(value)
-    elif not isinstance(spec, os.PathLike):
-        raise MaterialError(f"material: expected a number, a name or a file, got {spec!r}")
-    key = _cache_key(spec)
+    value = _constant(spec)     # validated outside its parse: MaterialError is a ValueError
+    return _named(spec, require_range) if value is None else ConstantMaterial(value)
+
+
+def _named(spec: Any, require_range: tuple[float, float] | None) -> Material:
+    """The material a name or file ``spec`` names (:func:`_source`), loaded once and
+    cached, its data checked to cover ``require_range`` (see :func:`resolve`)."""
+    key, load = _source(spec)
     with _cache_lock:
         mat = _cache.get(key) if key is not None else None
     if mat is None:
-        mat = load_file(Path(os.fspath(spec))) if isinstance(spec, os.PathLike) else _resolve_string(spec)
+        mat = load()
         if key is not None:
             with _cache_lock:
                 mat = _cache.setdefault(key, mat)
-    return _check_range(mat, spec if isinstance(spec, str) else os.fspath(spec), require_range)
+    if require_range is None or mat.constant is not None:
+        return mat
+    lo, hi = require_range
+    a, b = mat.wavelength_range
+    if lo < a * (1 - RANGE_RTOL) or hi > b * (1 + RANGE_RTOL):
+        raise MaterialError(
+            f"material {spec if isinstance(spec, str) else os.fspath(spec)!r}: its data cover "
+            f"{a:g}-{b:g} nm, not the required {lo:g}-{hi:g} nm "
+            "(Mitsuba's spectral range); choose a dataset that does, e.g. from "
+            "'python -m thinfilm_mi materials', or pass require_range=None for numpy-only use"
+        )
+    return mat
 
 
 def refractive_index(material: Any, wavelength_nm) -> np.ndarray:

@@ -67,7 +67,11 @@ class LoopFilms:
         #: index (where none absorbs) and the ambient's largest index.
         self.film_n_min = float(eta.min()) if self.real else None
         self.film_n_max = float(eta.max())
+        # the media's indices on the grid, read once: the ambient's, and the exit's
+        # where it is real (None where it absorbs, or there is none)
         self.n0_max = float(np.max(texture_on_grid(n0.eta)))
+        exit_eta = (texture_on_grid(exit_.eta) if exit_ is not None
+                    and not np.any(texture_on_grid(exit_.k)) else None)
         #: The ambient's index does not depend on the wavelength: with constant
         #: films, ``q`` and the Fresnel amplitudes are then one per lane.
         self.n0_constant = n0.knots is not None and n0.knots.size == 0
@@ -75,18 +79,14 @@ class LoopFilms:
         self.real_steps = real_loop_applies(self.n0_max, self.film_n_min)
         #: ``R`` of one such film over ``exit_`` in closed form (:meth:`_one_film_reflectance`):
         #: the exit medium is real, its index nowhere below the ambient's (real ``q``)
-        self.airy = (self.real_steps and len(films) == 1 and exit_ is not None
-                     and not np.any(texture_on_grid(exit_.k))
-                     and float(np.min(texture_on_grid(exit_.eta))) >= self.n0_max)
+        self.airy = (self.real_steps and len(films) == 1 and exit_eta is not None
+                     and float(np.min(exit_eta)) >= self.n0_max)
         #: Trace-time bounds of each film's index (and the exit's, where real) for the
         #: unrolled recursion (optics.stack_rt): a real root, no q = 0 guard where they allow
         self.bounds = [film_bounds(float(e.min()), float(e.max()), float(kj.min()),
                                    float(kj.max()), self.n0_max) for e, kj in zip(eta, k)]
-        self.exit_bounds = UNBOUNDED
-        if exit_ is not None and not np.any(texture_on_grid(exit_.k)):
-            ex = texture_on_grid(exit_.eta)
-            self.exit_bounds = film_bounds(float(ex.min()), float(ex.max()), 0.0, 0.0,
-                                           self.n0_max)
+        self.exit_bounds = UNBOUNDED if exit_eta is None else film_bounds(
+            float(exit_eta.min()), float(exit_eta.max()), 0.0, 0.0, self.n0_max)
         #: Every film's index is one constant (no knots: a single grid cell): one
         #: real per film, gathered once per lane for all the wavelengths.
         self.constant = self.real and self.cells == 1

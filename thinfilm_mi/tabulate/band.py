@@ -112,7 +112,7 @@ import numpy as np
 from thinfilm_mi.colour import cie
 from thinfilm_mi.optics.core import COMPONENTS, Cx
 from thinfilm_mi.tabulate import exact
-from thinfilm_mi.tabulate.axes import BAND, GHOST, AngleAxis, axis_for, band_cos
+from thinfilm_mi.tabulate.axes import GHOST, AngleAxis, axis_for, band_cos
 from thinfilm_mi.tabulate.base import (
     GRAZING_COS,
     MAX_U,
@@ -125,7 +125,6 @@ from thinfilm_mi.tabulate.base import (
     bspline_coefficients,
     bspline_midpoints,
     bspline_weights,
-    build_work,
     evaluate_side,
     film_gather,
     opaque_float,
@@ -134,14 +133,20 @@ from thinfilm_mi.tabulate.base import (
 )
 from thinfilm_mi.tabulate.bilinear import SPLINE_SHARE, resample
 from thinfilm_mi.tabulate.policy import MAX_TEXELS
-from thinfilm_mi.tabulate.refine import Budget, convergence_factor, optical_thickness, power_of_two_step
+from thinfilm_mi.tabulate.refine import (
+    Budget,
+    build_work,
+    convergence_factor,
+    optical_thickness,
+    power_of_two_step,
+)
 
 __all__ = ["COLOUR_TOLERANCE", "EXPECTED_TOTAL", "FIRST_NU", "FIRST_ORDER", "GRADING",
            "ILLUMINANTS", "INTERPOLATION_NODES", "KNOT_SHARE", "MAX_ROUNDS", "MAX_STEP",
            "MIN_FACTOR", "MIN_PANEL", "MIN_PANEL_GRAZING", "REFERENCE_WAVELENGTH",
            "RESOLVE_DISTANCE", "SAMPLE_ROWS", "SHEAR_WAVELENGTH", "TAIL", "TOLERANCE", "V_SPACING",
            "Amplitudes", "Rows", "Shear", "amplitudes", "build_band_table", "build_table",
-           "first_bin_step", "fringe_step", "near_zeros", "powers_of", "samples_amplitudes",
+           "first_bin_step", "near_zeros", "powers_of", "samples_amplitudes",
            "sigma_nu"]
 
 
@@ -474,21 +479,17 @@ _GL3_X = (-0.5 * math.sqrt(0.6), 0.0, 0.5 * math.sqrt(0.6))
 _GL3_W = (5.0 / 18.0, 8.0 / 18.0, 5.0 / 18.0)
 
 
-def fringe_step(side: SideData, w: float) -> float:
-    """A 32nd of an interference fringe of the stack's whole optical thickness
-    (period ``1 / (2 Σ n_j d_j)`` in wavenumber), in bins of width ``w`` (nm⁻¹)."""
+def first_bin_step(side: SideData, w: float) -> tuple[float, float]:
+    """``(step, fringe)``: the first level's sample step and a 32nd of an interference
+    fringe of the stack's whole optical thickness (period ``1 / (2 Σ n_j d_j)`` in
+    wavenumber), both in bins of width ``w`` (nm⁻¹); the step is the fringe's 32nd as a
+    power of two from 1/2 to :data:`MAX_STEP`. (Accepted panels stand for their
+    quadratics, so the step bounds ``R_σ``'s error where no resonance refines it:
+    measured on the 10-film stack against a brute-force convolution, 5e-5 at 16
+    samples per fringe, 4e-6 at 32.)"""
     ot = optical_thickness(side.films, np.linspace(360.0, 830.0, 48))
-    return 1.0 / max(2.0 * ot, 1e-9) / w / 32.0
-
-
-def first_bin_step(side: SideData, w: float, fringe: float | None = None) -> float:
-    """The first level's sample step (bins of width ``w``): 32 samples per
-    interference fringe (:func:`fringe_step`, or ``fringe`` if given), as a power of
-    two from 1/2 to :data:`MAX_STEP`. (Accepted panels stand for their quadratics,
-    so the step bounds ``R_σ``'s error where no resonance refines it: measured on
-    the 10-film stack against a brute-force convolution, 5e-5 at 16 samples per
-    fringe, 4e-6 at 32.)"""
-    return power_of_two_step(fringe_step(side, w) if fringe is None else fringe, 0.5, MAX_STEP)
+    fringe = 1.0 / max(2.0 * ot, 1e-9) / w / 32.0
+    return power_of_two_step(fringe, 0.5, MAX_STEP), fringe
 
 
 class _Resonances:
@@ -548,8 +549,13 @@ class Rows:
 
     def __init__(self, side: SideData, axis: AngleAxis, resolution: float,
                  spacing: float = V_SPACING, extent: tuple | None = None):
-        self.side, self.axis = side, axis
+        self.side, self.axis, self.resolution, self.spacing = side, axis, resolution, spacing
         self.sigma = sigma_nu(resolution)
+        #: what is tabulated: the side's quantity (the powers, or the Mueller
+        #: components, :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`)
+        self.quantity = q = side.quantity
+        self.channels = q.channels(side.transmission)
+        sampled = samples_amplitudes(side)
         # the wavenumbers the bins cover (a sheared table's rows reach beyond
         # 360-830 nm, :meth:`sample`), SIGMA_MIN .. SIGMA_MAX by default
         low, self.top = extent if extent is not None else (SIGMA_MIN, SIGMA_MAX)
@@ -558,12 +564,11 @@ class Rows:
         self.w = w = span / (2.0 * (self.nv - 1))
         self.sig = math.sqrt(self.sigma ** 2 - w * w / 3.0)
         self.reach = int(math.ceil(TAIL * self.sig / w))
-        fringe = fringe_step(side, w)
-        self.step = first_bin_step(side, w, fringe)
+        self.step, fringe = first_bin_step(side, w)
         #: whether the adaptive panels take their values from the first level's
         #: amplitudes (:class:`Amplitudes`) instead of the films: where the first
         #: level samples them, at least 32 times per fringe
-        self.interpolate = samples_amplitudes(side) and self.step <= fringe
+        self.interpolate = sampled and self.step <= fringe
         # margins: ghosts, the Gaussian's reach, and whole pairs of first panels
         # (nb - 1 a multiple of 4 steps; it is even, and so is every quantum)
         quantum = int(round(4 * self.step))
@@ -572,10 +577,13 @@ class Rows:
         self.b0 = b0
         self.nb = nb = 2 * (self.nv - 1) + 2 * b0 + 1
         self.wavenumbers = self.top - (np.arange(nb) - b0) * w          # decreasing ν
-        #: what is tabulated: the side's quantity (the powers, or the Mueller
-        #: components, :data:`~thinfilm_mi.tabulate.quantities.QUANTITIES`)
-        self.quantity = q = side.quantity
-        self.channels = q.channels(side.transmission)
+        #: the first level's wavenumbers (every row is sampled there, every
+        #: :attr:`step` bins)
+        self.first_nu = self.wavenumbers[0] - w * (self.step * np.arange(int(round((nb - 1) / self.step)) + 1))
+        # the side's indices where every row is evaluated: at the first level's
+        # wavenumbers and at the bins (the colour check, the nodes' angles)
+        self._first_indices = side_indices(side, 1.0 / self.first_nu)
+        self._bin_indices = side_indices(side, 1.0 / self.wavenumbers)
         self.points = 0
         self._bins_of: dict = {}     # the rows computed: their bins I_b
         self._smooth: dict = {}      # R_σ at the bins of the rows values() was asked for
@@ -610,8 +618,8 @@ class Rows:
         return self.axis.row_cos(xs[r], np.asarray(idx[0], np.float64)[inv],
                                  np.asarray(idx[2]).real[inv])
 
-    def _first(self, xs: np.ndarray, nu_pts: np.ndarray):
-        """The first level: exact ``R`` [, ``T``] of every row at ``nu_pts`` (shape
+    def _first(self, xs: np.ndarray):
+        """The first level: exact ``R`` [, ``T``] of every row at :attr:`first_nu` (shape
         ``(rows, P, C)``), ``cos`` there, the resonances panels must resolve
         (:class:`_Resonances`), and the amplitudes' interpolation the panels read
         (an ``Amplitudes``, or ``None``: the panels evaluate the films).
@@ -624,13 +632,13 @@ class Rows:
         zero (:class:`_Resonances`: at the zero itself, its distance from the
         axis, the resonance's half width), and the adaptive rule then resolves
         its shape."""
+        nu_pts = self.first_nu
         R, P, C = xs.size, nu_pts.size, self.channels
         rows_of = np.repeat(np.arange(R), P)
         if not samples_amplitudes(self.side):
             f, cos = self._exact(xs, rows_of, np.tile(nu_pts, R))
             return f.reshape(R, P, C), cos.reshape(R, P), _Resonances.none(), None
-        wl = 1.0 / nu_pts
-        idx = side_indices(self.side, wl)
+        wl, idx = 1.0 / nu_pts, self._first_indices
         cos = self._cos(xs, rows_of, idx, np.tile(np.arange(P), R)).reshape(R, P)
         q, tr = self.quantity, self.side.transmission
         terms, exps = q.smooth_terms(
@@ -650,6 +658,12 @@ class Rows:
         return f, cos, _Resonances(r, self.step * pos,
                                    np.maximum(self.step * d, MIN_PANEL), self.nb), smooth
 
+    def bin_cos(self, xs: np.ndarray, bins: np.ndarray) -> np.ndarray:
+        """cos θ_i of rows ``xs`` at the bins ``bins``: shape ``(len bins, len xs)``."""
+        cos = self._cos(xs, np.tile(np.arange(xs.size), len(bins)), self._bin_indices,
+                        np.repeat(bins, xs.size))
+        return cos.reshape(len(bins), xs.size)
+
     # -- adaptive Simpson into bins ---------------------------------------------
     def _bins(self, xs: np.ndarray) -> np.ndarray:
         """``I_b`` of the rows ``xs``: shape ``(rows, nb, C)``.
@@ -661,10 +675,9 @@ class Rows:
         the quadratic through its three
         samples, integrated exactly against the bins' B-splines (3-point
         Gauss-Legendre on each bin interval it covers: degree 2 + 3)."""
-        R, nb, w, S = xs.size, self.nb, self.w, self.step
-        P = int(round((nb - 1) / S)) + 1
-        at_pts = S * np.arange(P)
-        f, cos, res, smooth = self._first(xs, self.wavenumbers[0] - w * at_pts)
+        R, w, S = xs.size, self.w, self.step
+        P = self.first_nu.size
+        f, cos, res, smooth = self._first(xs)
         f0, f1, f2, f3, f4 = (f[:, k:P - 4 + k:4] if k < 4 else f[:, 4::4] for k in range(5))
         H = 2.0 * S
         coarse = (2 * H / 6) * (f0 + 4 * f2 + f4)
@@ -842,10 +855,8 @@ class Rows:
         under D65, A and F11 (an array of 3; ``∫ R W dλ = ∫ R W(1/ν) dν / ν²``;
         ``R_σ``'s colour weights the bins by the Gaussian-smoothed weights)."""
         wl_b = 1.0 / self.wavenumbers
-        idx = side_indices(self.side, wl_b)
         nb = wl_b.size
-        cos = self._cos(xs, np.repeat(np.arange(xs.size), nb), idx,
-                        np.tile(np.arange(nb), xs.size)).reshape(xs.size, nb)
+        cos = self.bin_cos(xs, np.arange(nb)).T
         keep = cos.min(axis=1) >= GRAZING_COS
         if not keep.any():
             return np.zeros(3)
@@ -965,24 +976,35 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
                   "colour_error": None, "errors": []})
     if axis is None:
         return None
-    side.set_absorbing(wavelengths)
     axis = axis.band_limited     # a plain axis: more nodes at mid angles
-    split = axis.split
     # a quantity whose channels vary faster along v (tabulate.mueller) starts finer
     spacing = side.quantity.v_spacing
     shear = _fringe_shear(side, axis)
     rows = _rows(side, axis, resolution, spacing, shear)
-    nu = 2 * FIRST_NU if split else FIRST_NU
+    nu = 2 * FIRST_NU if axis.split else FIRST_NU
+    side.set_absorbing(wavelengths)     # every evaluation of the build traces one kernel
     budget = Budget.scaled(budget_scale, texels=max_texels, point_work=build_work(side, 1))
     first = EXPECTED_TOTAL * sum(len(x) for x in axis.rows(nu)) * ((rows.nb - 1) / rows.step + 1)
     stats["expected_work"] = build_work(side, first)
     if not budget.allows(first):
         stats["result"] = "over budget (expected)"
         return None
-    last, per_row = None, 0.0
+    return _rounds(rows, shear, spacing, nu, budget, error, stats)
+
+
+def _rounds(rows: Rows, shear: Shear | None, spacing: float, nu: int, budget: Budget,
+            error: float, stats: BuildReport) -> Table | None:
+    """The rounds of :func:`build_band_table` from ``nu`` angle nodes: each samples the
+    rows (:func:`_samples`, :func:`_sheared_samples`), fits the spline through them and
+    measures its errors (:func:`_fit`), and refines the axes until the target
+    ``error`` is met, the colour check fails or the budget is spent."""
+    axis, last, per_row = rows.axis, None, 0.0
     for _ in range(MAX_ROUNDS + 1):
+        if shear is None and spacing != rows.spacing:    # a finer v axis: every row again
+            rows = Rows(rows.side, axis, rows.resolution, spacing)
         nv = rows.nv if shear is None else _sheared_nv(shear, rows.sigma, spacing)
-        coords = np.concatenate(axis.rows(nu))
+        xn, xm = axis.rows(nu)
+        coords = np.concatenate((xn, xm))
         if not per_row:
             # the cost per row measured on SAMPLE_ROWS of the first round's rows (then
             # part of it) before the rest is spent: the expectation is a bound from the
@@ -992,28 +1014,40 @@ def build_band_table(side: SideData, error: float, wavelengths: np.ndarray,
         # the round's new rows at the cost per row so far
         todo = rows.missing(coords)
         if nu > MAX_U or nv > MAX_V or not budget.allows(rows.points + todo * per_row, nu * nv):
-            stats["result"] = "over budget"
-            stats["points"] = budget.spent + rows.points
+            stats.update(result="over budget", points=budget.spent + rows.points)
             return None
-        table, err_u, err_v = (_round(rows, axis, nu) if shear is None
-                               else _round_sheared(rows, shear, nu, nv))
+        samples = (_samples(rows, xn, xm) if shear is None
+                   else _sheared_samples(rows, shear, xn, xm, nv))
+        coeffs, err_u, err_v = _fit(*samples)
         per_row = max(per_row, rows.points / rows.computed)
-        _account_round(stats, budget, rows, (nu, nv, err_u, err_v))
+        stats.update(rounds=stats["rounds"] + 1, points=budget.spent + rows.points,
+                     colour_error=rows.colour_error,
+                     colour_errors=dict(zip(ILLUMINANTS, rows.colour_errors.tolist())))
+        stats["errors"].append((nu, nv, err_u, err_v))
         if rows.colour_error > COLOUR_TOLERANCE:
             stats["result"] = "colour check failed"
             return None
         if err_u + err_v <= error:
             stats["result"] = "table"
-            return Table(table, axis, err_u + err_v, table.shape[-1], resolution, shear=shear)
+            return Table(coeffs, axis, err_u + err_v, coeffs.shape[-1], rows.resolution, shear=shear)
         if not budget.allows(rows.points):
             break
-        if err_v > 0.5 * error:      # a finer v axis (unsheared: every row again)
+        if err_u > 0.5 * error or err_u + min(err_v, 0.5 * error) > error:
+            # more angle nodes, by the factor the error's convergence order predicts
+            # (``last``: the previous round's ``(nu, err_u)``), so that ``err_u``
+            # reaches what ``err_v`` leaves of the target
+            factor = convergence_factor(nu, err_u, 0.8 * error - min(err_v, 0.4 * error), last,
+                                        FIRST_ORDER, margin=1.1, cap=6.0, highest=4.0)
+            if not axis.split and factor <= 2.0:
+                # halving the spacing reuses every row computed (the nodes and the
+                # midpoints): 2 (nu - 1) new rows, never more than a smaller factor
+                # would compute afresh
+                factor = 2.0
+            nu, last = axis.segments * (int(math.ceil((nu // axis.segments - 1) * factor)) + 1), (nu, err_u)
+        if err_v > 0.5 * error:      # a finer v axis (unsheared: new rows next round)
             spacing *= 0.75 * (0.5 * error / err_v) ** 0.25
             if shear is None:
                 budget.spend(rows.points)
-                rows = Rows(side, axis, resolution, spacing)
-        if err_u > 0.5 * error or err_u + min(err_v, 0.5 * error) > error:
-            nu, last = _refined_nu(nu, err_u, err_v, error, last, split)
     stats["result"] = "over budget"
     return None
 
@@ -1028,33 +1062,6 @@ def _fringe_shear(side: SideData, axis) -> Shear | None:
                     complex(np.asarray(side.n0(np.array([SHEAR_WAVELENGTH])))[0]))
 
 
-def _account_round(stats: BuildReport, budget: Budget, rows, errors: tuple) -> None:
-    """Write one round of :func:`build_band_table` into its report: the evaluations so
-    far, the colour check's errors and ``errors = (nu, nv, err_u, err_v)``."""
-    stats["rounds"] += 1
-    stats["points"] = budget.spent + rows.points
-    stats["colour_error"] = rows.colour_error
-    stats["colour_errors"] = dict(zip(ILLUMINANTS, rows.colour_errors.tolist()))
-    stats["errors"].append(errors)
-
-
-def _refined_nu(nu: int, err_u: float, err_v: float, error: float, last, split: bool):
-    """``(nu, last)``: :func:`build_band_table`'s next number of angle nodes, by the factor
-    the error's convergence order predicts (``last``: the previous ``(nu, err_u)``), so
-    that ``err_u`` reaches what ``err_v`` leaves of the target."""
-    goal = 0.8 * error - min(err_v, 0.4 * error)
-    factor = convergence_factor(nu, err_u, goal, last, FIRST_ORDER, margin=1.1, cap=6.0,
-                                highest=4.0)
-    if not split and factor <= 2.0:
-        # halving the spacing reuses every row computed (the nodes and the
-        # midpoints): 2 (nu - 1) new rows, never more than a smaller factor
-        # would compute afresh
-        factor = 2.0
-    if split:
-        return 2 * (int(math.ceil((nu // 2 - 1) * factor)) + 1), (nu, err_u)
-    return int(math.ceil((nu - 1) * factor)) + 1, (nu, err_u)
-
-
 def _sheared_nv(shear: Shear, sigma: float, spacing: float) -> int:
     """v nodes of a sheared axis: ``spacing`` times the Gaussian's width in ``ν'``
     where it is narrowest (``σ P_min``)."""
@@ -1066,21 +1073,20 @@ def _rows(side: SideData, axis: AngleAxis, resolution: float, spacing: float,
           shear: Shear | None) -> Rows:
     """The rows of a build: on a sheared axis, bins over every wavenumber a node
     ``ν'_t / P`` of any row (ghosts included) can ask for."""
-    if shear is None:
-        return Rows(side, axis, resolution, spacing)
-    dv = (SIGMA_MAX - shear.low) / (_sheared_nv(shear, sigma_nu(resolution), spacing) - 1)
-    margin = (GHOST + 1) * dv
-    return Rows(side, axis, resolution, spacing,
-                extent=((shear.low - margin) / shear.max_factor, (SIGMA_MAX + margin) / shear.min_factor))
+    extent = None
+    if shear is not None:
+        dv = (SIGMA_MAX - shear.low) / (_sheared_nv(shear, sigma_nu(resolution), spacing) - 1)
+        margin = (GHOST + 1) * dv
+        extent = ((shear.low - margin) / shear.max_factor, (SIGMA_MAX + margin) / shear.min_factor)
+    return Rows(side, axis, resolution, spacing, extent=extent)
 
 
-def _round_sheared(rows: Rows, shear: Shear, nu: int, nv: int):
-    """:func:`_round` on a sheared v axis (:class:`Shear`): the
+def _sheared_samples(rows: Rows, shear: Shear, xn: np.ndarray, xm: np.ndarray, nv: int):
+    """:func:`_samples` on a sheared v axis (:class:`Shear`) of ``nv`` nodes: the
     rows sampled at their nodes' ``ν'_t / P(s)``; a midpoint counts where its
     wavelength is within a node of 360-830 nm (the lookups' range) and outside
     the grazing sliver."""
     g = GHOST
-    xn, xm = BAND.rows(nu)
     pn = shear.factor_np(1.0 - band_cos(xn) ** 2)
     pm = shear.factor_np(1.0 - band_cos(xm) ** 2)
     t = np.arange(-g, nv + g, dtype=np.float64)
@@ -1090,65 +1096,59 @@ def _round_sheared(rows: Rows, shear: Shear, nu: int, nv: int):
     nodes = np.swapaxes(rows.sample(xn, nodes_v[None, :] / pn[:, None]), 0, 1)
     mid_u = np.swapaxes(rows.sample(xm, nodes_v[None, g:-g] / pm[:, None]), 0, 1)
     mid_v = np.swapaxes(rows.sample(xn[g:-g], mids_v[None, :] / pn[g:-g, None]), 0, 1)
-    cu = bspline_coefficients(nodes, axis=1)
-    approx_u = bspline_midpoints(cu[g:-g], 1, g, nu)
-    coeffs = bspline_coefficients(cu, axis=0)
 
     def counted(v, p, x):      # (len v, len p): in the lookups' range, not grazing
         return ((v[:, None] >= p[None, :] * SIGMA_MIN - dv) & (v[:, None] <= p[None, :] * SIGMA_MAX + dv)
                 & (band_cos(x) >= GRAZING_COS)[None, :])
-    dev = np.abs(mid_u - approx_u).max(axis=-1)
-    err_u = float(np.max(np.where(counted(nodes_v[g:-g], pm, xm), dev, 0.0)))
-    cols = np.arange(nu) + g
-    cv = (coeffs[:, cols - 1] + 4.0 * coeffs[:, cols] + coeffs[:, cols + 1]) / 6.0
-    dev = np.abs(mid_v - bspline_midpoints(cv, 0, g, nv)).max(axis=-1)
-    err_v = float(np.max(np.where(counted(mids_v, pn[g:-g], xn[g:-g]), dev, 0.0)))
-    return coeffs, err_u, err_v
+    return (nodes, mid_u, mid_v, counted(nodes_v[g:-g], pm, xm),
+            counted(mids_v, pn[g:-g], xn[g:-g]), None)
 
 
-def _round(rows: Rows, axis: AngleAxis, nu: int):
-    """The spline coefficients of a table with ``nu`` angle nodes and ``rows.nv``
-    wavelength nodes, and its errors ``(coefficients, err_u, err_v)``."""
-    g, split, nv, b0 = GHOST, axis.split, rows.nv, rows.b0
-    xn, xm = axis.rows(nu)
+def _samples(rows: Rows, xn: np.ndarray, xm: np.ndarray):
+    """What :func:`_fit` checks a table of the node rows ``xn`` (midpoint rows ``xm``)
+    and ``rows.nv`` wavelength nodes by: ``(nodes, mid_u, mid_v, keep_u, keep_v,
+    ends)``, the values at the nodes ``(nv + 2g, rows, C)``, between them along the
+    angle ``(nv, mids, C)`` and along the wavelength ``(nv - 1, nu, C)``, where a
+    midpoint counts (outside the grazing sliver), and a split axis's ghost ends."""
+    g, axis, nv, b0 = GHOST, rows.axis, rows.nv, rows.b0
+    real = np.arange(xn.size - (0 if axis.split else 2 * g)) + (0 if axis.split else g)
     vn, vm = rows.values(xn), rows.values(xm)
     tv = b0 + 2 * np.arange(-g, nv + g)                      # the v nodes' bins
+    cos_m, cos_n = rows.bin_cos(xm, tv[g:-g]), rows.bin_cos(xn[real], tv[g:-g])
     nodes = np.swapaxes(vn[:, tv], 0, 1)                      # (nv + 2g, rows, C)
     mid_u = np.swapaxes(vm[:, tv[g:-g]], 0, 1)                # (nv, mids, C)
     mid_v = np.swapaxes(vn[:, tv[g:-g - 1] + 1], 0, 1)        # (nv - 1, rows, C)
-    if split:
-        m = nu // 2
-        segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *ends), 0, 1)
-                for part, ends in zip((nodes[:, :m], nodes[:, m:]), axis.ends)]
+    return (nodes, mid_u, mid_v[:, real], cos_m >= GRAZING_COS,
+            (cos_n[:-1] >= GRAZING_COS) & (cos_n[1:] >= GRAZING_COS), axis.ends if axis.split else None)
+
+
+def _fit(nodes: np.ndarray, mid_u: np.ndarray, mid_v: np.ndarray, keep_u: np.ndarray,
+         keep_v: np.ndarray, ends) -> tuple:
+    """The spline coefficients of a table through the node values ``nodes`` and its
+    errors ``(coefficients, err_u, err_v)``: the largest difference between the spline
+    and the midpoint values along the angle (``mid_u``) and the wavelength (``mid_v``)
+    where ``keep_u``, ``keep_v`` count them (:func:`_samples`). ``ends``: a split axis's
+    ghost ends (:attr:`~thinfilm_mi.tabulate.axes.AngleAxis.ends`; its segments are
+    fitted apart), or ``None``: the node rows hold the ghosts."""
+    g, nv = GHOST, mid_u.shape[0]
+    if ends is not None:
+        m = nodes.shape[1] // 2
+        segs = [np.moveaxis(with_ghosts(np.moveaxis(part, 1, 0), *e), 0, 1)
+                for part, e in zip((nodes[:, :m], nodes[:, m:]), ends)]
         cu = [bspline_coefficients(s, axis=1) for s in segs]
         approx_u = np.concatenate([bspline_midpoints(c[g:-g], 1, g, m) for c in cu], axis=1)
         cu = np.concatenate(cu, axis=1)
-        real = np.arange(nu)
+        real = np.arange(2 * m)
         cols = real + g + np.where(real >= m, 2 * g, 0)
     else:
+        nu = nodes.shape[1] - 2 * g
         cu = bspline_coefficients(nodes, axis=1)
         approx_u = bspline_midpoints(cu[g:-g], 1, g, nu)
-        real = np.arange(nu) + g
         cols = np.arange(nu) + g
     coeffs = bspline_coefficients(cu, axis=0)
-    cos_m = _node_cos(rows, xm, tv[g:-g])
-    dev = np.abs(mid_u - approx_u).max(axis=-1)
-    dev = np.where(cos_m >= GRAZING_COS, dev, 0.0)
-    err_u = float(np.max(dev))
+    err_u = float(np.max(np.where(keep_u, np.abs(mid_u - approx_u).max(axis=-1), 0.0)))
     # the spline along v through node column j: the u spline's (1, 4, 1) / 6 of
     # the coefficients
     cv = (coeffs[:, cols - 1] + 4.0 * coeffs[:, cols] + coeffs[:, cols + 1]) / 6.0
-    dev = np.abs(mid_v[:, real] - bspline_midpoints(cv, 0, g, nv)).max(axis=-1)
-    cos_n = _node_cos(rows, xn[real], tv[g:-g])
-    keep = (cos_n[:-1] >= GRAZING_COS) & (cos_n[1:] >= GRAZING_COS)
-    err_v = float(np.max(np.where(keep, dev, 0.0)))
-    return coeffs, err_u, err_v
-
-
-def _node_cos(rows: Rows, xs: np.ndarray, bins: np.ndarray) -> np.ndarray:
-    """cos θ_i of rows ``xs`` at the bins ``bins``: shape ``(len bins, len xs)``."""
-    wl = 1.0 / rows.wavenumbers[bins]
-    idx = side_indices(rows.side, wl)
-    cos = rows._cos(xs, np.tile(np.arange(xs.size), len(bins)), idx,
-                    np.repeat(np.arange(len(bins)), xs.size))
-    return cos.reshape(len(bins), xs.size)
+    dev = np.abs(mid_v - bspline_midpoints(cv, 0, g, nv)).max(axis=-1)
+    return coeffs, err_u, float(np.max(np.where(keep_v, dev, 0.0)))

@@ -40,8 +40,8 @@ from thinfilm_mi.tabulate.axes import GHOST, AngleAxis, GhostEnd
 __all__ = ["BILINEAR", "BUILD_LOOP_MIN_FILMS", "BuildReport", "CUBIC", "Bilinear", "CubicSpline",
            "GRAZING_COS", "INTERPOLATIONS",
            "MAX_ROUNDS", "MAX_U", "MAX_V", "MIN_U", "MIN_V",
-           "POINT_WORK", "REFINE_SHARE", "SIGMA_MAX", "SIGMA_MIN", "SideData", "Table",
-           "TableCache", "bspline_at", "bspline_coefficients", "bspline_weights", "bspline_midpoints", "build_work",
+           "REFINE_SHARE", "SIGMA_MAX", "SIGMA_MIN", "SideData", "Table",
+           "TableCache", "bspline_at", "bspline_coefficients", "bspline_weights", "bspline_midpoints",
            "evaluate_side", "film_gather", "grid_coordinate", "linear_texture", "opaque_float",
            "side_indices", "v_nodes_wl", "v_texel", "with_ghosts"]
 
@@ -58,18 +58,6 @@ MAX_U, MAX_V = 4096, 8192
 #: contribution to an image is a sliver at silhouettes. Tables interpolate
 #: there too; benchmarks/speed_vs_error.py reports the error including it.
 GRAZING_COS = 0.02
-#: An exact evaluation's cost grows with the films (the recursion visits each):
-#: :func:`build_work` weighs a point by its films plus this share of its own
-#: (indices, angle, Fresnel terms, numpy bookkeeping).
-POINT_WORK = 4
-
-
-def build_work(side: "SideData", points: float) -> float:
-    """The cost of ``points`` exact evaluations of ``side`` in film units
-    (:data:`POINT_WORK` per point on top of one per film)."""
-    return float(points) * (len(side.films) + POINT_WORK)
-
-
 #: Builds evaluate stacks of this many films or more as a loop over the films: its
 #: float64 kernel is compiled once for every depth, where an unrolled one compiles anew
 #: (for most of a second) for each.

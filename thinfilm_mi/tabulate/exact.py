@@ -81,7 +81,6 @@ from thinfilm_mi.tabulate.base import (
     bspline_at,
     bspline_coefficients,
     bspline_midpoints,
-    build_work,
     evaluate_side,
     side_indices,
     v_nodes_wl,
@@ -89,7 +88,7 @@ from thinfilm_mi.tabulate.base import (
     with_ghosts,
 )
 from thinfilm_mi.tabulate.policy import MAX_BUILD_WORK, MAX_TEXELS
-from thinfilm_mi.tabulate.refine import Budget, convergence_factor
+from thinfilm_mi.tabulate.refine import Budget, build_work, convergence_factor
 
 __all__ = ["MAX_PROBE_WORK", "PROBE_HOT_LINES", "PROBE_POINTS", "PROBE_SHARE", "PROBE_U",
            "PROBE_U_FINE", "PROBE_V", "PROBE_V_FINE", "build_exact_table", "ghost_count", "line_levels",
@@ -190,7 +189,7 @@ _REF = 1001
 #: margin for lines probed again finer.
 PROBE_POINTS = 60_000
 #: The probe runs only where :data:`PROBE_POINTS` cost at most this
-#: (:func:`~thinfilm_mi.tabulate.base.build_work`): a deeper stack is not probed, as no
+#: (:func:`~thinfilm_mi.tabulate.refine.build_work`): a deeper stack is not probed, as no
 #: exact table resolves its fringes; its band-limited build decides alone.
 MAX_PROBE_WORK = MAX_BUILD_WORK // 10
 

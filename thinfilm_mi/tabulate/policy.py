@@ -50,7 +50,7 @@ MAX_TEXELS = 1 << 22
 #: Exact evaluations one build may spend (probe, nodes and checks of every round), so that
 #: a stack with sharp resonances is evaluated exactly instead of waiting on its table.
 MAX_BUILD_POINTS = 3_000_000
-#: Work (:func:`~thinfilm_mi.tabulate.base.build_work`, film units) one build may spend,
+#: Work (:func:`~thinfilm_mi.tabulate.refine.build_work`, film units) one build may spend,
 #: decided before the work where it can be predicted, so that a deep stack is evaluated
 #: exactly at once instead of spending seconds on a table the budget then rejects.
 MAX_BUILD_WORK = 100_000_000

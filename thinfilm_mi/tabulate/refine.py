@@ -3,7 +3,8 @@ starts, and how it decides where to add nodes.
 
 * :class:`Budget`: the exact evaluations and texels a build may spend, decided
   before the work; every builder asks it before a round and records what the
-  round cost (the account goes into the build's :class:`~thinfilm_mi.tabulate.base.BuildReport`).
+  round cost (the account goes into the build's :class:`~thinfilm_mi.tabulate.base.BuildReport`);
+  :func:`build_work` weighs evaluations by the stack's depth.
 * :func:`optical_thickness` and :func:`power_of_two_step`: the first sample step
   from the stack's whole optical thickness ``Σ n_j d_j`` (its narrowest fringe),
   used along the wavelength by the colour integrals and along the wavenumber by
@@ -32,8 +33,21 @@ import numpy as np
 from thinfilm_mi.tabulate.axes import PLAIN, AngleAxis
 from thinfilm_mi.tabulate.policy import MAX_BUILD_POINTS, MAX_BUILD_WORK, MAX_TEXELS
 
-__all__ = ["Budget", "LinearAxis", "convergence_factor", "interleave", "linear_error", "midpoints4",
-           "optical_thickness", "power_of_two_step", "subdivide"]
+__all__ = ["Budget", "LinearAxis", "POINT_WORK", "build_work", "convergence_factor", "interleave",
+           "linear_error", "midpoints4", "optical_thickness", "power_of_two_step", "subdivide"]
+
+
+#: An exact evaluation's cost grows with the films (the recursion visits each):
+#: :func:`build_work` weighs a point by its films plus this share of its own
+#: (indices, angle, Fresnel terms, numpy bookkeeping).
+POINT_WORK = 4
+
+
+def build_work(side, points: float) -> float:
+    """The cost of ``points`` exact evaluations of ``side`` (a
+    :class:`~thinfilm_mi.tabulate.base.SideData`) in film units (:data:`POINT_WORK` per
+    point on top of one per film)."""
+    return float(points) * (len(side.films) + POINT_WORK)
 
 
 @dataclass
@@ -41,7 +55,7 @@ class Budget:
     """What one build may spend: ``points`` exact evaluations in all (probe, nodes
     and checks of every round) and tables of at most ``texels`` texels (or, for
     the linear tables, floats). ``spent`` counts the evaluations so far. With a
-    ``point_work`` (a point's cost in film units, :func:`base.build_work`), the
+    ``point_work`` (a point's cost in film units, :func:`build_work`), the
     evaluations' work must also stay within ``work``."""
     points: int = MAX_BUILD_POINTS
     texels: int = MAX_TEXELS
