@@ -2,7 +2,7 @@
 ``conductor``, the exact evaluation's cost per film, and the share of a gradient
 descent spent in table builds.
 
-    python benchmarks/deep_bench.py [--rounds 3] [--only loads|steady|descent|edits]
+    python benchmarks/deep_bench.py [--rounds 3] [--only loads|steady|descent|edits|ratios]
 
 Stacks: the Al stacks of render_bench.py (2.3/1.46 films, 50-200 nm from
 ``default_rng(6)``), default settings (``tabulate="auto"``, ``spectral_resolution``
@@ -26,7 +26,14 @@ Stacks: the Al stacks of render_bench.py (2.3/1.46 films, 50-200 nm from
    default settings and with ``tabulate`` false; a plain render (median of
    --rounds + 2) against a thickness edit through ``mi.traverse(scene)`` (a new
    value each time, so no table comes from a cache) + ``params.update()`` + the
-   render (median of as many).
+   render (median of as many; the first edit, which may compile the kernel of another
+   route, also alone).
+5. Ratios to ``conductor`` at 10 and 30 films (128x128, 8 spp, default settings): the
+   first image (``timing.first_images``: a fresh process, an empty kernel cache and no
+   table store, ``mi.load_dict`` + the first render; the run with the median total of
+   --rounds) in llvm_ad_spectral, and the steady render (``timing.pair_rounds``, --rounds
+   rounds) in llvm_ad_spectral and llvm_ad_spectral_polarized, each variant in a process
+   of its own.
 
 The table store on disk is off (builds are what is timed) unless the environment
 names one.
@@ -167,13 +174,15 @@ def edits(rounds: int) -> None:
     n = rounds + 2
     print("\n### A thickness edit + render against a plain render (128x128, 8 spp, "
           f"medians of {n})\n")
-    print("| films | mode | plain render (s) | edit + render (s) | ratio | the edit's build |")
-    print("|---:|---|---:|---:|---:|---|")
+    print("| films | mode | plain render (s) | edit + render (s) | ratio | first edit + render (s) "
+          "| mode after edits | the edit's build |")
+    print("|---:|---|---:|---:|---:|---:|---|---|")
     for L in (1, 10, 30):
         for exact in (False, True):
             s = rb.scene_dict("conductor", 128, 8)
             s["sphere"]["bsdf"] = dict(bsdf(L), **({"tabulate": False} if exact else {}))
             scene = mi.load_dict(s)
+            mode = scene.shapes()[0].bsdf().stack.mode()
             rb.render_sync(scene, seed=0)
             plain = []
             for i in range(n):
@@ -193,21 +202,87 @@ def edits(rounds: int) -> None:
             stack = scene.shapes()[0].bsdf().stack
             report = stack.plan[False].build_report or {}
             a, b = statistics.median(plain), statistics.median(edit)
-            print(f"| {L} | {stack.mode()} | {a:.3f} | {b:.3f} | {b / a:.2f} | "
-                  f"{report.get('result', '-')} |", flush=True)
+            print(f"| {L} | {mode} | {a:.3f} | {b:.3f} | {b / a:.2f} | {edit[0]:.3f} | "
+                  f"{stack.mode()} | {report.get('result', '-')} |", flush=True)
             del scene, params, stack   # alive, it would be traced into the next scenes' renders
             gc.collect()
+
+
+RATIO_FILMS = (10, 30)
+RATIO_VARIANTS = ("llvm_ad_spectral", "llvm_ad_spectral_polarized")
+
+
+def ratio_scene(config: str) -> dict:
+    """The 128x128, 8 spp sphere scene of ``"conductor"`` or of ``"L"`` films."""
+    import render_bench as rb
+    return rb.scene_dict("conductor", 128, 8, bsdf=None if config == "conductor"
+                         else bsdf(int(config)))
+
+
+def first_image_child(config: str) -> None:
+    """Runs in the subprocess: ``mi.load_dict`` + the first render, timed."""
+    import mitsuba as mi
+    mi.set_variant("llvm_ad_spectral")
+    from timing import mode_of, render_sync
+
+    import thinfilm_mi  # noqa: F401
+    t0 = time.perf_counter()
+    scene = mi.load_dict(ratio_scene(config))
+    t1 = time.perf_counter()
+    render_sync(scene, seed=0)
+    print(json.dumps({"load": t1 - t0, "render": time.perf_counter() - t1,
+                      "mode": mode_of(scene)}))
+
+
+def steady_child(variant: str, rounds: int) -> None:
+    """Runs in the subprocess: ``conductor`` against each depth, steady."""
+    import mitsuba as mi
+    mi.set_variant(variant)
+    from timing import own_table_store, pair_rounds
+
+    import thinfilm_mi  # noqa: F401
+    own_table_store()
+    native = mi.load_dict(ratio_scene("conductor"))
+    loaders = [lambda L=L: mi.load_dict(ratio_scene(str(L))) for L in RATIO_FILMS]
+    print(json.dumps(pair_rounds([native] * len(RATIO_FILMS), loaders, rounds)))
+
+
+def ratios(rounds: int) -> None:
+    from timing import child, first_images
+    configs = ["conductor"] + [str(L) for L in RATIO_FILMS]
+    runs = first_images(__file__, configs, rounds)
+    base = runs["conductor"]["load"] + runs["conductor"]["render"]
+    print("\n### Against `conductor`, 128x128, 8 spp, default settings\n")
+    print("| films | measure | variant | mode | ours (s) | conductor (s) | ratio |")
+    print("|---:|---|---|---|---:|---:|---:|")
+    for L in RATIO_FILMS:
+        r = runs[str(L)]
+        print(f"| {L} | first image (load {r['load']:.2f} + render {r['render']:.2f} s; "
+              f"median of {rounds} fresh processes) | llvm_ad_spectral | {r['mode']} | "
+              f"{r['load'] + r['render']:.2f} | {base:.2f} | {(r['load'] + r['render']) / base:.2f} |",
+              flush=True)
+    for v in RATIO_VARIANTS:
+        rows = child(__file__, "--steady-child", v, "--rounds", str(rounds))
+        for L, row in zip(RATIO_FILMS, rows):
+            print(f"| {L} | steady (CPU time, median of {rounds} pairs) | {v} | {row['mode']} | "
+                  f"{row['ours']:.3f} | {row['native']:.3f} | {row['ratio']:.2f} |", flush=True)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--rounds", type=int, default=3)
-    ap.add_argument("--only", choices=("loads", "steady", "descent", "edits"))
+    ap.add_argument("--only", choices=("loads", "steady", "descent", "edits", "ratios"))
     ap.add_argument("--child", type=int, help=argparse.SUPPRESS)
+    ap.add_argument("--first-image-child", help=argparse.SUPPRESS)
+    ap.add_argument("--steady-child", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.child:
         print(json.dumps(load_child(a.child)))
         return
+    if a.first_image_child:
+        return first_image_child(a.first_image_child)
+    if a.steady_child:
+        return steady_child(a.steady_child, a.rounds)
     if a.only in (None, "loads"):
         loads(a.rounds)
     if a.only in (None, "steady"):
@@ -216,6 +291,8 @@ def main() -> None:
         descent()
     if a.only in (None, "edits"):
         edits(a.rounds)
+    if a.only in (None, "ratios"):
+        ratios(a.rounds)
 
 
 if __name__ == "__main__":

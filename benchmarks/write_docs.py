@@ -34,7 +34,7 @@ BENCHMARKS = {
     "plugin_bench": ["--repeats", "3", "--demo-repeats", "3", "--first-repeats", "3"],
     "rgb_bench": ["--build-repeats", "3"],
     "band_bench": ["--repeats", "3", "--first-repeats", "1", "--de-spp", "256"],
-    "deep_bench": ["--rounds", "1"],
+    "deep_bench": ["--rounds", "3"],
     "stability": ["--worst"],
     "diffuse_models": ["--spp", "32"],
     "diffuse_texture_bench": [],

@@ -11,6 +11,9 @@ under the build budget, and the tables and buffers returned with the sides.
   from the cache, the same seed gives the same image, bit for bit (1 spp, box filter).
 * A build returns new sides (the plan it was given keeps none of its tables), and a
   mirrored plan whose ambient side has no table is planned side by side.
+* An edit builds no table for a side of ``policy.EDIT_EXACT_MIN_FILMS`` films or more:
+  it is evaluated exactly (within ``table_error`` of float64), from the cached kernel, and
+  reads the load's table again once edited back.
 """
 from __future__ import annotations
 
@@ -19,9 +22,12 @@ import mitsuba as mi
 import numpy as np
 import pytest
 
-import thinfilm_mi  # noqa: F401  (registers the plugins)
-from tests.support.stacks import benchmark_layers, sphere_scene
-from thinfilm_mi.render import stack_build
+import thinfilm_mi as tf
+from tests.support.kernels import assert_edits_render_from_cache, interaction
+from tests.support.stacks import benchmark_layers, benchmark_thicknesses, sphere_scene
+from tests.support.tables import random_points, ref_R
+from thinfilm_mi.errors import ThinFilmError
+from thinfilm_mi.render import media, stack_build
 from thinfilm_mi.tabulate import policy
 
 
@@ -79,6 +85,44 @@ def test_gradients_build_no_table_and_the_image_does_not_depend_on_the_build():
     again = mi.load_dict(_scene(10))
     assert again.shapes()[0].bsdf().stack.plan[False].build_report["result"] == "table"
     assert np.array_equal(_render(again), first)
+
+
+def test_an_edited_deep_side_is_evaluated_exactly_and_an_edit_back_reads_its_table():
+    """Edits through ``mi.traverse(scene)`` of a stack of ``EDIT_EXACT_MIN_FILMS`` films
+    on Al (``auto``: a table at load): the edited side reads its films from buffers, not
+    given up on, within ``table_error`` of the float64 recursion of the edited stack
+    (a stale table, 7 nm off, is not); a further edit renders from the cached kernel;
+    the loaded value again reads the load's table from the cache; a bad value is refused
+    naming the key and the value."""
+    stack_build.TABLE_CACHE.clear()
+    films = policy.EDIT_EXACT_MIN_FILMS
+    scene = mi.load_dict(sphere_scene(_bsdf(films)))
+    stack = scene.shapes()[0].bsdf().stack
+    assert stack.mode() == "table"
+    params = mi.traverse(scene)
+    key = "ball.bsdf.layers.0.thickness"
+    loaded = float(params[key][0])
+    params[key] = loaded + 7.0
+    params.update()
+    side = stack.plan[False]
+    assert stack.mode() == "exact" and side.loop is not None and stack.table_failed == []
+    assert side.build_report["result"] == stack_build.NOT_REBUILT
+    d = benchmark_thicknesses(films)
+    d[0] += 7.0
+    ref = tf.Stack(benchmark_layers(films).replace(repr(float(d[0] - 7.0)), repr(float(d[0]))),
+                   substrate="Al", ambient=media.DEFAULT_EXT_IOR)
+    cos, wls = random_points(4000)
+    R = np.array(stack.reflectance(interaction(wls), mi.Float(cos.astype(np.float32))))
+    err = max(np.max(np.abs(R[i] - ref_R(ref, cos, wls[i]))) for i in range(4))
+    assert err <= stack.table_error, err
+    assert_edits_render_from_cache(scene, params, {key: loaded + 19.0})
+    params[key] = loaded
+    params.update()
+    assert stack.mode() == "table" and stack.plan[False].build_report["result"] == "from the cache"
+    params[key] = -1.0
+    with pytest.raises(ThinFilmError, match=r"'layers\.0\.thickness' .* got -1\b"):
+        params.update()
+    stack_build.TABLE_CACHE.clear()
 
 
 def test_a_table_asked_for_may_take_longer_than_auto_waits():

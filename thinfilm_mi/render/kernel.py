@@ -43,7 +43,8 @@ class KernelStack:
     planned from what it is (:func:`~thinfilm_mi.render.stack_plan.plan_sides`: what a
     scene does not need is skipped, the sides that pay for one read a table) and the
     plan built (:func:`~thinfilm_mi.render.stack_build.build_plan`), again after every
-    edit (:meth:`parameters_changed`); identical stacks share one table."""
+    edit (:meth:`parameters_changed`; ``auto`` then builds no table for a deep side);
+    identical stacks share one table."""
 
     def __init__(self, films: Sequence[tuple[SpectralIndex, float]], ambient: SpectralIndex,
                  substrate: SpectralIndex, thickness_texture=None, *,
@@ -88,10 +89,11 @@ class KernelStack:
 
     def parameters_changed(self, keys=None) -> None:
         """Refresh after an edit (``keys``, the changed keys, are not needed:
-        the plan and its tables are rebuilt from the current values)."""
+        the plan is made again from the current values, as an edited stack's:
+        :func:`~thinfilm_mi.render.stack_plan.cached_only`)."""
         self.films.parameters_changed()
         facts = stack_facts(self.films)
-        plan = plan_sides(facts, self.options, self.planned.gave_up)
+        plan = plan_sides(facts, self.options, self.planned.gave_up, edited=True)
         self.planned = build_plan(plan)
 
     def thickness_scale_at(self, si, active=True):

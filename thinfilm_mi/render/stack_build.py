@@ -30,8 +30,8 @@ from thinfilm_mi.tabulate.policy import MAX_TEXELS
 from thinfilm_mi.tabulate.quantities import POWERS
 from thinfilm_mi.tabulate.store import default_store
 
-__all__ = ["STORE_MIN_POINTS", "TABLE_CACHE", "build_plan", "build_tables", "side_data",
-           "side_table"]
+__all__ = ["NOT_REBUILT", "STORE_MIN_POINTS", "TABLE_CACHE", "build_plan", "build_tables",
+           "side_data", "side_table"]
 
 #: Tables shared between stacks with identical optics (bounded: 64 MiB of texture data).
 TABLE_CACHE = TableCache()
@@ -39,6 +39,9 @@ TABLE_CACHE = TableCache()
 #: 10 films and more, every band-limited build) are kept in the table store
 #: (:mod:`thinfilm_mi.tabulate.store`) for later processes; cheaper ones are rebuilt.
 STORE_MIN_POINTS = 50_000
+#: The report's ``result`` for a side an edit left without a table
+#: (:func:`~thinfilm_mi.render.stack_plan.cached_only`): evaluated exactly.
+NOT_REBUILT = "not rebuilt after an edit (exact)"
 
 
 def build_plan(plan: StackPlan) -> StackPlan:
@@ -80,7 +83,7 @@ def build_tables(plan: StackPlan) -> StackPlan:
         if side.tabulate:
             table, report = side_table(plan.facts, options, side, plan.quantity)
             sides[inside] = replace(side, table=table, build_report=report)
-            if table is None:
+            if table is None and not side.cached_only:
                 failed.append(inside)
     option = options.tabulate
     if option.required and failed:
@@ -109,7 +112,8 @@ def side_table(facts: StackFacts, options: StackOptions, side: SidePlan, quantit
     disk (:func:`~thinfilm_mi.tabulate.store.default_store`, the report then says
     ``"from the table store"`` with the original build's report under ``build``);
     a build of :data:`STORE_MIN_POINTS` evaluations or more is kept there for
-    later processes.
+    later processes. A ``cached_only`` side found in neither gets no table (report
+    :data:`NOT_REBUILT`) and is evaluated exactly.
     """
     mi = mitsuba_module()
     arrays = []
@@ -138,6 +142,8 @@ def side_table(facts: StackFacts, options: StackOptions, side: SidePlan, quantit
             TABLE_CACHE.put(key, table)
             return table, BuildReport(result="from the table store", build=report)
 
+    if side.cached_only:
+        return None, BuildReport(result=NOT_REBUILT, points=0)
     report = BuildReport()
     table = band.build_table(data, options.table_error, GRID, max_texels,
                              options.spectral_resolution, report=report,

@@ -10,7 +10,8 @@ thickness are dropped; below an optically opaque film nothing is evaluated and
 lossless films need no ``T`` (``1 - R``), and both sides of a lossless stack may read
 the ambient side's table (mirrored, :func:`mirror_applies`, evaluated by
 :mod:`thinfilm_mi.render.mirror`). Whether tables are built at all
-(:func:`wants_tables`), which sides a table pays for (:func:`few_films`) and which
+(:func:`wants_tables`), which sides a table pays for (:func:`few_films`), which sides an
+edit leaves to the tables already built (:func:`cached_only`) and which
 sides read their films from buffers where no table serves them (:func:`buffered`) are
 decided here too; :mod:`thinfilm_mi.render.stack_build` builds what the plan asks for.
 """
@@ -28,13 +29,13 @@ from thinfilm_mi.render.media import SpectralIndex
 from thinfilm_mi.render.tabulation import Route, tabulate_option
 from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.tabulate.mueller import MUELLER
-from thinfilm_mi.tabulate.policy import MIRROR_AUTO_MIN_FILMS
+from thinfilm_mi.tabulate.policy import EDIT_EXACT_MIN_FILMS, MIRROR_AUTO_MIN_FILMS
 from thinfilm_mi.tabulate.quantities import POWERS
 
 __all__ = ["BUFFERED_MIN_FILMS", "DEFAULT_COHERENCE_THICKNESS", "DEFAULT_SPECTRAL_RESOLUTION",
            "DEFAULT_TABLE_ERROR", "OPAQUE_AMPLITUDE", "SidePlan", "StackOptions", "StackPlan",
-           "buffered", "exact_mirrors", "few_films", "full_plan", "mirror_applies", "plan_sides",
-           "wants_tables"]
+           "buffered", "cached_only", "exact_mirrors", "few_films", "full_plan", "mirror_applies",
+           "plan_sides", "wants_tables"]
 
 #: Default coherence thickness (nm): thicker films are averaged incoherently.
 DEFAULT_COHERENCE_THICKNESS = 5000.0
@@ -86,8 +87,9 @@ class SidePlan:
     or the first optically opaque film, in which case ``opaque`` is true and
     ``T = 0``); ``lossless``: non-absorbing films under a real incidence medium
     (``T = 1 - R``, tables hold ``R``). The plan's answers for the build:
-    ``tabulate``, a table of the side is built; ``buffered``, the side reads its
-    films from buffers where no table serves it (:func:`buffered`). What
+    ``tabulate``, a table of the side is built, or with ``cached_only`` only taken
+    from the caches (:func:`cached_only`); ``buffered``, the side reads its films from
+    buffers where no table serves it (:func:`buffered`). What
     :mod:`~thinfilm_mi.render.stack_build` builds comes with it: ``table`` (a
     :class:`~thinfilm_mi.tabulate.base.Table`) and ``build_report`` (what its build
     did, a :class:`~thinfilm_mi.tabulate.base.BuildReport`), ``loop`` (a
@@ -104,6 +106,7 @@ class SidePlan:
     transmission: bool
     lossless: bool = False
     tabulate: bool = False
+    cached_only: bool = False
     buffered: bool = False
     table: Any = None
     build_report: Any = None
@@ -189,10 +192,12 @@ def exact_mirrors(ambient: SpectralIndex, substrate: SpectralIndex) -> bool:
     return all(ix.knots is not None and ix.knots.size == 0 for ix in (ambient, substrate))
 
 
-def plan_sides(facts: StackFacts, options: StackOptions, gave_up=frozenset()) -> StackPlan:
+def plan_sides(facts: StackFacts, options: StackOptions, gave_up=frozenset(),
+               edited: bool = False) -> StackPlan:
     """The sides of the stack ``facts`` describe that ``options.sides`` asks for, after
     the skips (see the module), with what is built for them decided (nothing built
-    yet); ``gave_up``: the sides whose table ``"auto"`` does not try again."""
+    yet); ``gave_up``: the sides whose table ``"auto"`` does not try again; ``edited``:
+    the stack is planned after an edit (:func:`cached_only`)."""
     stack = facts.stack
     # Zero-thickness films dropped; opacity decided once per film for all sides.
     kept = [(ix, d, dv, op) for ix, d, dv, op in
@@ -225,6 +230,7 @@ def plan_sides(facts: StackFacts, options: StackOptions, gave_up=frozenset()) ->
                  side, tabulate=tables and bool(side.films) and not (selective and (
                      inside in gave_up or few_films(stack, options, side, mirrored and not inside,
                                                     quantity))),
+                 cached_only=edited and cached_only(options, side),
                  buffered=not colour and jit and buffered(side))
              for inside, side in sides.items()}
     return StackPlan(sides, mirrored, facts, options, tables, quantity, gave_up=frozenset(gave_up))
@@ -242,6 +248,14 @@ def few_films(stack: FilmStack, options: StackOptions, side: SidePlan, mirrored:
     if rt and options.rt_min_films is not None:
         return len(side.films) < options.rt_min_films
     return len(side.films) < quantity.auto_min_films(rt)
+
+
+def cached_only(options: StackOptions, side: SidePlan) -> bool:
+    """``tabulate="auto"`` after an edit: whether ``side`` reads a table only where one of
+    its new values is cached, and is otherwise evaluated exactly (from
+    :data:`~thinfilm_mi.tabulate.policy.EDIT_EXACT_MIN_FILMS` films: a rebuild per edit
+    would cost more than the renders between edits)."""
+    return options.tabulate.selective and len(side.films) >= EDIT_EXACT_MIN_FILMS
 
 
 def wants_tables(stack: FilmStack, options: StackOptions, sides: dict, mirrored: bool,

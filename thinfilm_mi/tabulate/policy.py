@@ -2,7 +2,8 @@
 
 A side of a stack is tabulated by ``tabulate="auto"`` from a number of films (``*_MIN_FILMS``)
 and within a size (``AUTO_MAX_*``) at which a lookup renders faster than the exact
-recursion; every build, ``auto`` or ``true``, spends at most a budget of exact evaluations
+recursion, but after an edit not for a side of :data:`EDIT_EXACT_MIN_FILMS` films or more;
+every build, ``auto`` or ``true``, spends at most a budget of exact evaluations
 (``MAX_BUILD_*``, times :data:`REQUESTED_BUDGET_SCALE` for ``true``). The plugins' doc rows
 (:mod:`thinfilm_mi.render.doc_rows`) and the tables guide (``docs/guides/tables.md``) quote
 these values through :func:`fill`, never as literals (``tests/cross/test_docblocks.py``).
@@ -12,10 +13,10 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["AUTO_MAX_TEXELS", "AUTO_MIN_FILMS", "COATING_RT_MIN_FILMS", "LINEAR_MAX_FLOATS", "MAX_BUILD_POINTS",
-           "MAX_BUILD_SECONDS", "MAX_BUILD_WORK", "MAX_TEXELS", "MIRROR_AUTO_MIN_FILMS", "MUELLER_AUTO_MAX_FLOATS",
-           "MUELLER_AUTO_MIN_FILMS", "PLACEHOLDER", "REQUESTED_BUDGET_SCALE", "RT_AUTO_MIN_FILMS", "fill",
-           "prose_values"]
+__all__ = ["AUTO_MAX_TEXELS", "AUTO_MIN_FILMS", "COATING_RT_MIN_FILMS", "EDIT_EXACT_MIN_FILMS",
+           "LINEAR_MAX_FLOATS", "MAX_BUILD_POINTS", "MAX_BUILD_SECONDS", "MAX_BUILD_WORK", "MAX_TEXELS",
+           "MIRROR_AUTO_MIN_FILMS", "MUELLER_AUTO_MAX_FLOATS", "MUELLER_AUTO_MIN_FILMS", "PLACEHOLDER",
+           "REQUESTED_BUDGET_SCALE", "RT_AUTO_MIN_FILMS", "fill", "prose_values"]
 
 #: A table of ``R`` alone (one channel) pays from one film: its lookup costs less than the
 #: exact recursion of a single film.
@@ -33,6 +34,11 @@ COATING_RT_MIN_FILMS = 5
 #: A Mueller lookup (4 channels or more) costs what the exact amplitudes of tens of films do;
 #: from this many the exact path is clearly the dearer.
 MUELLER_AUTO_MIN_FILMS = 40
+#: After an edit (``parameters_changed``) ``auto`` builds no table for a side of this many
+#: films or more, which is then evaluated exactly unless a table of its new values is
+#: cached: from here a rebuild costs more renders than an edit is worth (more with every
+#: film), where a shallower side's costs a few and keeps its table.
+EDIT_EXACT_MIN_FILMS = 4
 #: ``auto`` keeps tables of the powers within this many texels over all channels (2 MiB of
 #: float32): a lookup in a table that fits the cache is cheaper than the recursion, one
 #: beyond it is not.
@@ -85,6 +91,7 @@ def prose_values() -> dict[str, str]:
         "RT_AUTO_MIN_FILMS": str(RT_AUTO_MIN_FILMS),
         "MIRROR_AUTO_MIN_FILMS": str(MIRROR_AUTO_MIN_FILMS),
         "COATING_RT_MIN_FILMS": str(COATING_RT_MIN_FILMS),
+        "EDIT_EXACT_MIN_FILMS": str(EDIT_EXACT_MIN_FILMS),
         "MUELLER_AUTO_MIN_FILMS": str(MUELLER_AUTO_MIN_FILMS),
         "AUTO_MAX_TEXELS": _power_of_two(AUTO_MAX_TEXELS),
         "AUTO_MAX_TEXELS_MIB": _mib(AUTO_MAX_TEXELS),
