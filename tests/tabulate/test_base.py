@@ -81,3 +81,20 @@ def test_table_cache_is_bounded_in_bytes_least_recently_used_first_out(monkeypat
     np.testing.assert_allclose(R.ravel(), ref.rt(np.array([450.0, 520.0, 610.0, 700.0]),
                                                  np.arccos(0.8)).R,
                                atol=1.5 * bsdfs[0].stack.plan[False].table.error + 1e-5)
+
+
+@pytest.mark.parametrize("kind", ["tiled", "random", "one", "repeats"])
+def test_unique_wavelengths_is_numpys_unique(kind):
+    """The builds' sort of their wavelengths returns exactly ``np.unique``'s arrays
+    (so a build's points, and its table, are the same bits)."""
+    from thinfilm_mi.tabulate.base import unique_wavelengths
+
+    rng = np.random.default_rng(3)
+    wl = {"tiled": np.tile(360.0 + 0.5 * np.arange(941), 7)[5:-3],
+          "random": rng.choice(360.0 + 470.0 * rng.random(200), 5000),
+          "one": np.array([550.0]),
+          "repeats": np.array([600.0, 400.0, 600.0, 400.0, 500.0])}[kind]
+    values, inverse = unique_wavelengths(wl)
+    expected_values, expected_inverse = np.unique(wl, return_inverse=True)
+    np.testing.assert_array_equal(values, expected_values)
+    np.testing.assert_array_equal(inverse, expected_inverse.ravel())

@@ -33,7 +33,15 @@ from thinfilm_mi.render.tabulation import table_key
 from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar, texture_range, uniform
 from thinfilm_mi.tabulate import integrated
 from thinfilm_mi.tabulate.axes import TIR
-from thinfilm_mi.tabulate.base import SideData, TableCache, evaluate_side, grid_coordinate, linear_texture, side_indices
+from thinfilm_mi.tabulate.base import (
+    SideData,
+    TableCache,
+    evaluate_side,
+    grid_coordinate,
+    linear_texture,
+    side_indices,
+    unique_wavelengths,
+)
 from thinfilm_mi.tabulate.refine import LinearAxis, optical_thickness
 
 __all__ = ["COLOUR_CACHE", "GradientSampler", "attach_gradient", "channel_mean_texture",
@@ -134,7 +142,7 @@ def colour_table(facts, side, side_data):
             d = data if scale is None or per_point else replace(
                 data, films=[(f, t * scale) for f, t in data.films])
             # the points' wavelengths repeat (one per angle node): indices per unique one
-            uniq, rows = np.unique(wl, return_inverse=True)
+            uniq, rows = unique_wavelengths(wl)
             return evaluate_side(d, cos, rows, uniq, side_indices(d, uniq),
                                      scale if per_point else None)
         # the stack's optical thickness at its thickest (the largest scale)

@@ -43,7 +43,7 @@ __all__ = ["BILINEAR", "BUILD_LOOP_MIN_FILMS", "BuildReport", "CUBIC", "Bilinear
            "REFINE_SHARE", "SIGMA_MAX", "SIGMA_MIN", "SideData", "Table",
            "TableCache", "bspline_at", "bspline_coefficients", "bspline_weights", "bspline_midpoints",
            "evaluate_side", "film_gather", "grid_coordinate", "linear_texture", "opaque_float",
-           "side_indices", "v_nodes_wl", "v_texel", "with_ghosts"]
+           "side_indices", "unique_wavelengths", "v_nodes_wl", "v_texel", "with_ghosts"]
 
 SIGMA_MAX = 1.0 / SPECTRAL_RANGE[0]   # 1/nm at 360 nm
 SIGMA_MIN = 1.0 / SPECTRAL_RANGE[1]   # 1/nm at 830 nm
@@ -390,6 +390,21 @@ class Table:
             for c in range(self.channels):
                 out[c].append(res[c])
         return [mi.UnpolarizedSpectrum(*vals) for vals in out]
+
+
+def unique_wavelengths(wl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(wl, return_inverse=True)``, the same arrays, by a stable sort: a
+    build's wavelengths come as sorted runs (one grid per angle node), which it merges
+    in linear time where ``np.unique``'s quicksort does not see them."""
+    wl = np.asarray(wl).ravel()
+    order = np.argsort(wl, kind="stable")
+    ordered = wl[order]
+    first = np.empty(ordered.size, bool)
+    first[:1] = True
+    np.not_equal(ordered[1:], ordered[:-1], out=first[1:])
+    inverse = np.empty(wl.size, np.intp)
+    inverse[order] = np.cumsum(first) - 1
+    return ordered[first], inverse
 
 
 def side_indices(side: SideData, wl: np.ndarray):

@@ -83,6 +83,7 @@ from thinfilm_mi.tabulate.base import (
     bspline_midpoints,
     evaluate_side,
     side_indices,
+    unique_wavelengths,
     v_nodes_wl,
     v_texel,
     with_ghosts,
@@ -149,7 +150,7 @@ class _Points:
     def evaluate(self):
         """``[(values (len t, len s, C), cos0 (len t, len s))]`` for every set."""
         wl = np.concatenate([v_nodes_wl(t, nv) for t, _, _, nv, _ in self.sets])
-        wl, inverse = np.unique(wl, return_inverse=True)
+        wl, inverse = unique_wavelengths(wl)
         if wl.size == 1:   # Dr.Jit traces a 1-element buffer as a scalar: another kernel
             wl = np.repeat(wl, 2)
         indices = side_indices(self.side, wl)
