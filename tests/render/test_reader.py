@@ -135,7 +135,7 @@ def test_stack_spec_parses_and_builds_nothing():
 
 
 @pytest.mark.parametrize("plugin", ["thinfilm_conductor", "thinfilm_roughconductor", "thinfilm_dielectric",
-                                    "thinfilm_roughdielectric", "thinfilm_coating"])
+                                    "thinfilm_roughdielectric", "thinfilm_coating", "thinfilm_diffuse"])
 def test_a_misspelt_name_is_refused_before_the_stack_is_built(plugin, monkeypatch):
     """Every stack plugin reads all its properties, then builds (tables: seconds)."""
     import importlib
@@ -143,7 +143,8 @@ def test_a_misspelt_name_is_refused_before_the_stack_is_built(plugin, monkeypatc
 
     def build(*args, **kwargs):
         raise AssertionError("built before the properties were checked")
-    monkeypatch.setattr(module, "build_stack", build)
+    # the diffuse plugin's stacks are built with its model's parts (render/layered/series.py)
+    monkeypatch.setattr(module, "series_parts" if plugin == "thinfilm_diffuse" else "build_stack", build)
     scene = {"type": plugin, "layers": "1.46 100", "tabulat": True}
     if plugin == "thinfilm_coating":
         scene["bsdf"] = {"type": "diffuse"}
