@@ -34,7 +34,7 @@ from thinfilm_mi.render.textures import GRID, mitsuba_module, new_object, scalar
 from thinfilm_mi.tabulate import integrated
 from thinfilm_mi.tabulate.axes import TIR
 from thinfilm_mi.tabulate.base import SideData, TableCache, evaluate_side, grid_coordinate, linear_texture, side_indices
-from thinfilm_mi.tabulate.refine import LinearAxis, optical_thickness
+from thinfilm_mi.tabulate.refine import LinearAxis
 
 __all__ = ["COLOUR_CACHE", "GradientSampler", "attach_gradient", "channel_mean_texture",
            "colour_channels", "colour_table", "index_on_wavelengths", "prepare_gradients",
@@ -125,6 +125,10 @@ def colour_table(facts, side, side_data):
     found, table = COLOUR_CACHE.get(key)
     if found:
         return table
+    # the films' optical thickness Σ max_λ Re n_j d_j (nm) from the values read above, at
+    # its thickest (the largest scale)
+    optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) * sum(
+        float(np.max(n.real)) * scalar(d) for n, (_, d, _) in zip(arrays[1:-1], side.films))
 
     def source(data, chans):
         data = with_absorbing(data)
@@ -137,9 +141,6 @@ def colour_table(facts, side, side_data):
             uniq, rows = np.unique(wl, return_inverse=True)
             return evaluate_side(d, cos, rows, uniq, side_indices(d, uniq),
                                      scale if per_point else None)
-        # the stack's optical thickness at its thickest (the largest scale)
-        optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) \
-            * optical_thickness(data.films, GRID, np.real)
         return integrated.Source(evaluate, chans, integrated.first_wavelength_step(optical))
 
     C = integrated.channel_count(channels)
