@@ -108,17 +108,8 @@ def colour_table(facts, side, side_data):
         n_exit = facts.grid[id(side.exit)].real
         if (np.all(n0 == n0[0]) and np.all(n_exit == n_exit[0]) and n_exit[0] < n0[0]):
             axis = LinearAxis(TIR, float(n0[0]), float(n_exit[0]))
-    scale_max = fixed_scale = None
     tex = facts.stack.thickness_texture
-    if tex is not None and not tex.is_spatially_varying():
-        fixed_scale = max(scalar(tex.eval_1(dr.zeros(mitsuba_module().SurfaceInteraction3f))), 0.0)
-    elif tex is not None:
-        rng = texture_range(tex, mono=True)
-        scale_max = max(rng[1], 0.0) if rng is not None else None
-        if scale_max is None:
-            raise ThinFilmError(f"{facts.stack.plugin}: 'thickness': its range cannot be evaluated "
-                                f"at load time, which the {mitsuba_module().variant()!r} variant needs "
-                                "(a table over the thickness scale)")
+    scale_max, fixed_scale = _thickness_scale(facts.stack)
     key = table_key(arrays, side.films, (mitsuba_module().variant(), channels, transmission,
                                          side.exit_real, side.opaque, axis, scale_max, fixed_scale,
                                          integrated.settings()))
@@ -153,6 +144,23 @@ def colour_table(facts, side, side_data):
     table = integrated.build(sources, channels, transmission, axis, scale_max, fixed_scale)
     COLOUR_CACHE.put(key, table)
     return table
+
+
+def _thickness_scale(stack) -> tuple[float | None, float | None]:
+    """``(scale_max, fixed_scale)`` of ``stack``'s thickness texture for its colour tables:
+    the top of its range (>= 0; a table over the scale up to it) where it varies over the
+    surface, else its one value (>= 0); ``(None, None)`` without one."""
+    tex = stack.thickness_texture
+    if tex is None:
+        return None, None
+    if not tex.is_spatially_varying():
+        return None, max(scalar(tex.eval_1(dr.zeros(mitsuba_module().SurfaceInteraction3f))), 0.0)
+    rng = texture_range(tex, mono=True)
+    if rng is None:
+        raise ThinFilmError(f"{stack.plugin}: 'thickness': its range cannot be evaluated "
+                            f"at load time, which the {mitsuba_module().variant()!r} variant needs "
+                            "(a table over the thickness scale)")
+    return max(rng[1], 0.0), None
 
 
 class GradientSampler:
