@@ -117,3 +117,36 @@ def test_unqueried_sees_exactly_what_no_getter_read():
     read.value("colour")
     read.value("thicknes")
     read.check_unqueried()   # all read now
+
+
+def test_stack_spec_parses_and_builds_nothing():
+    from thinfilm_mi.render.kernel import KernelStack, StackSpec, build_stack
+    read = reader(layers="1.46 100", ext_ior=1.33, int_ior="water", tabulate=False)
+    interior, ambient = read.indices(("int_ior", 1.5), ("ext_ior", 1.0))
+    assert (interior.label, ambient.mean_real()) == ("water", pytest.approx(1.33))
+    spec = read.stack_spec(interior)
+    assert isinstance(spec, StackSpec) and not isinstance(spec, KernelStack)
+    assert spec.substrate is interior and spec.ambient.mean_real() == pytest.approx(1.33)
+    assert [d for _, d in spec.films] == [100.0] and spec.options["tabulate"] is False
+    stack = build_stack(spec, plugin="test")
+    assert len(stack) == 1 and stack.substrate is interior and stack.plugin == "test"
+    with pytest.raises(ThinFilmError, match=r"^ext_ior: must be a finite real index > 0, got -1.0$"):
+        reader(ext_ior=-1.0).stack_spec(interior)
+
+
+@pytest.mark.parametrize("plugin", ["thinfilm_conductor", "thinfilm_roughconductor", "thinfilm_dielectric",
+                                    "thinfilm_roughdielectric", "thinfilm_coating", "thinfilm_diffuse"])
+def test_a_misspelt_name_is_refused_before_the_stack_is_built(plugin, monkeypatch):
+    """Every stack plugin reads all its properties, then builds (tables: seconds)."""
+    import importlib
+    module = importlib.import_module(f"thinfilm_mi.plugins.{plugin}")
+
+    def build(*args, **kwargs):
+        raise AssertionError("built before the properties were checked")
+    # the diffuse plugin's stacks are built with its model's parts (render/layered/series.py)
+    monkeypatch.setattr(module, "series_parts" if plugin == "thinfilm_diffuse" else "build_stack", build)
+    scene = {"type": plugin, "layers": "1.46 100", "tabulat": True}
+    if plugin == "thinfilm_coating":
+        scene["bsdf"] = {"type": "diffuse"}
+    with pytest.raises(Exception, match=r"unreferenced property 'tabulat' = True"):
+        mi.load_dict(scene)

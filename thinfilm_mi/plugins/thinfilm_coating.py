@@ -185,11 +185,13 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.render import modes
+from thinfilm_mi.render.kernel import build_stack
 from thinfilm_mi.render.layered.bottom import NestedBottom
 from thinfilm_mi.render.layered.coat import CoatMedium
 from thinfilm_mi.render.layered.engine import layered
 from thinfilm_mi.render.layered.top import RoughTop, SmoothTop
 from thinfilm_mi.render.layered.walk import DEFAULT_MAX_BOUNCES
+from thinfilm_mi.render.media import DEFAULT_EXT_IOR
 from thinfilm_mi.render.microfacet import DISTRIBUTIONS, Microfacet
 from thinfilm_mi.render.params import MAX_ALPHA, ParameterGuard
 from thinfilm_mi.render.reader import PluginProperties, finite_number
@@ -202,12 +204,11 @@ NAME = "thinfilm_coating"
 DEFAULT_COAT_IOR = 1.5
 
 
-def coat_top(read, stack, mode):
-    """The top: ``stack`` on the microfacets of the roughness read (a
-    :class:`~thinfilm_mi.render.layered.top.RoughTop`), or the smooth
-    :class:`~thinfilm_mi.render.layered.top.SmoothTop` where no roughness is given or every
-    one is a number equal to 0. A rough top needs a refraction (different mean indices), as
-    ``thinfilm_roughdielectric``."""
+def coat_roughness(read, interior, ambient):
+    """The top's roughness: a :class:`~thinfilm_mi.render.microfacet.Microfacet` read from
+    ``read``, or ``None`` for a smooth top, where no roughness is given or every one is a
+    number equal to 0. A rough top needs a refraction (the ``interior`` and ``ambient``
+    media's mean indices differ), as ``thinfilm_roughdielectric``."""
     names = [n for n in ("alpha", "alpha_u", "alpha_v") if n in read]
     values = [read.value(n) for n in names]
     numbers = [finite_number(f"'{n}'", v, 0.0, MAX_ALPHA, also=" or a texture")
@@ -216,14 +217,22 @@ def coat_top(read, stack, mode):
     if len(numbers) == len(names) and not any(numbers):
         read.choice("distribution", DISTRIBUTIONS)
         read.boolean("sample_visible", True)
-        return SmoothTop(stack, mode)
+        return None
     microfacet = Microfacet(read)
-    if stack.substrate.mean_real() == stack.ambient.mean_real():
+    if interior.mean_real() == ambient.mean_real():
         raise ThinFilmError(f"a rough top ({', '.join(f'{n}={v!r}' for n, v in zip(names, values))}) "
-                            f"needs 'int_ior' ({stack.substrate.label}) and 'ext_ior' "
-                            f"({stack.ambient.label}) to differ: a rough interface without "
+                            f"needs 'int_ior' ({interior.label}) and 'ext_ior' "
+                            f"({ambient.label}) to differ: a rough interface without "
                             "refraction is undefined")
-    return RoughTop(stack, mode, microfacet)
+    return microfacet
+
+
+def coat_top(stack, mode, microfacet):
+    """The top: ``stack`` on the microfacets ``microfacet`` (a
+    :class:`~thinfilm_mi.render.layered.top.RoughTop`), or the smooth
+    :class:`~thinfilm_mi.render.layered.top.SmoothTop` where it is ``None``
+    (:func:`coat_roughness`)."""
+    return SmoothTop(stack, mode) if microfacet is None else RoughTop(stack, mode, microfacet)
 
 
 class ThinFilmCoating(mi.BSDF):
@@ -237,13 +246,15 @@ class ThinFilmCoating(mi.BSDF):
             mode = modes.current()
             read = PluginProperties(props)
             base = read.nested_bsdf()
-            interior = read.index("int_ior", DEFAULT_COAT_IOR)
-            stack = read.kernel_stack(interior, sides={False: True, True: False}, plugin=NAME)
-            top = coat_top(read, stack, mode)
+            interior, ambient = read.indices(("int_ior", DEFAULT_COAT_IOR), ("ext_ior", DEFAULT_EXT_IOR))
+            spec = read.stack_spec(interior, ambient)
+            microfacet = coat_roughness(read, interior, ambient)
             sigma_a = read.factor("coat_sigma_a")
             thickness = read.number("coat_thickness", 1.0, 0.0)
             bounces = read.integer("max_bounces", DEFAULT_MAX_BOUNCES, 1)
             read.check_unqueried()
+            stack = build_stack(spec, sides={False: True, True: False}, plugin=NAME)
+            top = coat_top(stack, mode, microfacet)
             #: the layered engine (render/layered/): the top over the nested BSDF
             self.layered = layered(top, NestedBottom(base), CoatMedium(sigma_a, thickness, NAME),
                                    mode, NAME, max_bounces=bounces)

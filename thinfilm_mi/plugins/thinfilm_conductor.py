@@ -115,6 +115,7 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import plugin_boundary
 from thinfilm_mi.render import modes
+from thinfilm_mi.render.kernel import build_stack
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.reader import PluginProperties
 from thinfilm_mi.render.variant import check_variant
@@ -131,9 +132,10 @@ class ThinFilmConductor(mi.BSDF):
             self.mode = modes.current()
             read = PluginProperties(props)
             substrate = read.substrate()
-            self.stack = read.kernel_stack(substrate, plugin=NAME)
+            spec = read.stack_spec(substrate)
             self.specular_reflectance = read.factor("specular_reflectance")
             read.check_unqueried()
+            self.stack = build_stack(spec, plugin=NAME)
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
         flags = mi.BSDFFlags.DeltaReflection | mi.BSDFFlags.FrontSide

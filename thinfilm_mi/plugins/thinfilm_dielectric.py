@@ -118,8 +118,9 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import plugin_boundary
 from thinfilm_mi.render import modes
+from thinfilm_mi.render.kernel import build_stack
 from thinfilm_mi.render.lobe_choice import chosen_weight, reflection_probability
-from thinfilm_mi.render.media import DEFAULT_INT_IOR
+from thinfilm_mi.render.media import DEFAULT_EXT_IOR, DEFAULT_INT_IOR
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.reader import PluginProperties
 from thinfilm_mi.render.variant import check_variant
@@ -135,12 +136,13 @@ class ThinFilmDielectric(mi.BSDF):
             check_variant(NAME)
             self.mode = modes.current()
             read = PluginProperties(props)
-            interior = read.index("int_ior", DEFAULT_INT_IOR)
-            self.stack = read.kernel_stack(interior, sides={False: True, True: True}, plugin=NAME)
-            self.eta = interior.mean_real() / self.stack.ambient.mean_real()
+            interior, ambient = read.indices(("int_ior", DEFAULT_INT_IOR), ("ext_ior", DEFAULT_EXT_IOR))
+            spec = read.stack_spec(interior, ambient)
+            self.eta = interior.mean_real() / ambient.mean_real()
             self.specular_reflectance = read.factor("specular_reflectance")
             self.specular_transmittance = read.factor("specular_transmittance")
             read.check_unqueried()
+            self.stack = build_stack(spec, sides={False: True, True: True}, plugin=NAME)
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
         self.m_components = [

@@ -326,19 +326,19 @@ class ThinFilmDiffuse(mi.BSDF):
             check_variant(NAME)
             read = PluginProperties(props)
             model = read.choice("model", DIFFUSE_MODELS)
-            films = read.films()
             ext = read.index("ext_ior", DEFAULT_EXT_IOR)
             if "base_ior" in read and not model.takes_base_ior:
                 names = " or ".join(repr(m) for m, o in DIFFUSE_MODELS.items() if o.takes_base_ior)
                 raise ThinFilmError(f"'base_ior' is a parameter of model {names} only "
                                     f"(model is {model.name!r})")
             base = read.index("base_ior", None) if "base_ior" in read else ext
+            spec = read.stack_spec(base, ext)   # the films over the diffuse base's medium
             reflectance = albedo(read)
-            options = dict(read.stack_options(), plugin=NAME)
             rough = OrenNayar(read, NAME)   # roughness: render/orennayar.py
             read.check_unqueried()
             mode = modes.current()
-            top, film_n, own = series_parts(model, films, ext, base, options, mode)
+            top, film_n, own = series_parts(model, spec.films, spec.ambient, spec.substrate,
+                                            dict(spec.options, plugin=NAME), mode)
             #: the layered engine (render/layered/): the films over the diffuse base
             self.layered = layered(top, DiffuseBottom(reflectance, rough), film_n, mode, NAME,
                                    **own)

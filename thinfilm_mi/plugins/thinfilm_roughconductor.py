@@ -129,6 +129,7 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import plugin_boundary
 from thinfilm_mi.render import modes
+from thinfilm_mi.render.kernel import build_stack
 from thinfilm_mi.render.microfacet import Microfacet, rough_bsdf_base
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.reader import PluginProperties
@@ -147,9 +148,10 @@ class ThinFilmRoughConductor(rough_bsdf_base()):
             read = PluginProperties(props)
             self.microfacet = Microfacet(read)
             substrate = read.substrate()
-            self.stack = read.kernel_stack(substrate, plugin=NAME)
+            spec = read.stack_spec(substrate)
             self.specular_reflectance = read.factor("specular_reflectance")
             read.check_unqueried()
+            self.stack = build_stack(spec, plugin=NAME)
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.FrontSide | self.microfacet.flags

@@ -132,8 +132,9 @@ import mitsuba as mi
 
 from thinfilm_mi.errors import ThinFilmError, plugin_boundary
 from thinfilm_mi.render import modes
+from thinfilm_mi.render.kernel import build_stack
 from thinfilm_mi.render.lobe_choice import chosen_weight, reflection_probability
-from thinfilm_mi.render.media import DEFAULT_INT_IOR
+from thinfilm_mi.render.media import DEFAULT_EXT_IOR, DEFAULT_INT_IOR
 from thinfilm_mi.render.microfacet import Microfacet, rough_bsdf_base
 from thinfilm_mi.render.params import ParameterGuard
 from thinfilm_mi.render.reader import PluginProperties
@@ -156,12 +157,12 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
             self.mode = modes.current()
             read = PluginProperties(props)
             self.microfacet = Microfacet(read)
-            interior = read.index("int_ior", DEFAULT_INT_IOR)
-            self.stack = read.kernel_stack(interior, sides={False: True, True: True}, plugin=NAME)
-            n_int, n_ext = interior.mean_real(), self.stack.ambient.mean_real()
+            interior, ambient = read.indices(("int_ior", DEFAULT_INT_IOR), ("ext_ior", DEFAULT_EXT_IOR))
+            spec = read.stack_spec(interior, ambient)
+            n_int, n_ext = interior.mean_real(), ambient.mean_real()
             if n_int == n_ext:
                 raise ThinFilmError(f"'int_ior' ({interior.label}) and 'ext_ior' "
-                                    f"({self.stack.ambient.label}) must differ (mean index "
+                                    f"({ambient.label}) must differ (mean index "
                                     f"{n_int:g} on both sides: a rough interface without "
                                     "refraction is undefined; use thinfilm_dielectric)")
             #: Relative index for directions (mean real indices, as thinfilm_dielectric).
@@ -169,6 +170,7 @@ class ThinFilmRoughDielectric(rough_bsdf_base()):
             self.specular_reflectance = read.factor("specular_reflectance")
             self.specular_transmittance = read.factor("specular_transmittance")
             read.check_unqueried()
+            self.stack = build_stack(spec, sides={False: True, True: True}, plugin=NAME)
         # registered once complete: from here on every thread's symbolic calls trace it
         mi.BSDF.__init__(self, props)
         sides = mi.BSDFFlags.FrontSide | mi.BSDFFlags.BackSide | self.microfacet.flags

@@ -42,7 +42,7 @@ from thinfilm_mi.tabulate.base import (
     side_indices,
     unique_wavelengths,
 )
-from thinfilm_mi.tabulate.refine import LinearAxis, optical_thickness
+from thinfilm_mi.tabulate.refine import LinearAxis
 
 __all__ = ["COLOUR_CACHE", "GradientSampler", "attach_gradient", "channel_mean_texture",
            "colour_channels", "colour_table", "index_on_wavelengths", "prepare_gradients",
@@ -116,23 +116,18 @@ def colour_table(facts, side, side_data):
         n_exit = facts.grid[id(side.exit)].real
         if (np.all(n0 == n0[0]) and np.all(n_exit == n_exit[0]) and n_exit[0] < n0[0]):
             axis = LinearAxis(TIR, float(n0[0]), float(n_exit[0]))
-    scale_max = fixed_scale = None
     tex = facts.stack.thickness_texture
-    if tex is not None and not tex.is_spatially_varying():
-        fixed_scale = max(scalar(tex.eval_1(dr.zeros(mitsuba_module().SurfaceInteraction3f))), 0.0)
-    elif tex is not None:
-        rng = texture_range(tex, mono=True)
-        scale_max = max(rng[1], 0.0) if rng is not None else None
-        if scale_max is None:
-            raise ThinFilmError(f"{facts.stack.plugin}: 'thickness': its range cannot be evaluated "
-                                f"at load time, which the {mitsuba_module().variant()!r} variant needs "
-                                "(a table over the thickness scale)")
+    scale_max, fixed_scale = _thickness_scale(facts.stack)
     key = table_key(arrays, side.films, (mitsuba_module().variant(), channels, transmission,
                                          side.exit_real, side.opaque, axis, scale_max, fixed_scale,
                                          integrated.settings()))
     found, table = COLOUR_CACHE.get(key)
     if found:
         return table
+    # the films' optical thickness Σ max_λ Re n_j d_j (nm) from the values read above, at
+    # its thickest (the largest scale)
+    optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) * sum(
+        float(np.max(n.real)) * scalar(d) for n, (_, d, _) in zip(arrays[1:-1], side.films))
 
     def source(data, chans):
         data = with_absorbing(data)
@@ -145,9 +140,6 @@ def colour_table(facts, side, side_data):
             uniq, rows = unique_wavelengths(wl)
             return evaluate_side(d, cos, rows, uniq, side_indices(d, uniq),
                                      scale if per_point else None)
-        # the stack's optical thickness at its thickest (the largest scale)
-        optical = max(scale_max or 0.0, fixed_scale or 0.0, 1.0 if tex is None else 0.0) \
-            * optical_thickness(data.films, GRID, np.real)
         return integrated.Source(evaluate, chans, integrated.first_wavelength_step(optical))
 
     C = integrated.channel_count(channels)
@@ -160,6 +152,23 @@ def colour_table(facts, side, side_data):
     table = integrated.build(sources, channels, transmission, axis, scale_max, fixed_scale)
     COLOUR_CACHE.put(key, table)
     return table
+
+
+def _thickness_scale(stack) -> tuple[float | None, float | None]:
+    """``(scale_max, fixed_scale)`` of ``stack``'s thickness texture for its colour tables:
+    the top of its range (>= 0; a table over the scale up to it) where it varies over the
+    surface, else its one value (>= 0); ``(None, None)`` without one."""
+    tex = stack.thickness_texture
+    if tex is None:
+        return None, None
+    if not tex.is_spatially_varying():
+        return None, max(scalar(tex.eval_1(dr.zeros(mitsuba_module().SurfaceInteraction3f))), 0.0)
+    rng = texture_range(tex, mono=True)
+    if rng is None:
+        raise ThinFilmError(f"{stack.plugin}: 'thickness': its range cannot be evaluated "
+                            f"at load time, which the {mitsuba_module().variant()!r} variant needs "
+                            "(a table over the thickness scale)")
+    return max(rng[1], 0.0), None
 
 
 class GradientSampler:

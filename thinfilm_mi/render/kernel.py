@@ -8,6 +8,7 @@ The names of those modules that the layers above read are here too.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Sequence
 
 from thinfilm_mi.errors import ThinFilmError
@@ -25,7 +26,7 @@ from thinfilm_mi.render.stack_plan import (
 )
 from thinfilm_mi.render.tabulation import Route
 
-__all__ = ["KernelStack"]
+__all__ = ["KernelStack", "StackSpec", "build_stack"]
 
 
 class KernelStack:
@@ -163,3 +164,27 @@ class KernelStack:
         return stack_eval.reflectance(self.films, self.planned, si, cos_theta, active,
                                       inside=inside, transmission=transmission,
                                       thickness_scale=thickness_scale)
+
+
+@dataclass(frozen=True, eq=False)
+class StackSpec:
+    """A thin-film BSDF's stack as its properties give it, parsed and checked, nothing
+    built (:meth:`~thinfilm_mi.render.reader.PluginProperties.stack_spec`): ``films``
+    (``(SpectralIndex, thickness_nm)`` from the ambient), ``ambient``, ``substrate`` and
+    ``options`` (:class:`KernelStack`'s keyword options). A plugin reads all its
+    properties, refuses the ones no one read, and only then builds the stack
+    (:func:`build_stack`), whose tables may take seconds."""
+
+    films: list
+    ambient: SpectralIndex
+    substrate: SpectralIndex
+    options: dict
+
+
+def build_stack(spec: StackSpec, *, sides: dict | None = None,
+                plugin: str = "thin-film BSDF") -> KernelStack:
+    """The :class:`KernelStack` of ``spec``: ``sides`` (``{inside: needs_T}``) says what the
+    BSDF evaluates, hence what is tabulated; ``plugin`` names the BSDF in what the stack
+    reports later (a warning, an edit)."""
+    return KernelStack(spec.films, spec.ambient, spec.substrate, sides=sides, plugin=plugin,
+                       **spec.options)

@@ -5,10 +5,11 @@ answers typed, checked values by name, as ``Properties::get<T>`` and a plugin's 
 do for Mitsuba's C++ plugins: numbers in a range (:meth:`~PluginProperties.number`),
 integers, booleans, a choice from a registry, textures whose values are checked at load,
 real indices and materials, the parts of a film stack (:meth:`~PluginProperties.films`,
-:meth:`~PluginProperties.stack_options`, or the stack itself,
-:meth:`~PluginProperties.kernel_stack`), a conductor's substrate and a nested BSDF.
+:meth:`~PluginProperties.stack_options`, or the stack's whole spec,
+:meth:`~PluginProperties.stack_spec`), a conductor's substrate and a nested BSDF.
 :meth:`~PluginProperties.check_unqueried` then refuses what no one read (a misspelt name),
-as Mitsuba does for its own plugins.
+as Mitsuba does for its own plugins. It parses and checks; it builds nothing: a plugin
+builds its stack from the spec after the check.
 
 A bad value raises :class:`~thinfilm_mi.errors.ThinFilmError` naming the property and the
 value. Nothing here knows the plugin: its name is put in front of the message once, at the
@@ -19,12 +20,13 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
+from typing import Any
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX
 from thinfilm_mi.materials.stack import check_thickness, parse_layers
 from thinfilm_mi.optics.choices import choose
-from thinfilm_mi.render.kernel import KernelStack
+from thinfilm_mi.render.kernel import StackSpec
 from thinfilm_mi.render.media import DEFAULT_EXT_IOR, SpectralIndex, real_index
 from thinfilm_mi.render.stack_plan import (
     DEFAULT_COHERENCE_THICKNESS,
@@ -164,6 +166,11 @@ class PluginProperties:
         a material name (:func:`~thinfilm_mi.render.media.real_index`)."""
         return real_index(self.props.get(name, default), name)
 
+    def indices(self, *named: tuple[str, Any]) -> list[SpectralIndex]:
+        """The non-absorbing media of an interface, read together and in order: one
+        :meth:`index` per ``(name, default)`` (e.g. ``int_ior`` and ``ext_ior``)."""
+        return [real_index(self.props.get(name, default), name) for name, default in named]
+
     def substrate(self, default: str = "Au") -> SpectralIndex:
         """A conductor's substrate: ``material`` or ``eta`` + ``k`` (textures checked over
         all of Mitsuba's wavelengths, as Mitsuba's ``conductor`` takes them)."""
@@ -231,19 +238,19 @@ class PluginProperties:
                 if "thickness" in self.props else None)
         return options
 
-    def kernel_stack(self, substrate: SpectralIndex, ambient: SpectralIndex | None = None, *,
-              sides: dict | None = None, plugin: str = "thin-film BSDF") -> KernelStack:
-        """The :class:`~thinfilm_mi.render.kernel.KernelStack` of a thin-film BSDF: its
-        :meth:`films` over ``substrate``, under ``ambient`` (default: ``ext_ior``), with
-        the :meth:`stack_options`. ``sides`` (``{inside: needs_T}``) says what the BSDF
-        evaluates, hence what is tabulated; ``plugin`` names the BSDF in what the stack
-        reports later (a warning, an edit). Every thin-film BSDF builds its stack here, so
-        the stack options are the same for all of them."""
+    def stack_spec(self, substrate: SpectralIndex, ambient: SpectralIndex | None = None) -> StackSpec:
+        """The :class:`~thinfilm_mi.render.kernel.StackSpec` of a thin-film BSDF, parsed,
+        not built: its :meth:`films` over ``substrate``, under ``ambient`` (default:
+        ``ext_ior``), with the :meth:`stack_options`. Every thin-film BSDF reads its stack
+        here, so the stack options are the same for all of them; it builds the stack
+        (:func:`~thinfilm_mi.render.kernel.build_stack`) once
+        :meth:`check_unqueried` has passed, so a misspelt name is refused before the
+        tables are built."""
         options = self.stack_options()
         films = self.films()
         if ambient is None:
             ambient = real_index(self.props.get("ext_ior", DEFAULT_EXT_IOR), "ext_ior")
-        return KernelStack(films, ambient, substrate, sides=sides, plugin=plugin, **options)
+        return StackSpec(films, ambient, substrate, options)
 
     def check_unqueried(self) -> None:
         """Refuse the properties no getter read, named with their values, as Mitsuba
