@@ -61,6 +61,7 @@ from tqdm import tqdm
 
 from thinfilm_mi.batch import exr
 from thinfilm_mi.errors import RenderError, RenderFailure, UsageError
+from thinfilm_mi.render import gc_guard
 
 #: the prefix of the messages a render prints on stderr (the console script's name)
 PROG = "thinfilm-render"
@@ -363,7 +364,7 @@ def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
     # C++ plugins resolving files on other loader threads.
     config = mi.parser.ParserConfig(variant or mi.variant())
     try:
-        with _files_beside(path):
+        with _files_beside(path), gc_guard.loading():   # not beside another thread's render
             state = mi.parser.parse_file(config, str(path), **dict(params or {}))
             _apply_overrides(state, size, spp, log)
             mi.parser.transform_all(config, state)

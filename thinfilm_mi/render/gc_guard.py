@@ -44,6 +44,19 @@ frees nothing) while that set is not empty, whichever thread starts the pass.
   and runs one full :func:`gc.collect`, so the dropped scenes are freed once no
   thread traces them.
 
+The second defect (also upstream): a symbolic call traces every instance registered in
+its domain, and Mitsuba registers an instance in its base class's constructor, before the
+instance is built (a ``blendbsdf`` whose nested BSDFs are not yet set, a Python plugin
+whose ``__init__`` has not finished) or while it is being destroyed. A scene loaded on
+one thread while another renders can so crash the render, with no Python plugin and no
+collection involved (``tests/support/load_race_child.py``). So loads and renders take
+turns (:func:`loading`, :func:`rendering`): any number of loads at once, or any number of
+renders, never a load beside a render. A render waits for the loads in progress and lets
+a waiting load go first; a load waits only for the renders in progress (a load that a
+plugin's constructor starts inside another load must not wait for a render that waits
+for the outer load). Importing the package wraps Mitsuba's ``load_dict``, ``load_file``
+and ``load_string`` in :func:`loading`, as ``mi.render`` in :func:`rendering`.
+
 Limits: a render started another way (the integrator's own ``render``, or a
 ``render`` bound before this package was imported) is covered from the first
 traced call of a method of ours, not before it; a thread that has a profile
@@ -54,8 +67,9 @@ which none traces defer collection until there is one; objects the user froze wi
 :func:`gc.freeze` are unfrozen by the owed collection. A scene freed by reference
 counting (``del scene``) on one thread while another thread renders is outside a
 garbage collector's reach: only the upstream fix covers it. Scalar variants make no
-symbolic calls and never defer. What it costs is measured in
-``benchmarks/gc_guard_bench.py``.
+symbolic calls and never defer. A load made through ``mitsuba.parser`` directly, or
+through a ``load_*`` bound before this package was imported, does not take its turn. What
+the guard costs is measured in ``benchmarks/gc_guard_bench.py``.
 """
 from __future__ import annotations
 
@@ -66,7 +80,11 @@ import os
 import sys
 import threading
 
-__all__ = ["install", "installed", "deferred_collections", "rendering", "watch_traces", "TRACED_METHODS"]
+__all__ = ["install", "installed", "deferred_collections", "loading", "rendering", "watch_traces",
+           "TRACED_METHODS", "LOADS"]
+
+#: Mitsuba's functions that load a scene or an object (each takes its turn: :func:`loading`)
+LOADS = ("load_dict", "load_file", "load_string")
 
 #: the methods Mitsuba calls on a Python BSDF or texture inside a symbolic call
 TRACED_METHODS = ("sample", "eval", "pdf", "eval_pdf", "eval_pdf_sample", "eval_diffuse_reflectance",
@@ -168,6 +186,51 @@ class _Guard:
         self.pass_lock, self.pass_held, self.passing = threading.Lock(), False, None
 
 
+class _Turns:
+    """Loads and renders take turns (see the module docstring): ``kind`` is what holds
+    the turn now (``"load"``, ``"render"`` or ``None``), ``count`` how many threads
+    hold it; a thread that holds a turn enters again at once, whatever it asks for."""
+
+    def __init__(self) -> None:
+        self.cond = threading.Condition(threading.Lock())
+        self.kind: str | None = None
+        self.count = 0
+        self.loads_waiting = 0
+        #: the threads that hold a turn, with their nesting depth
+        self.depth: dict[int, int] = {}
+
+    def _may_enter(self, kind: str) -> bool:
+        if kind == "load":
+            return self.kind in (None, "load")
+        return self.kind in (None, "render") and not self.loads_waiting
+
+    @contextlib.contextmanager
+    def turn(self, kind: str):
+        me = threading.get_ident()
+        with self.cond:
+            if me in self.depth:
+                self.depth[me] += 1
+            else:
+                self.loads_waiting += kind == "load"
+                try:
+                    self.cond.wait_for(lambda: self._may_enter(kind))
+                finally:
+                    self.loads_waiting -= kind == "load"
+                self.kind, self.count, self.depth[me] = kind, self.count + 1, 1
+        try:
+            yield
+        finally:
+            with self.cond:
+                self.depth[me] -= 1
+                if not self.depth[me]:
+                    del self.depth[me]
+                    self.count -= 1
+                    if not self.count:
+                        self.kind = None
+                    self.cond.notify_all()
+
+
+_turns = _Turns()
 _guard: _Guard | None = None
 
 
@@ -181,8 +244,40 @@ def install() -> None:
         if _guard is None:
             _guard = _Guard(drjit)
             gc.callbacks.append(_guard)
-            os.register_at_fork(after_in_child=_guard.forget_threads)
+            os.register_at_fork(after_in_child=_after_fork)
         _cover_mitsuba_render()
+        _cover_mitsuba_loads()
+
+
+def _after_fork() -> None:
+    """In a forked child only the forking thread lives on: no other thread holds a turn
+    or traces."""
+    global _turns
+    _turns = _Turns()
+    if _guard is not None:
+        _guard.forget_threads()
+
+
+def _cover_mitsuba_loads() -> None:
+    """Replace Mitsuba's :data:`LOADS` (under every name Mitsuba's modules give them) by
+    wrappers that load inside :func:`loading`."""
+    import mitsuba
+
+    for name in LOADS:
+        load = getattr(mitsuba, name, None)
+        if load is None or getattr(load, "__wrapped_by_gc_guard__", False):
+            continue
+
+        def covered_load(*args, _load=load, **kwargs):
+            with loading():
+                return _load(*args, **kwargs)
+
+        covered = functools.wraps(load)(covered_load)
+        covered.__wrapped_by_gc_guard__ = True
+        for module_name, module in list(sys.modules.items()):
+            if ((module_name == "mitsuba" or module_name.startswith("mitsuba."))
+                    and getattr(module, name, None) is load):
+                setattr(module, name, covered)
 
 
 def _cover_mitsuba_render() -> None:
@@ -220,20 +315,32 @@ def deferred_collections() -> tuple[int, int]:
 @contextlib.contextmanager
 def rendering():
     """No collection frees anything while the block runs on this thread (a render:
-    its symbolic calls trace every live BSDF, dropped scenes' included). A pass that
-    another thread began before is waited for: it may still be freeing."""
+    its symbolic calls trace every live BSDF, dropped scenes' included), and no load runs
+    on another thread (the block waits for the loads in progress). A pass that another
+    thread began before is waited for: it may still be freeing."""
     install()
-    guard, me = _guard, threading.get_ident()
-    guard.scoped[me] = guard.scoped.get(me, 0) + 1
-    if guard.passing not in (None, me) and guard.pass_lock.acquire(timeout=PASS_WAIT):
-        guard.pass_lock.release()
-    try:
+    with _turns.turn("render"):
+        guard, me = _guard, threading.get_ident()
+        guard.scoped[me] = guard.scoped.get(me, 0) + 1
+        if guard.passing not in (None, me) and guard.pass_lock.acquire(timeout=PASS_WAIT):
+            guard.pass_lock.release()
+        try:
+            yield
+        finally:
+            depth = guard.scoped.pop(me, 1) - 1
+            if depth:
+                guard.scoped[me] = depth
+            guard.collect_if_owed()
+
+
+@contextlib.contextmanager
+def loading():
+    """The block loads a scene or an object: it waits for the renders in progress on
+    other threads, and no render starts on another thread while it runs (see the module
+    docstring: a render traces what a load registers before it is built)."""
+    install()
+    with _turns.turn("load"):
         yield
-    finally:
-        depth = guard.scoped.pop(me, 1) - 1
-        if depth:
-            guard.scoped[me] = depth
-        guard.collect_if_owed()
 
 
 def _traced(method):
