@@ -9,7 +9,7 @@ collection, no reference count reaching zero), up to 1500; another renders a sce
 of its own in a loop, each render tracing a symbolic call over every registered BSDF.
 Mitsuba registers an instance in its base class's constructor, before it is built, so
 a trace may call into a half-built wrapper. Measured with Mitsuba 3.9.1: SIGSEGV in
-1 of 5 runs of 60 s on 2 cores. With ``guard`` the process imports ``thinfilm_mi``
+1 of 6 runs of 60 s on 2 cores. With ``guard`` the process imports ``thinfilm_mi``
 first, which makes loads and renders take turns. On success it prints ``ok LOADS
 RENDERS``.
 """
