@@ -83,6 +83,7 @@ import drjit as dr
 
 from thinfilm_mi.render.layered.bottom import base_context, base_interaction, intensity
 from thinfilm_mi.render.layered.coated import CoatedEstimator
+from thinfilm_mi.render.layered.escape import critical_cosine, fold, unfold
 from thinfilm_mi.render.layered.forms import closed_form
 from thinfilm_mi.render.layered.walk import RandomWalk, eval_seed, logical_not, sample_seed
 from thinfilm_mi.render.textures import mitsuba_module
@@ -107,32 +108,6 @@ PROBE = ((0.25, (0.3, 0.25)), (0.75, (0.8, 0.75)))
 #: The least albedo the probe reports, so that ``P_R < 1`` where the base may reflect
 #: light the probe's two samples missed.
 ALBEDO_FLOOR = 0.05
-
-
-def critical_cosine(eta):
-    """``μ_c = cos θ_c``, beyond which light under a top of relative index ``eta``
-    (``η_c/η_e``) is totally reflected; 0 where ``eta <= 1`` (no total reflection)."""
-    return dr.select(eta > 1, dr.safe_sqrt(1.0 - dr.rcp(dr.square(eta))), 0.0)
-
-
-def _with_cosine(w, mu):
-    """``w`` turned about the normal's azimuth to the cosine ``mu``."""
-    mi = mitsuba_module()
-    k = dr.safe_sqrt((1.0 - dr.square(mu)) / dr.maximum(1.0 - dr.square(w.z), 1e-12))
-    return mi.Vector3f(w.x * k, w.y * k, mu)
-
-
-def fold(w, mu_c):
-    """An inner direction beyond the critical cosine (``0 < w.z < μ_c``) folded into the
-    escape cone: ``μ' = μ_c + (μ_c - μ)(1 - μ_c)/μ_c``, the same azimuth (its density is
-    multiplied by ``μ_c / (1 - μ_c)``)."""
-    return _with_cosine(w, mu_c + (mu_c - w.z) * (1.0 - mu_c) / dr.maximum(mu_c, 1e-6))
-
-
-def unfold(w, mu_c):
-    """The direction beyond the critical cosine that :func:`fold` maps to ``w`` (in the
-    escape cone)."""
-    return _with_cosine(w, mu_c - (w.z - mu_c) * mu_c / dr.maximum(1.0 - mu_c, 1e-6))
 
 
 def sum_estimator(layer):
