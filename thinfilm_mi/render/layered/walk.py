@@ -61,8 +61,9 @@ __all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "ROULETTE_BELOW", "ESCAPE_KEEP", "
 DEFAULT_MAX_BOUNCES = 64
 #: Russian roulette starts after this many base vertices.
 RR_DEPTH = 3
-#: Russian roulette plays walks whose throughput is below this (pbrt's threshold).
-ROULETTE_BELOW = 0.25
+#: Russian roulette plays walks whose throughput is below this: a survivor carries it on, so
+#: a trapped walk's tail adds its terms at this throughput (the steps' decay brings it there).
+ROULETTE_BELOW = 0.1
 #: The probability that a step keeps a base sample inside the top's escape cone (else it is
 #: unfolded beyond the critical angle, :meth:`RandomWalk.steer`).
 ESCAPE_KEEP = 0.5
