@@ -23,9 +23,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
+import sys
 import time
 
 import numpy as np
+
+# this checkout's package, not an installed one (the script's folder is first on sys.path)
+sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 #: the coating of every row: a TiO2 film under SiO2 on a clear 1.5 coat
 COAT = {"layers": "TiO2 80; SiO2 120", "int_ior": 1.5}

@@ -46,7 +46,8 @@ delta lobe's weight and the base's are both near the layer's albedo; weight the 
 over ``P_R``; 1 over a pure-delta base (no component 1). Otherwise a direction is drawn
 from a mixture (:meth:`NestedEstimator.base_pdf`, its exact density)::
 
-    p(ω_o) = (1 - P_R) [ (1 - c) p_f(ω_o') (η_e/η_c)² cos θ_o / cos θ_o' + c cos θ_o / π ]
+    p(ω_o) = (1 - P_R) [ (1 - c) p_f(ω_o') (η_e/η_c)² cos θ_o / cos θ_o'
+                         + c (1 - b cos φ_o) cos θ_o / π ]
 
 the base sampled at ``ω_i'`` (its non-delta lobes only,
 :meth:`~thinfilm_mi.render.layered.bottom.NestedBottom.smooth_context`) and refracted out,
@@ -57,9 +58,12 @@ puts it), so no sample fails: ``p_f(w) = p_b(w) + p_b(unfold(w)) μ_c / (1 - μ_
 cosine lobe for the light the interreflections spread, with the share ``c = clip(0.8 -
 0.15 ln ν, 0.2, 0.8)`` (:data:`MIXTURE_BOUNDS`, :data:`MIXTURE_SLOPE`): most of it over
 a broad lobe, whose own samples cover the cosine's directions too, little over a narrow
-one, whose light the cosine lobe would give heavy weights. ``P_R`` and ``c`` are
-deterministic functions of ``ω_i`` (the probe's numbers are fixed), so ``pdf`` repeats
-them. The weight is the sum's estimate of ``f cos θ_o`` divided by ``p``: ``sample``,
+one, whose light the cosine lobe would give heavy weights. The cosine lobe leans away
+from ``ω_i``'s azimuth (``φ_o``: ``ω_o``'s azimuth from it; :meth:`NestedEstimator.forward`),
+where the bounces of a glossy base carry its light, by ``b = 0.4 sin θ_i ā²``
+(:data:`FORWARD_BIAS`; none at normal incidence, little over a dark base). ``P_R``, ``c``
+and ``b`` are deterministic functions of ``ω_i`` (the probe's numbers are fixed), so
+``pdf`` repeats them. The weight is the sum's estimate of ``f cos θ_o`` divided by ``p``: ``sample``,
 ``eval`` and ``pdf`` are consistent by construction, ``pdf`` is the true density of
 ``sample`` (Mitsuba's chi2 test passes), and MIS weights built from it sum to one in both
 strategies. (Were ``p`` only an approximation of the sampler's density, as pbrt's layered
@@ -83,12 +87,13 @@ import drjit as dr
 
 from thinfilm_mi.render.layered.bottom import base_context, base_interaction, intensity
 from thinfilm_mi.render.layered.coated import CoatedEstimator
+from thinfilm_mi.render.layered.escape import critical_cosine, fold, unfold
 from thinfilm_mi.render.layered.forms import closed_form
 from thinfilm_mi.render.layered.walk import RandomWalk, eval_seed, logical_not, sample_seed
 from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.render.variant import spectral_mean
 
-__all__ = ["MIXTURE_BOUNDS", "MIXTURE_SLOPE", "PROBE", "ALBEDO_FLOOR", "NestedEstimator",
+__all__ = ["MIXTURE_BOUNDS", "MIXTURE_SLOPE", "FORWARD_BIAS", "PROBE", "ALBEDO_FLOOR", "NestedEstimator",
            "sum_estimator", "critical_cosine", "fold", "unfold"]
 
 #: The bounds of the cosine lobe's share ``c`` of the sampling mixture: every direction a
@@ -101,6 +106,10 @@ MIXTURE_BOUNDS = (0.2, 0.8)
 #: α 0.3 under a 1.5 coat at normal incidence: ``ν ≈ 2``, α 0.12 ``ν ≈ 11``, α 0.05 more than
 #: 55).
 MIXTURE_SLOPE = 0.15
+#: The cosine lobe's bias towards the azimuth away from ``ω_i`` over a white base at grazing
+#: incidence (:meth:`NestedEstimator.forward_bias`): the light that bounces in the layer
+#: leaves forwards. Any value in [0, 1) keeps ``pdf`` exact.
+FORWARD_BIAS = 0.4
 #: The probe's fixed numbers ``(sample1, sample2)``: two stratified samples of the base
 #: (one picks a ``principled``'s lobes too unevenly for its albedo).
 PROBE = ((0.25, (0.3, 0.25)), (0.75, (0.8, 0.75)))
@@ -109,30 +118,19 @@ PROBE = ((0.25, (0.3, 0.25)), (0.75, (0.8, 0.75)))
 ALBEDO_FLOOR = 0.05
 
 
-def critical_cosine(eta):
-    """``μ_c = cos θ_c``, beyond which light under a top of relative index ``eta``
-    (``η_c/η_e``) is totally reflected; 0 where ``eta <= 1`` (no total reflection)."""
-    return dr.select(eta > 1, dr.safe_sqrt(1.0 - dr.rcp(dr.square(eta))), 0.0)
-
-
-def _with_cosine(w, mu):
-    """``w`` turned about the normal's azimuth to the cosine ``mu``."""
+def _azimuth(w):
+    """The unit azimuth of ``w`` (a ``Vector2f``; 0 along the normal)."""
     mi = mitsuba_module()
-    k = dr.safe_sqrt((1.0 - dr.square(mu)) / dr.maximum(1.0 - dr.square(w.z), 1e-12))
-    return mi.Vector3f(w.x * k, w.y * k, mu)
+    sin = dr.sqrt(dr.square(w.x) + dr.square(w.y))
+    inv = dr.rcp(dr.select(sin > 0, sin, 1.0))
+    return mi.Vector2f(w.x * inv, w.y * inv)
 
 
-def fold(w, mu_c):
-    """An inner direction beyond the critical cosine (``0 < w.z < μ_c``) folded into the
-    escape cone: ``μ' = μ_c + (μ_c - μ)(1 - μ_c)/μ_c``, the same azimuth (its density is
-    multiplied by ``μ_c / (1 - μ_c)``)."""
-    return _with_cosine(w, mu_c + (mu_c - w.z) * (1.0 - mu_c) / dr.maximum(mu_c, 1e-6))
-
-
-def unfold(w, mu_c):
-    """The direction beyond the critical cosine that :func:`fold` maps to ``w`` (in the
-    escape cone)."""
-    return _with_cosine(w, mu_c - (w.z - mu_c) * mu_c / dr.maximum(1.0 - mu_c, 1e-6))
+def _cos_azimuth(w, d):
+    """The cosine of the azimuth between ``w`` and the unit azimuth ``d`` (0 along the
+    normal)."""
+    sin = dr.sqrt(dr.square(w.x) + dr.square(w.y))
+    return (w.x * d.x + w.y * d.y) / dr.select(sin > 0, sin, 1.0)
 
 
 def sum_estimator(layer):
@@ -249,9 +247,9 @@ class NestedEstimator(CoatedEstimator):
         total = delta + pt * albedo * escape / (1.0 - albedo * (1.0 - escape))
         return dr.detach(dr.select(total > 0, delta / dr.select(total > 0, total, 1.0), 1.0))
 
-    def base_pdf(self, ctx_mode, si, wo, share, active):
+    def base_pdf(self, ctx_mode, si, wo, share, bias, active):
         """The non-delta density at ``wo`` without the factor ``1 - P_R`` (``share``: the
-        cosine lobe's, from :meth:`probe`)."""
+        cosine lobe's, from :meth:`probe`; ``bias``: its :meth:`forward_bias`)."""
         ctx = self.bottom.smooth_context(ctx_mode)
         wi_in, ok_i = self.top.inward(si.wi)
         wo_in, ok_o = self.top.inward(wo)
@@ -265,8 +263,34 @@ class NestedEstimator(CoatedEstimator):
         p_f = self.bottom.bsdf.pdf(ctx, si_b, pre, ok_f)
         p_b = p_b + dr.select(ok_f, p_f * mu_c / dr.maximum(1.0 - mu_c, 1e-6), 0.0)
         jac = self.top.inv_eta2 * wo.z / dr.maximum(wo_in.z, 1e-12)
-        p = (1.0 - share) * p_b * jac + share * wo.z * dr.inv_pi
+        p = (1.0 - share) * p_b * jac + share * self.forward_pdf(si, wo, bias)
         return dr.select(ok, p, 0.0)
+
+    def forward_bias(self, si, albedo):
+        """``b = FORWARD_BIAS sin θ_i ā²`` (``ā``: the probe's albedo): the cosine lobe's
+        bias towards the azimuth away from ``ω_i`` (:meth:`forward_pdf`), none at normal
+        incidence, where no azimuth stands out, and little over a dark base, whose light
+        seldom bounces; detached (a sampling decision)."""
+        sin = dr.sqrt(dr.square(si.wi.x) + dr.square(si.wi.y))
+        return dr.detach(FORWARD_BIAS * dr.minimum(sin, 1.0) * dr.square(albedo))
+
+    def forward(self, si, w, u, bias):
+        """A cosine lobe's sample ``w`` on ``ω_i``'s side of the hemisphere mirrored to the
+        other side (across the plane of the normal square to ``ω_i``'s azimuth) where ``u``
+        is below ``bias`` times the cosine of their azimuths: the density of
+        :meth:`forward_pdf`."""
+        mi = mitsuba_module()
+        d = _azimuth(si.wi)
+        along = w.x * d.x + w.y * d.y
+        turn = (along > 0) & (u < bias * _cos_azimuth(w, d))
+        return dr.select(turn, mi.Vector3f(w.x - 2.0 * along * d.x, w.y - 2.0 * along * d.y, w.z), w)
+
+    def forward_pdf(self, si, wo, bias):
+        """The density of :meth:`forward`'s directions, ``(1 - b cos φ) cos θ / π`` (``b``:
+        ``bias``; ``φ``: the azimuth of ``wo`` from ``ω_i``'s): more of it away from
+        ``ω_i``, where a glossy base's interreflections leave (each bounce scatters
+        forwards)."""
+        return (1.0 - bias * _cos_azimuth(wo, _azimuth(si.wi))) * dr.maximum(wo.z, 0.0) * dr.inv_pi
 
     # -- the BSDF interface ----------------------------------------------------
     def sample(self, ctx, si, sample1, sample2, active, has_delta: bool, has_base: bool):
@@ -310,10 +334,13 @@ class NestedEstimator(CoatedEstimator):
             mu_c = critical_cosine(self.top.eta_f)
             trapped = (bs_b.wo.z > 0) & (bs_b.wo.z < mu_c)
             out, leaves = self.top.outward(dr.select(trapped, fold(bs_b.wo, mu_c), bs_b.wo))
-            wo_b = dr.select(cosine, mi.warp.square_to_cosine_hemisphere(sample2), out)
+            bias = self.forward_bias(si, albedo)
+            wo_c = self.forward(si, mi.warp.square_to_cosine_hemisphere(sample2),
+                                s / dr.select(share > 0, share, 1.0), bias)
+            wo_b = dr.select(cosine, wo_c, out)
             ok = sel_b & (cosine | (leaves & (bs_b.wo.z > 0) & (bs_b.pdf > 0)))
             wo = dr.select(sel_b, wo_b, wo)
-            pdf = (1.0 - p_r) * self.base_pdf(ctx.mode, si, wo, share, ok)
+            pdf = (1.0 - p_r) * self.base_pdf(ctx.mode, si, wo, share, bias, ok)
             f = self.transmitted(ctx.mode, si, wo, seed, ok & (pdf > 0), top_i)
             weight = dr.select(ok & (pdf > 0), f / dr.select(pdf > 0, pdf, 1.0), weight)
             sel_b = ok & (pdf > 0)
@@ -383,7 +410,7 @@ class NestedEstimator(CoatedEstimator):
             value = self.transmitted(ctx.mode, si, wo, eval_seed(si.wi, wo), active, top_i)
         if want_pdf:
             albedo, share = self.probe(ctx.mode, si, active)
-            pdf = self.base_pdf(ctx.mode, si, wo, share, active)
+            pdf = self.base_pdf(ctx.mode, si, wo, share, self.forward_bias(si, albedo), active)
             if has_delta:
                 pdf = pdf * (1.0 - self.prob_reflect(ctx.mode, si, top_i, albedo, active))
         return dr.select(active, value, 0.0), dr.select(active, pdf, 0.0)

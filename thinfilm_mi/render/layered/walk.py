@@ -13,7 +13,7 @@ the walk goes on reflected by the underside: ``β_{k+1} = β_k g R_in(θ_w) A(w)
 are unbiased estimates of the interreflection series. **The link**: the second vertex's
 term, the integral ``∫ f_b(ω_i', w) cos θ_w U(w̄) f_b(w̄, ω_o') cos θ_o' dw`` over the
 direction that reaches it, is estimated by two strategies combined by Veach's power
-heuristic: the walk's own sample (its density ``p_f``: the base's at ``ω_i'``), and a
+heuristic: the walk's own step (its density ``p_f``: the step's at ``ω_i'``), and a
 *reverse sample* ``v`` drawn from the base at ``ω_o'`` (its non-delta lobes; density
 ``p_v``: an exact density too, as pbrt-v4's ``LayeredBxDF`` pre-samples its exit), linked
 from the first vertex: ``f_b(ω_i', v̄) cos θ_v U(v) f_b(v, ω_o') cos θ_o' / p_v``. The
@@ -21,16 +21,26 @@ light a glossy base sends beyond the critical angle of ``ω_o'``'s lobe, which t
 internal reflection traps, reaches ``ω_o'`` by the link rather than by the chance that the
 walk's own sample falls there. Later vertices have no link (each would cost two more calls
 of the base per vertex, for paths already spread by a bounce). A delta step (a Dirac
-density) is the walk's alone. Russian roulette from :data:`RR_DEPTH` vertices on, of walks whose
-throughput is below :data:`ROULETTE_BELOW` (:func:`roulette`; unbiased); the walk stops
-after ``max_bounces`` base vertices: the paths with more are dropped (the link too where ``N = 1``).
-For a Lambertian base of albedo ``ρ`` each vertex sends back ``ρ R̄`` of what it receives
-(``R̄``: the underside's hemispherical reflectance), so the dropped energy is at most ``(ρ R̄)^N /
-(1 - ρ R̄)`` of the light that entered: ``0.596^64/0.404 ≈ 1e-14`` for a bare ``η = 1.5``
-coat over white. A base that sends its light beyond the critical angle meets ``R_in = 1``
-there and may lose more (``tests/render/layered/test_walk.py`` measures the truncation at
-``N = 1``). Random numbers: a PCG32 seeded from the sample's numbers in ``sample`` and
-from a TEA hash of the two directions in ``eval`` (as pbrt-v4's ``LayeredBxDF``), so
+density) is the walk's alone. **The steps** (:meth:`RandomWalk.steer`): a base sample
+inside the top's escape cone, where most of the light leaves the layer, is kept with
+probability :data:`ESCAPE_KEEP`, else unfolded beyond the critical angle
+(:func:`~thinfilm_mi.render.layered.escape.unfold`), where total internal reflection keeps
+the light; the step's weight is ``f_b cos θ / p`` by the mixture's density ``p``
+(:meth:`RandomWalk.step_pdf`). The throughput of trapped light so falls at every vertex by
+the share of the base's lobe that could escape there, rather than staying whole until a
+sample escapes: its energy reaches ``ω_o'`` along a decaying throughput, not by a walk of
+random length (whose long ones were the heaviest sample weights). Russian roulette from
+:data:`RR_DEPTH` vertices on, of walks whose throughput is below :data:`ROULETTE_BELOW`
+(:func:`roulette`; unbiased); the walk stops after ``max_bounces`` base vertices: the paths
+with more are dropped (the link too where ``N = 1``). For a Lambertian base of albedo ``ρ``
+each vertex sends back ``ρ R̄`` of what it receives (``R̄``: the underside's hemispherical
+reflectance), so the dropped energy is at most ``(ρ R̄)^N / (1 - ρ R̄)`` of the light that
+entered: ``0.596^64/0.404 ≈ 1e-14`` for a bare ``η = 1.5`` coat over white. A base that
+sends its light beyond the critical angle meets ``R_in = 1`` there and may lose more
+(``tests/render/layered/test_walk.py`` measures the truncation at ``N = 1``). Random
+numbers: a PCG32 seeded from the sample's numbers in ``sample`` and from a TEA hash of the
+two directions in ``eval`` (as pbrt-v4's ``LayeredBxDF``), so that ``eval`` repeats its
+estimate for the same pair of directions.
 """
 from __future__ import annotations
 
@@ -40,9 +50,10 @@ import drjit as dr
 
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.layered.bottom import base_interaction, intensity
+from thinfilm_mi.render.layered.escape import critical_cosine, fold, unfold
 from thinfilm_mi.render.textures import mitsuba_module
 
-__all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "ROULETTE_BELOW", "RandomWalk", "eval_seed",
+__all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "ROULETTE_BELOW", "ESCAPE_KEEP", "RandomWalk", "eval_seed",
            "sample_seed", "logical_not", "power_heuristic", "roulette"]
 
 #: Default cap on the base vertices of a walk (``max_bounces``); its bias is stated in
@@ -50,8 +61,12 @@ __all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "ROULETTE_BELOW", "RandomWalk", "e
 DEFAULT_MAX_BOUNCES = 64
 #: Russian roulette starts after this many base vertices.
 RR_DEPTH = 3
-#: Russian roulette plays walks whose throughput is below this (pbrt's threshold).
-ROULETTE_BELOW = 0.25
+#: Russian roulette plays walks whose throughput is below this: a survivor carries it on, so
+#: a trapped walk's tail adds its terms at this throughput (the steps' decay brings it there).
+ROULETTE_BELOW = 0.1
+#: The probability that a step keeps a base sample inside the top's escape cone (else it is
+#: unfolded beyond the critical angle, :meth:`RandomWalk.steer`).
+ESCAPE_KEEP = 0.5
 
 
 def logical_not(mask):
@@ -175,7 +190,8 @@ class RandomWalk:
                 # the link to the reverse sample: the second vertex's term by the other strategy
                 link = more & v_ok
                 f_c, p_c = base.eval_pdf(ctx, si_b, v_bar, link)
-                w_link = dr.select(link, power_heuristic(p_v, p_c), 0.0)
+                w_link = dr.select(link, power_heuristic(p_v, self.step_pdf(ctx, si_b, v_bar, p_c,
+                                                                           link)), 0.0)
                 linked = beta * f_c * rev * w_link
             with dr.suspend_grad(when=replay):
                 gathered = dr.select(active, gathered + beta * e * mis + linked, gathered)
@@ -183,8 +199,9 @@ class RandomWalk:
                 s1 = rng.next_float32()
                 s2 = mi.Point2f(rng.next_float32(), rng.next_float32())
                 bs, g = base.sample(ctx, si_b, s1, s2, active)
+                bs.wo, g, p = self.steer(ctx, si_b, bs, g, rng.next_float32(), active)
                 cos = bs.wo.z
-                active = more & (cos > 0) & (bs.pdf > 0)
+                active = more & (cos > 0) & (p > 0)
                 # the light that reached the base along -bs.wo left the previous vertex
                 # along w_next and reflected at the underside
                 w_next = mi.Vector3f(-bs.wo.x, -bs.wo.y, cos)
@@ -194,7 +211,7 @@ class RandomWalk:
                     # the second vertex's own term, weighted against the link that reaches it
                     p_r = base.pdf(ctx_s, si_o, w_next, active & logical_not(
                         mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta)))
-                    mis_next = power_heuristic(bs.pdf, p_r)
+                    mis_next = power_heuristic(p, p_r)
             if replay:
                 acc = mi.Spectrum(acc + self._replayed(ctx, si, si_b, bs, (s1, s2), w_next,
                                                        total - gathered, active)
@@ -225,6 +242,43 @@ class RandomWalk:
                              max_iterations=-1 if replay else None)
         # the walk's sum is what it gathered; the replay's, the first vertex's and the loop's
         return first[0] + rest[0] if replay else rest[1]
+
+    def steer(self, ctx, si_b, bs, g, u, active):
+        """A step's direction from the base's sample ``bs`` (weight ``g``) at ``si_b``:
+        a non-delta sample inside the escape cone is kept where ``u < ESCAPE_KEEP``, else
+        unfolded beyond the critical cosine (:func:`~thinfilm_mi.render.layered.escape.unfold`),
+        where total internal reflection keeps the light in the layer. Returns ``(w, f_b cos /
+        p, p)``, ``p`` the step's density (:meth:`step_pdf`); detached (a sampling decision)."""
+        mi = mitsuba_module()
+        mu_c = critical_cosine(self.layer.top.eta_f)
+        smooth = active & (mu_c > 0) & (bs.pdf > 0) & logical_not(
+            mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta))
+        turn = smooth & (bs.wo.z >= mu_c) & (u >= ESCAPE_KEEP)
+        w = dr.select(turn, unfold(bs.wo, mu_c), bs.wo)
+        trapped = smooth & (w.z > 0) & (w.z < mu_c)
+        # the base at the other direction of the fold's pair: the unfolded one's value and
+        # density, or a kept trapped one's escape direction's density
+        f_o, p_o = self.layer.base.eval_pdf(ctx, si_b, dr.select(turn, w, fold(w, mu_c)), trapped)
+        p_b = dr.select(turn, p_o, bs.pdf)
+        jac = (1.0 - mu_c) / dr.maximum(mu_c, 1e-6)
+        p = dr.select(trapped, p_b + (1.0 - ESCAPE_KEEP) * jac * dr.select(turn, bs.pdf, p_o),
+                      dr.select(smooth, ESCAPE_KEEP * bs.pdf, bs.pdf))
+        f = dr.select(turn, f_o, g * bs.pdf)
+        weight = dr.select(smooth, f / dr.select(p > 0, p, 1.0), g)
+        return w, dr.select(smooth & (p <= 0), 0.0, weight), p
+
+    def step_pdf(self, ctx, si_b, w, p_b, active):
+        """The density of a step (:meth:`steer`) from ``si_b`` to the non-delta direction
+        ``w``, where the base's own is ``p_b``: ``ESCAPE_KEEP p_b`` inside the escape cone,
+        ``p_b + (1 - ESCAPE_KEEP) p_b(fold(w)) (1 - μ_c)/μ_c`` beyond it (the unfolded
+        samples' share)."""
+        mu_c = critical_cosine(self.layer.top.eta_f)
+        steered = active & (mu_c > 0)
+        trapped = steered & (w.z > 0) & (w.z < mu_c)
+        p_o = self.layer.base.pdf(ctx, si_b, fold(w, mu_c), trapped)
+        jac = (1.0 - mu_c) / dr.maximum(mu_c, 1e-6)
+        return dr.select(trapped, p_b + (1.0 - ESCAPE_KEEP) * jac * p_o,
+                         dr.select(steered, ESCAPE_KEEP * p_b, p_b))
 
     def _replayed(self, ctx, si, si_b, bs, numbers, w_next, after, active):
         """A vertex's step in the replay: ``dlog(g r) (W - W_{≤j})`` (``after``: what the
