@@ -108,8 +108,10 @@ interreflections are estimated, unbiased for any base, by a position-free random
 (Guo et al. 2018, pbrt-v4's ``LayeredBxDF``): next-event estimation through the smooth
 top at every base vertex, the first vertex's next term also reached from a sample of the
 base at the exit direction (the two combined by the power heuristic), the base sampled
-between vertices, Russian roulette after 3 vertices of walks whose throughput fell below
-0.25, at most ``max_bounces`` vertices. ``eval`` seeds its random numbers from a
+between vertices (a sample that would leave through the top is kept half the time and
+otherwise turned back into the coat, weighted by that mixture's density, so that trapped
+light loses weight at every bounce), Russian roulette after 3 vertices of walks whose
+throughput fell below 0.1, at most ``max_bounces`` vertices. ``eval`` seeds its random numbers from a
 hash of the directions and ``sample`` from its sample, so both are deterministic. Over
 Mitsuba's ``diffuse`` without ``coat_sigma_a``, in spectral and polarized variants, the
 walk is replaced by its closed form, ``ρ/π cos θ_o' / (1 - ρ R_dh)`` with the underside's
