@@ -245,8 +245,9 @@ def install() -> None:
             _guard = _Guard(drjit)
             gc.callbacks.append(_guard)
             os.register_at_fork(after_in_child=_after_fork)
-        _cover_mitsuba_render()
-        _cover_mitsuba_loads()
+        _cover("render", rendering)
+        for name in LOADS:
+            _cover(name, loading)
 
 
 def _after_fork() -> None:
@@ -258,47 +259,26 @@ def _after_fork() -> None:
         _guard.forget_threads()
 
 
-def _cover_mitsuba_loads() -> None:
-    """Replace Mitsuba's :data:`LOADS` (under every name Mitsuba's modules give them) by
-    wrappers that load inside :func:`loading`."""
+def _cover(name: str, block) -> None:
+    """Replace ``mitsuba.<name>`` (under every name Mitsuba's modules give it) by a wrapper
+    that runs it inside ``block()`` (:func:`rendering` or :func:`loading`), so that a
+    user's call on any thread is covered from its start. Idempotent."""
     import mitsuba
 
-    for name in LOADS:
-        load = getattr(mitsuba, name, None)
-        if load is None or getattr(load, "__wrapped_by_gc_guard__", False):
-            continue
-
-        def covered_load(*args, _load=load, **kwargs):
-            with loading():
-                return _load(*args, **kwargs)
-
-        covered = functools.wraps(load)(covered_load)
-        covered.__wrapped_by_gc_guard__ = True
-        for module_name, module in list(sys.modules.items()):
-            if ((module_name == "mitsuba" or module_name.startswith("mitsuba."))
-                    and getattr(module, name, None) is load):
-                setattr(module, name, covered)
-
-
-def _cover_mitsuba_render() -> None:
-    """Replace ``mitsuba.render`` (and its other names in Mitsuba's modules) by a
-    wrapper that renders inside :func:`rendering`, so that a user's render on any
-    thread is covered from its first symbolic call."""
-    import mitsuba
-
-    render = getattr(mitsuba, "render", None)
-    if render is None or getattr(render, "__wrapped_by_gc_guard__", False):
+    original = getattr(mitsuba, name, None)
+    if original is None or getattr(original, "__wrapped_by_gc_guard__", False):
         return
 
-    @functools.wraps(render)
-    def covered_render(*args, **kwargs):
-        with rendering():
-            return render(*args, **kwargs)
+    @functools.wraps(original)
+    def covered(*args, **kwargs):
+        with block():
+            return original(*args, **kwargs)
 
-    covered_render.__wrapped_by_gc_guard__ = True
-    for name, module in list(sys.modules.items()):
-        if (name == "mitsuba" or name.startswith("mitsuba.")) and getattr(module, "render", None) is render:
-            setattr(module, "render", covered_render)
+    covered.__wrapped_by_gc_guard__ = True
+    for module_name, module in list(sys.modules.items()):
+        if ((module_name == "mitsuba" or module_name.startswith("mitsuba."))
+                and getattr(module, name, None) is original):
+            setattr(module, name, covered)
 
 
 def installed() -> bool:

@@ -60,30 +60,24 @@ import drjit as dr
 from thinfilm_mi.errors import ThinFilmError
 from thinfilm_mi.render.layered.bottom import base_interaction, intensity
 from thinfilm_mi.render.layered.coated import CoatedEstimator
-from thinfilm_mi.render.layered.walk import RR_DEPTH, eval_seed, logical_not, sample_seed
+from thinfilm_mi.render.layered.walk import (
+    RR_DEPTH,
+    eval_seed,
+    logical_not,
+    power_heuristic,
+    ratio,
+    sample_seed,
+)
 from thinfilm_mi.render.textures import mitsuba_module
 from thinfilm_mi.render.variant import spectral_mean
 from thinfilm_mi.tabulate.base import opaque_float
 
-__all__ = ["ROUGH_MIXTURE", "RoughEstimator", "power_heuristic", "ratio"]
+__all__ = ["ROUGH_MIXTURE", "RoughEstimator"]
 
 #: The cosine lobe's share ``c`` of the rough top's sampling mixture. Any fixed value in
 #: (0, 1) keeps ``pdf`` exact; the smooth top fits its share per direction from a probe of
 #: the base (:mod:`~thinfilm_mi.render.layered.nested`), which the rough top does not use yet.
 ROUGH_MIXTURE = 0.5
-
-
-def ratio(x):
-    """``x / detach(x)``: 1, with the gradient of ``log x`` (0 where ``x`` is 0)."""
-    live = dr.detach(x) != 0
-    return dr.select(live, x / dr.select(live, dr.detach(x), 1.0), 0.0)
-
-
-def power_heuristic(p, q):
-    """``p² / (p² + q²)`` (0 where both are 0)."""
-    p2, q2 = dr.square(p), dr.square(q)
-    total = p2 + q2
-    return dr.select(total > 0, p2 / dr.select(total > 0, total, 1.0), 0.0)
 
 
 class RoughEstimator(CoatedEstimator):

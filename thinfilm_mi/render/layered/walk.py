@@ -54,7 +54,7 @@ from thinfilm_mi.render.layered.escape import critical_cosine, fold, unfold
 from thinfilm_mi.render.textures import mitsuba_module
 
 __all__ = ["DEFAULT_MAX_BOUNCES", "RR_DEPTH", "ROULETTE_BELOW", "ESCAPE_KEEP", "RandomWalk", "eval_seed",
-           "sample_seed", "logical_not", "power_heuristic", "roulette"]
+           "sample_seed", "logical_not", "power_heuristic", "ratio", "roulette"]
 
 #: Default cap on the base vertices of a walk (``max_bounces``); its bias is stated in
 #: the module docstring.
@@ -294,9 +294,14 @@ class RandomWalk:
             e_r = dr.select(mi.has_flag(bs.sampled_type, mi.BSDFFlags.Delta), g_a * bs_a.pdf, e_r)
         g_r = e_r / dr.detach(dr.select(bs.pdf > 0, bs.pdf, 1.0)) \
             * self.layer.underside(si, w_next, active)
-        live = dr.detach(g_r) != 0
-        ratio = dr.select(live, g_r / dr.select(live, dr.detach(g_r), 1.0), 0.0)
-        return dr.select(active, ratio * after, dr.zeros(mi.Spectrum))
+        return dr.select(active, ratio(g_r) * after, dr.zeros(mi.Spectrum))
+
+
+def ratio(x):
+    """``x / detach(x)``: 1, with the gradient of ``log x`` (0 where ``x`` is 0): a replayed
+    factor's share of the derivative."""
+    live = dr.detach(x) != 0
+    return dr.select(live, x / dr.select(live, dr.detach(x), 1.0), 0.0)
 
 
 def power_heuristic(p, q):
