@@ -18,8 +18,9 @@ from more exact evaluations:
    table's ``error`` is the spline's plus this;
 3. a table that would need more than the caller's ``max_floats`` stays a spline.
 
-No exact evaluation is spent: resampling and verifying a table of 2-4 MiB takes 0.1-0.25 s
-of numpy.
+No exact evaluation is spent: resampling and verifying is numpy over the fine table, its
+texels in float64 and the checks in float32 (their rounding, ~1e-7, is far below a table's
+error), against the float32 texels a lookup reads.
 """
 from __future__ import annotations
 
@@ -74,19 +75,26 @@ def _along(coeffs: np.ndarray, n: int, k: int, half: bool) -> np.ndarray:
 
 def _resampled(coeffs: np.ndarray, axis, nu: int, nv: int, ku: int, kv: int) -> dict:
     """The spline of ``coeffs`` (a :class:`~thinfilm_mi.tabulate.base.CubicSpline`
-    texture, float64) at the fine nodes (``"nodes"``), halfway between them along the
-    angle (``"u"``), along the wavelength (``"v"``) and at the fine cells' centres
-    (``"c"``): each of shape ``(wavelength coordinates, segments x angle coordinates,
-    channels)``, a split axis's segments side by side."""
+    texture, float64) at the fine nodes (``"nodes"``, float64: the table's texels),
+    halfway between them along the angle (``"u"``), along the wavelength (``"v"``) and at
+    the fine cells' centres (``"c"``; float32, as the checks need: its rounding, ~1e-7,
+    is far below any table's error): each of shape ``(wavelength coordinates, segments x
+    angle coordinates, channels)``, a split axis's segments side by side."""
     g, m = GHOST, nu // axis.segments
     rows = {False: [], True: []}
     for s in range(axis.segments):
         part = np.swapaxes(coeffs[:, s * (m + 2 * g):(s + 1) * (m + 2 * g)], 0, 1)
-        for half in (False, True):
-            rows[half].append(np.swapaxes(_along(part, m, ku, half), 0, 1))
-    nodes_u, mids_u = (np.concatenate(rows[h], axis=1) for h in (False, True))
+        rows[False].append(np.swapaxes(_along(part, m, ku, False), 0, 1))
+        rows[True].append(np.swapaxes(_along(part.astype(np.float32), m, ku, True), 0, 1))
+    nodes_u, mids_u = (_side_by_side(rows[h]) for h in (False, True))
+    nodes_u32 = nodes_u.astype(np.float32)
     return {"nodes": _along(nodes_u, nv, kv, False), "u": _along(mids_u, nv, kv, False),
-            "v": _along(nodes_u, nv, kv, True), "c": _along(mids_u, nv, kv, True)}
+            "v": _along(nodes_u32, nv, kv, True), "c": _along(mids_u, nv, kv, True)}
+
+
+def _side_by_side(parts: list) -> np.ndarray:
+    """Segments' arrays joined along the angle axis (axis 1; no copy for one segment)."""
+    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
 
 
 def _verified(spline: Table, side: SideData, grids) -> list:
@@ -110,24 +118,27 @@ def _verified(spline: Table, side: SideData, grids) -> list:
 
 def _errors(spline: Table, side: SideData, coeffs: np.ndarray, ku: int, kv: int):
     """``(fine values, error along u, along v, at the cells' centres)`` of the spline
-    resampled ``(ku, kv)`` times finer: bilinear interpolation against the spline."""
+    resampled ``(ku, kv)`` times finer: bilinear interpolation of the float32 texels
+    against the spline."""
     m = spline.nu // spline.axis.segments
     su, tv = np.arange(ku * (m - 1) + 1) / ku, np.arange(kv * (spline.nv - 1) + 1) / kv
     mu, mv = (np.arange(su.size - 1) + 0.5) / ku, (np.arange(tv.size - 1) + 0.5) / kv
     at = _resampled(coeffs, spline.axis, spline.nu, spline.nv, ku, kv)
     fine, segs = at["nodes"], spline.axis.segments
+    texels = fine.astype(np.float32)
 
     def cells(a):   # per segment, the values between neighbouring fine nodes along u
-        parts = np.split(a, segs, axis=1)
-        return np.concatenate([0.5 * (p[:, 1:] + p[:, :-1]) for p in parts], axis=1)
+        parts = np.split(a, segs, axis=1) if segs > 1 else [a]
+        return _side_by_side([0.5 * (p[:, 1:] + p[:, :-1]) for p in parts])
 
     def worst(exact, linear, ok):
-        dev = np.abs(exact - linear).max(axis=-1)
+        dev = np.abs(np.subtract(exact, linear, out=exact), out=exact)   # in place
+        dev = dev[..., 0] if dev.shape[-1] == 1 else dev.max(axis=-1)
         return float(np.max(dev, where=ok, initial=0.0))
 
-    between = 0.5 * (fine[1:] + fine[:-1])
+    between = 0.5 * (texels[1:] + texels[:-1])
     ok_u, ok_v, ok_c = _verified(spline, side, ((mu, tv), (su, mv), (mu, mv)))
-    return (fine, worst(at["u"], cells(fine), ok_u), worst(at["v"], between, ok_v),
+    return (fine, worst(at["u"], cells(texels), ok_u), worst(at["v"], between, ok_v),
             worst(at["c"], cells(between), ok_c))
 
 
