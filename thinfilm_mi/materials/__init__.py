@@ -8,10 +8,16 @@
 * :mod:`thinfilm_mi.materials.stack` -- :class:`Stack`: films of materials over a
   substrate, evaluated exactly in float64 (numpy in and out).
 """
-from thinfilm_mi.materials.catalog import list_materials, refractive_index, resolve, save_material
+from thinfilm_mi.materials.catalog import (
+    conductor_spectra,
+    list_materials,
+    refractive_index,
+    resolve,
+    save_material,
+)
 from thinfilm_mi.materials.model import MAX_INDEX, MIN_INDEX, SPECTRAL_RANGE, Material
 from thinfilm_mi.materials.stack import Layer, RTResult, Stack, parse_layers
 
 __all__ = ["MAX_INDEX", "MIN_INDEX", "SPECTRAL_RANGE", "Layer", "Material", "RTResult",
-           "Stack", "list_materials", "parse_layers", "refractive_index", "resolve",
+           "Stack", "conductor_spectra", "list_materials", "parse_layers", "refractive_index", "resolve",
            "save_material"]

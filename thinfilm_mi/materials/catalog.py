@@ -53,7 +53,13 @@ from typing import Any
 import numpy as np
 
 from thinfilm_mi.errors import MaterialError
-from thinfilm_mi.materials.model import RANGE_RTOL, SPECTRAL_RANGE, ConstantMaterial, Material
+from thinfilm_mi.materials.model import (
+    RANGE_RTOL,
+    RESAMPLE_TOL,
+    SPECTRAL_RANGE,
+    ConstantMaterial,
+    Material,
+)
 from thinfilm_mi.materials.sources import (
     MITSUBA_SWAPPED,
     SPD,
@@ -75,7 +81,7 @@ from thinfilm_mi.materials.sources import (
 )
 
 __all__ = ["resolve", "refractive_index", "list_materials", "format_material_table",
-           "format_resampling_table", "rendering_materials", "save_material"]
+           "format_resampling_table", "rendering_materials", "save_material", "conductor_spectra"]
 
 # ---------------------------------------------------------------------------
 # resolve()
@@ -338,3 +344,34 @@ def save_material(material: Any, path: str | os.PathLike, wavelength_nm=None) ->
     if fmt is not None and fmt.writable:
         return fmt.write(path, mat, wl, idx)
     raise MaterialError(f"save_material: unknown format for {str(path)!r} (use .csv, .yml or .spd)")
+
+
+def conductor_spectra(material: Any) -> dict:
+    """``{"eta": ..., "k": ...}``: the index of ``material`` (what :func:`resolve` takes;
+    ``"mitsuba:Al"`` is what Mitsuba's own ``material="Al"`` reads) for the dictionary of
+    a Mitsuba ``conductor`` or ``roughconductor``, e.g. ``{"type": "roughconductor",
+    **conductor_spectra("mitsuba:Al")}``: ``regular`` spectra on the material's uniform
+    grid, whose linear interpolation stays within ``RESAMPLE_TOL`` (1e-4) of the data's own
+    in n and in k (:meth:`~thinfilm_mi.materials.model.DispersiveMaterial.uniform_resampling`),
+    floats for a constant. Why: Mitsuba's ``material`` is an ``irregular`` spectrum, which
+    searches the data's knots at every evaluation, where a ``regular`` one reads a cell
+    with one multiply and a gather per wavelength; a base under ``thinfilm_coating`` is
+    evaluated several times per bounce of its walk. Raises :class:`MaterialError` where
+    no grid is that close."""
+    mat = resolve(material)
+    if isinstance(mat, ConstantMaterial):
+        value = complex(mat.index(np.array([550.0]))[0])
+        return {"eta": value.real, "k": value.imag}
+    fit = mat.uniform_resampling()
+    if fit is None:
+        raise MaterialError(f"conductor_spectra: material {material!r} has no uniform grid "
+                            f"over {SPECTRAL_RANGE[0]:g}-{SPECTRAL_RANGE[1]:g} nm within "
+                            f"{RESAMPLE_TOL:g} of its data (give the BSDF its `material` instead)")
+    lo, hi = float(fit.grid[0]), float(fit.grid[-1])
+
+    def spectrum(values):
+        # float32, as Mitsuba stores them; nine digits of a float32 parse back to it
+        text = ", ".join(f"{v:.9g}" for v in np.asarray(values, np.float64).astype(np.float32))
+        return {"type": "regular", "wavelength_min": lo, "wavelength_max": hi, "values": text}
+
+    return {"eta": spectrum(fit.values.real), "k": spectrum(fit.values.imag)}
