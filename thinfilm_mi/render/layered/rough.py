@@ -282,8 +282,12 @@ class RoughEstimator(CoatedEstimator):
                 bs_b, _ = self.bottom.bsdf.sample(self.bottom.smooth_context(ctx.mode),
                                                   base_interaction(si, wi_in), s_b, sample2,
                                                   active & pick_b)
-                out, _ = self.top.outward(bs_b.wo)
-                wo = dr.select(pick_b, out, wo)
+                out, leaves = self.top.outward(bs_b.wo)
+                # a base sample that failed (below its horizon, a zero vector, no density)
+                # or that total internal reflection keeps inside is no direction of the
+                # mixture: outward() would still map it to one above the horizon
+                leaves &= (bs_b.wo.z > 0) & (bs_b.pdf > 0)
+                wo = dr.select(pick_b, dr.select(leaves, out, mi.Vector3f(0.0)), wo)
             wo = dr.select(pick_c, mi.warp.square_to_cosine_hemisphere(sample2), wo)
         pdf = self.mixture_pdf(ctx.mode, si, wo, shares, active)
         ok = active & (wo.z > 0) & (pdf > 0)
