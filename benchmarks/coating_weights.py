@@ -100,7 +100,6 @@ def main() -> None:
 
     mi.set_variant(args.variant)
     import thinfilm_mi  # noqa: F401  (registers the plugins)
-
     from thinfilm_mi.materials import conductor_spectra
 
     rows = []
