@@ -80,8 +80,11 @@ class SpectralMode:
         """The return value of a sample or evaluation with the unpolarized ``weight``
         (``mi.Spectrum``) on ``lobe`` (a :class:`Response`'s ``reflection`` or
         ``transmission``, or :attr:`depolarized`) between ``wi`` and ``wo`` about
-        ``normal`` (default: the shading normal). Here: ``weight``."""
-        return weight
+        ``normal`` (default: the shading normal). Here: ``weight`` as a ``mi.Spectrum``
+        (arithmetic on the spectra of a film-free stack or of a scalar variant makes a
+        plain ``Array4f``, which a caller's loop over a nested BSDF refuses as a
+        different type)."""
+        return mitsuba_module().Spectrum(weight)
 
 
 class PolarizedMode(SpectralMode):
