@@ -1,7 +1,7 @@
 """The spread of ``thinfilm_coating``'s sample weights against its base's own.
 
     python benchmarks/coating_weights.py [--samples 1000000] [--variant llvm_ad_spectral]
-                                         [--json] [--compare BEFORE.json]
+                                         [--alpha 0] [--json] [--compare BEFORE.json]
 
 A path tracer multiplies its throughput by ``sample()``'s weight: heavy weights are the
 fireflies of a render. For each base of :data:`BASES`, alone and under the coating
@@ -11,6 +11,7 @@ draws --samples calls of ``sample()`` with independent uniform numbers at one wa
 the variance of the weights, the largest, and the share of the total weight carried by
 weights over :data:`HEAVY` (the energy a render gets from rare, bright samples), and the
 process CPU seconds of the coating's draws (after one untimed call: the kernel compiled).
+``--alpha`` > 0 gives the coating a rough top of that roughness (GGX).
 
 --compare reads the --json output of an earlier run (another commit, the same
 --samples) and prints its coating figures beside these: before and after a change of the
@@ -92,6 +93,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--samples", type=int, default=1_000_000)
     parser.add_argument("--variant", default="llvm_ad_spectral")
+    parser.add_argument("--alpha", type=float, default=0.0,
+                        help="the coating's top roughness (0: the smooth top)")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     parser.add_argument("--compare", metavar="BEFORE.json",
                         help="an earlier run's --json output, printed beside this one")
@@ -107,7 +110,8 @@ def main() -> None:
         if "spectra" in base:
             base = {k: v for k, v in base.items() if k != "spectra"} | conductor_spectra(base["spectra"])
         alone = mi.load_dict(base)
-        coat = mi.load_dict({"type": "thinfilm_coating", **COAT, "bsdf": base})
+        coat = mi.load_dict({"type": "thinfilm_coating", **COAT, "alpha": args.alpha,
+                             "bsdf": base})
         for c in COSINES:
             rows.append({"base": label, "cos_theta_i": c,
                          "alone": stats(weights(alone, c, args.samples)),

@@ -27,8 +27,9 @@ combined by the power heuristic:
 
 The walk then reflects at the underside, sampled from ``-y`` (the reflection lobe alone,
 its transmission being the next-event estimates' business): ``β_{k+1} = β_k g A(y) f_t
-cos / p · A(w_{k+1})``. Russian roulette from :data:`~thinfilm_mi.render.layered.walk.RR_DEPTH`
-base vertices, at most ``max_bounces`` (as :mod:`~thinfilm_mi.render.layered.walk`);
+cos / p · A(w_{k+1})``. Russian roulette and ``max_bounces`` as the smooth walk's
+(:func:`~thinfilm_mi.render.layered.walk.roulette`: from ``RR_DEPTH`` vertices, of walks
+whose throughput is below ``ROULETTE_BELOW``);
 random numbers from a PCG32 seeded with a hash of the directions in ``eval`` and of the
 sample's numbers in ``sample`` (the smooth walk's seeds). pbrt-v4 weighs the second
 estimate with the density of ``ω_o`` given ``-y``; here both weights use the density of
@@ -58,14 +59,14 @@ from __future__ import annotations
 import drjit as dr
 
 from thinfilm_mi.errors import ThinFilmError
-from thinfilm_mi.render.layered.bottom import base_interaction, intensity
+from thinfilm_mi.render.layered.bottom import base_interaction
 from thinfilm_mi.render.layered.coated import CoatedEstimator
 from thinfilm_mi.render.layered.walk import (
-    RR_DEPTH,
     eval_seed,
     logical_not,
     power_heuristic,
     ratio,
+    roulette,
     sample_seed,
 )
 from thinfilm_mi.render.textures import mitsuba_module
@@ -199,12 +200,8 @@ class RoughEstimator(CoatedEstimator):
             acc = mi.Spectrum(acc + nee + exit_
                               + dr.select(active, ratio(step) * (totals[0] - gathered), zero))
         beta = mi.Spectrum(dr.select(active, beta * dr.detach(step), zero))
-        q = dr.minimum(dr.max(intensity(beta, self.mode.polarized)), 0.95)
-        roulette = active & (depth >= RR_DEPTH)
-        u = rng.next_float32()
-        active = active & (logical_not(roulette) | (u < q)) & (q > 0)
-        beta = mi.Spectrum(dr.select(roulette, beta / dr.select(q > 0, q, 1.0), beta))
-        return acc, light_acc, gathered, beta, w_next, depth, rng, active
+        beta, active = roulette(beta, depth, rng, active, self.mode.polarized)
+        return acc, light_acc, gathered, mi.Spectrum(beta), w_next, depth, rng, active
 
     @staticmethod
     def numbers(rng):
