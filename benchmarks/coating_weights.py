@@ -43,6 +43,7 @@ BASES = [
     # same weights within 1e-4, the draws' time without Mitsuba's knot searches
     ("roughconductor Al (regular spectra), α 0.3",
      {"type": "roughconductor", "spectra": "mitsuba:Al", "alpha": 0.3}),
+    ("conductor Al (smooth)", {"type": "conductor", "material": "Al"}),
     ("principled grey, roughness 0.3", {"type": "principled", "roughness": 0.3,
                                         "base_color": {"type": "rgb", "value": 0.5}}),
     ("diffuse 0.5", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}}),

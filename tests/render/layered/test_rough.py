@@ -24,6 +24,8 @@ BASES = {
                    "base_color": {"type": "rgb", "value": [0.7, 0.3, 0.2]}},
 }
 FILMS = "TiO2 120; SiO2 200"
+#: a pure-delta base, whose walk links the light side through its mirror
+DELTA_BASES = {"conductor": {"type": "conductor", "material": "Au"}}
 
 
 @pytest.fixture(autouse=True)
@@ -158,7 +160,7 @@ def test_sample_pdf_is_pdf_and_weight_estimates_eval():
     assert np.all(np.abs(m) <= 4 * e)
 
 
-@pytest.mark.parametrize("base", ["diffuse", "roughconductor"])
+@pytest.mark.parametrize("base", ["diffuse", "roughconductor", "conductor"])
 @pytest.mark.parametrize("layers", ["", FILMS], ids=["bare", "films"])
 def test_albedo_is_the_explicit_walks(base, layers):
     """The albedo (mean sample weight) at 0, 30, 60, 80 degrees is the explicit walk's
@@ -168,8 +170,9 @@ def test_albedo_is_the_explicit_walks(base, layers):
     # (tabulate false: no tables to build for two plugins; the same stack either way)
     top = mi.load_dict({"type": "thinfilm_roughdielectric", "int_ior": 1.5, "alpha": alpha,
                         "distribution": "ggx", "layers": layers, "tabulate": False})
-    b = rough(BASES[base], alpha, layers=layers, tabulate=False)
-    ref_base = mi.load_dict(BASES[base])
+    spec = {**BASES, **DELTA_BASES}[base]
+    b = rough(spec, alpha, layers=layers, tabulate=False)
+    ref_base = mi.load_dict(spec)
     n = 1 << 16
     for theta in (0.0, 30.0, 60.0, 80.0):
         (r, re), (c, ce) = explicit_albedo(top, ref_base, theta, n, 1), coating_albedo(b, theta, n, 2)
@@ -247,14 +250,17 @@ def test_alpha_to_zero_converges_to_the_smooth_top():
     assert gaps[1][0] < gaps[0][0] and gaps[1][1] < gaps[0][1], gaps
 
 
-def test_film_gradient_matches_finite_differences():
+@pytest.mark.parametrize("base", [{"type": "roughconductor", "alpha": 0.3},
+                                  {"type": "conductor", "material": "Au"}],
+                         ids=["roughconductor", "conductor"])
+def test_film_gradient_matches_finite_differences(base):
     """Forward- and reverse-mode derivatives of ``eval`` in a film's thickness against
     central differences (h = 1 nm: the truncation (4π n h/λ)²/6 < 2e-4 relative):
     ``max_bounces`` 3 (no Russian roulette) and the directions the top samples do not
     depend on the films, so the fixed-seed estimate is a smooth function of the thickness;
     1e-3 relative as the smooth top's check."""
-    b = rough({"type": "roughconductor", "alpha": 0.3}, 0.3, layers="2.3 120; 1.46 200",
-              coat_sigma_a=0.2, max_bounces=3, tabulate=False)
+    b = rough(base, 0.3, layers="2.3 120; 1.46 200", coat_sigma_a=0.2, max_bounces=3,
+              tabulate=False)
     params = mi.traverse(b)
     key = "layers.0.thickness"
     rng = np.random.default_rng(4)

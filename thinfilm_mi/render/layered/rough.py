@@ -25,6 +25,19 @@ combined by the power heuristic:
   ``p_b² / (p_b² + p_o(-y)²)``, 1 where the base sampled a delta lobe (the light's side
   never draws one).
 
+**Over a pure-delta base** (a smooth ``conductor``; not in polarized variants), whose
+mirror makes the first estimate 0 and left the second alone with the top's peaked
+transmission evaluated at a random ``-y``, the light's side is linked one step earlier
+(:attr:`RoughEstimator.linked`): towards ``w* = (v_x, v_y, -v_z)``, the base's ``wi`` that
+the mirror sends along ``-v``, from the top's transmission at ``ω_i`` before the first
+vertex (``f_t(ω_i, -w*) cos · A(w*) B_δ(w*) · A(v) f_t(v, ω_o) cos θ_o / p_o(v)``) and from
+the underside's reflection at every vertex (``β_k g A(y) f_r(-y, -w*) cos · A(w*) B_δ(w*)
+…``, for the next vertex), weight ``p_o² / (p_o² + p²)``, ``p`` the density with which the
+walk samples ``-w*`` there; the walk's exit after the mirror then weighs itself against
+it, ``p_w² / (p_w² + p_o(-y)²)`` with ``p_w`` the density its ``w_k`` was sampled with (the
+mirror maps the two directions with a unit Jacobian, so both densities measure the same
+path).
+
 The walk then reflects at the underside, sampled from ``-y`` (the reflection lobe alone,
 its transmission being the next-event estimates' business): ``β_{k+1} = β_k g A(y) f_t
 cos / p · A(w_{k+1})``. Russian roulette and ``max_bounces`` as the smooth walk's
@@ -90,6 +103,9 @@ class RoughEstimator(CoatedEstimator):
         super().__init__(top, bottom, medium, mode, plugin, max_bounces)
         #: the cosine lobe's share of the sampling mixture (:data:`ROUGH_MIXTURE`)
         self.mix = opaque_float(ROUGH_MIXTURE)
+        #: whether the walk links the light side through the mirror of a pure-delta base
+        #: (module docstring; not in polarized variants, whose frames would need chaining)
+        self.linked = self.delta is not None and not bottom.lobes and not mode.polarized
 
     def describe(self) -> str:
         """The stack, the media and the base, then the roughness, for ``to_string``."""
@@ -130,44 +146,62 @@ class RoughEstimator(CoatedEstimator):
         mi = mitsuba_module()
         top = self.top
         rng = mi.PCG32(size=1, initstate=mi.UInt64(seed[0]), initseq=mi.UInt64(seed[1]))
-        b0, t0, _, ok0 = top.sample(si, si.wi, self.numbers(rng), active, False, False)
+        b0, t0, p0, ok0 = top.sample(si, si.wi, self.numbers(rng), active, False, False)
         v, _, p_o, ok_o = top.sample(si, wo, self.numbers(rng), active, False, False)
         e_o, _ = top.lobe(si, v, wo, ok_o, reflect=False, inside=True)
         light = e_o * self.absorb(si, v.z, ok_o) / dr.select(ok_o, p_o, 1.0)
+        light_d = light if totals is None else dr.detach(light)
         w0 = -b0
         beta0 = mi.Spectrum(t0 * self.absorb(si, w0.z, ok0))
         zero = dr.zeros(mi.Spectrum)
         acc0, light_acc0, gathered0 = mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(zero)
+        tail, link0 = None, zero
+        if self.linked:
+            # the light side's direction reached through the mirror: the base's wi that
+            # reflects to -v, and what the light gains from it to ω_o
+            w_link = mi.Vector3f(v.x, v.y, -v.z)
+            ok_l = active & ok_o & (self.max_bounces > 0)
+            tail = self.absorb(si, w_link.z, ok_l) * self.delta.reflectance(
+                ctx_mode, si, w_link, (mi.Float(0.5), mi.Point2f(0.5, 0.5)), ok_l) * light_d
+            t_l, p_l = top.lobe(si, si.wi, -w_link, ok_l, reflect=False, inside=False)
+            link0 = dr.select(ok_l, t_l * tail * power_heuristic(p_o, p_l), zero)
+            # the sum starts with it (the replay's loop takes no differentiable input:
+            # its own derivative joins after the loop)
+            light_acc0, gathered0 = mi.Spectrum(dr.detach(link0)), mi.Spectrum(dr.detach(link0))
         if self.mode.polarized:
             # Mueller matrices that start as literals fill in along the loop (walk.py)
             dr.make_opaque(acc0, light_acc0, gathered0)
         state = (acc0, light_acc0, gathered0, dr.detach(beta0), mi.Vector3f(w0),
-                 mi.UInt32(0), rng, mi.Bool(ok0))
-        side = (v, p_o, ok_o, light if totals is None else dr.detach(light), light)
+                 mi.Float(dr.detach(p0)), mi.UInt32(0), rng, mi.Bool(ok0))
+        side = (v, p_o, ok_o, light_d, tail)
 
-        def cond(acc, light_acc, gathered, beta, w, depth, rng, active):
+        def cond(acc, light_acc, gathered, beta, w, p_w, depth, rng, active):
             return active
 
-        def body(acc, light_acc, gathered, beta, w, depth, rng, active):
+        def body(acc, light_acc, gathered, beta, w, p_w, depth, rng, active):
             return self.vertex(ctx_mode, si, wo, side, totals, acc, light_acc, gathered,
-                               beta, w, depth, rng, active)
+                               beta, w, p_w, depth, rng, active)
 
-        labels = ("acc", "light_acc", "gathered", "beta", "w", "depth", "rng", "active")
+        labels = ("acc", "light_acc", "gathered", "beta", "w", "p_w", "depth", "rng", "active")
         out = dr.while_loop(state, cond, body, labels=labels,
                             max_iterations=-1 if totals is not None else None)
         if totals is None:
             return out[0], out[1]
-        # the factors before the loop scale all of W (β_0) or W_L (the light side)
-        return mi.Spectrum(out[0] + ratio(beta0) * totals[0] + ratio(light) * totals[1]), None
+        # the link before the loop, and the factors before it that scale the rest of W
+        # (β_0) and W_L (the light side)
+        return mi.Spectrum(out[0] + link0 + ratio(beta0) * (totals[0] - dr.detach(link0))
+                           + ratio(light) * totals[1]), None
 
     def vertex(self, ctx_mode, si, wo, side, totals, acc, light_acc, gathered, beta, w,
-               depth, rng, active):
-        """One base vertex of :meth:`run`: its two next-event estimates, the base's
-        sample, the underside's reflection and Russian roulette; in the replay
-        (``totals`` given) the vertex's gradient terms (:meth:`walk`)."""
+               p_w, depth, rng, active):
+        """One base vertex of :meth:`run` (``p_w``: the density ``w`` was sampled with):
+        its two next-event estimates, the base's sample, the underside's reflection, over
+        a pure-delta base the link to the light side through the next vertex, and Russian
+        roulette; in the replay (``totals`` given) the vertex's gradient terms
+        (:meth:`walk`)."""
         mi = mitsuba_module()
         top, base = self.top, self.base
-        v, p_o, ok_o, light, _ = side
+        v, p_o, ok_o, light, tail = side
         ctx = mi.BSDFContext(ctx_mode)
         zero = dr.zeros(mi.Spectrum)
         si_b = base_interaction(si, w)
@@ -184,24 +218,37 @@ class RoughEstimator(CoatedEstimator):
             g = dr.select(delta, g, base.eval(ctx, si_b, y, alive) / pdf)
         e_y, _ = top.lobe(si, -y, wo, alive, reflect=False, inside=True)
         _, p_y = top.lobe(si, wo, -y, alive, reflect=False, inside=False, want_value=False)
-        mis = dr.select(delta, 1.0, power_heuristic(dr.detach(bs.pdf), dr.detach(p_y)))
+        # a delta vertex's exit is the walk's alone, or, linked, weighed against the link
+        # that reached it from the light side (its density that of the sampled w)
+        mis_delta = power_heuristic(p_w, dr.detach(p_y)) if self.linked else 1.0
+        mis = dr.select(delta, mis_delta, power_heuristic(dr.detach(bs.pdf), dr.detach(p_y)))
         through = g * self.absorb(si, y.z, alive)
         exit_ = dr.select(alive, beta * through * e_y * mis, zero)
-        z, r, _, ok_r = top.sample(si, -y, self.numbers(rng), alive, True, True)
+        z, r, p_z, ok_r = top.sample(si, -y, self.numbers(rng), alive, True, True)
         w_next = -z
         depth = depth + 1
         active = alive & ok_r & (depth < self.max_bounces)
         step = through * r * self.absorb(si, w_next.z, active)
-        light_acc = mi.Spectrum(light_acc + dr.detach(nee))
-        gathered = mi.Spectrum(gathered + dr.detach(nee + exit_))
+        link = zero
+        if self.linked:
+            # the next vertex reached from the light side: the underside reflects towards
+            # the direction the mirror sends to -v
+            ok_l = alive & ok_o & (depth < self.max_bounces)
+            f_l, p_l = top.lobe(si, -y, mi.Vector3f(-v.x, -v.y, v.z), ok_l, reflect=True,
+                                inside=True)
+            link = dr.select(ok_l, beta * through * f_l * tail * power_heuristic(p_o, p_l),
+                             zero)
+        light_acc = mi.Spectrum(light_acc + dr.detach(nee + link))
+        gathered = mi.Spectrum(gathered + dr.detach(nee + exit_ + link))
         if totals is None:
             acc = gathered
         else:
-            acc = mi.Spectrum(acc + nee + exit_
+            acc = mi.Spectrum(acc + nee + exit_ + link
                               + dr.select(active, ratio(step) * (totals[0] - gathered), zero))
         beta = mi.Spectrum(dr.select(active, beta * dr.detach(step), zero))
         beta, active = roulette(beta, depth, rng, active, self.mode.polarized)
-        return acc, light_acc, gathered, mi.Spectrum(beta), w_next, depth, rng, active
+        return (acc, light_acc, gathered, mi.Spectrum(beta), w_next, mi.Float(dr.detach(p_z)),
+                depth, rng, active)
 
     @staticmethod
     def numbers(rng):
