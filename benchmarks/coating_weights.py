@@ -109,6 +109,8 @@ def main() -> None:
     rows = []
     for label, base in BASES:
         if "spectra" in base:
+            if not mi.is_spectral:      # Mitsuba evaluates `regular` spectra there only
+                continue
             base = {k: v for k, v in base.items() if k != "spectra"} | conductor_spectra(base["spectra"])
         alone = mi.load_dict(base)
         coat = mi.load_dict({"type": "thinfilm_coating", **COAT, "alpha": args.alpha,

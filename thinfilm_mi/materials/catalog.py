@@ -356,8 +356,9 @@ def conductor_spectra(material: Any) -> dict:
     floats for a constant. Why: Mitsuba's ``material`` is an ``irregular`` spectrum, which
     searches the data's knots at every evaluation, where a ``regular`` one reads a cell
     with one multiply and a gather per wavelength; a base under ``thinfilm_coating`` is
-    evaluated several times per bounce of its walk. Raises :class:`MaterialError` where
-    no grid is that close."""
+    evaluated several times per bounce of its walk. For spectral variants: Mitsuba
+    evaluates a ``regular`` spectrum only there (in RGB and mono variants ``material``
+    is a constant already). Raises :class:`MaterialError` where no grid is that close."""
     mat = resolve(material)
     if isinstance(mat, ConstantMaterial):
         value = complex(mat.index(np.array([550.0]))[0])
