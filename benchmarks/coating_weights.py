@@ -71,7 +71,9 @@ def weights(bsdf, cos_theta: float, n: int, seed: int = 7):
     s1 = mi.Float(rng.random(n, dtype=np.float32))
     s2 = mi.Point2f(rng.random(n, dtype=np.float32), rng.random(n, dtype=np.float32))
     _, w = bsdf.sample(ctx, si, s1, s2, True)
-    w = np.asarray(mi.unpolarized_spectrum(w)).reshape(-1, n)[0]
+    w = np.asarray(mi.unpolarized_spectrum(w))
+    # a weight the same in every lane (a constant albedo) is one column
+    w = np.broadcast_to(w[:, None] if w.ndim == 1 else w, (w.shape[0], n))[0]
     return np.nan_to_num(w)
 
 
