@@ -25,7 +25,7 @@ combined by the power heuristic:
   ``p_b² / (p_b² + p_o(-y)²)``, 1 where the base sampled a delta lobe (the light's side
   never draws one).
 
-**Over a pure-delta base** (a smooth ``conductor``; not in polarized variants), whose
+**Over a pure-delta base** (a smooth ``conductor``), whose
 mirror makes the first estimate 0 and left the second alone with the top's peaked
 transmission evaluated at a random ``-y``, the light's side is linked one step earlier
 (:attr:`RoughEstimator.linked`): towards ``w* = (v_x, v_y, -v_z)``, the base's ``wi`` that
@@ -36,7 +36,8 @@ the underside's reflection at every vertex (``β_k g A(y) f_r(-y, -w*) cos · A(
 walk samples ``-w*`` there; the walk's exit after the mirror then weighs itself against
 it, ``p_w² / (p_w² + p_o(-y)²)`` with ``p_w`` the density its ``w_k`` was sampled with (the
 mirror maps the two directions with a unit Jacobian, so both densities measure the same
-path).
+path). In polarized variants each factor is the Mueller matrix of its event, in the order
+of the sampled path's (the link replaces the sampled reflection ``r`` by its value).
 
 The walk then reflects at the underside, sampled from ``-y`` (the reflection lobe alone,
 its transmission being the next-event estimates' business): ``β_{k+1} = β_k g A(y) f_t
@@ -104,8 +105,8 @@ class RoughEstimator(CoatedEstimator):
         #: the cosine lobe's share of the sampling mixture (:data:`ROUGH_MIXTURE`)
         self.mix = opaque_float(ROUGH_MIXTURE)
         #: whether the walk links the light side through the mirror of a pure-delta base
-        #: (module docstring; not in polarized variants, whose frames would need chaining)
-        self.linked = self.delta is not None and not bottom.lobes and not mode.polarized
+        #: (module docstring)
+        self.linked = self.delta is not None and not bottom.lobes
 
     def describe(self) -> str:
         """The stack, the media and the base, then the roughness, for ``to_string``."""
