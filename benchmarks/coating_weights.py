@@ -44,6 +44,7 @@ BASES = [
     ("roughconductor Al (regular spectra), α 0.3",
      {"type": "roughconductor", "spectra": "mitsuba:Al", "alpha": 0.3}),
     ("conductor Al (smooth)", {"type": "conductor", "material": "Al"}),
+    ("roughconductor α 0.05 (polished)", {"type": "roughconductor", "alpha": 0.05}),
     ("principled grey, roughness 0.3", {"type": "principled", "roughness": 0.3,
                                         "base_color": {"type": "rgb", "value": 0.5}}),
     ("diffuse 0.5", {"type": "diffuse", "reflectance": {"type": "rgb", "value": 0.5}}),

@@ -24,8 +24,9 @@ BASES = {
                    "base_color": {"type": "rgb", "value": [0.7, 0.3, 0.2]}},
 }
 FILMS = "TiO2 120; SiO2 200"
-#: a pure-delta base, whose walk links the light side through its mirror
-DELTA_BASES = {"conductor": {"type": "conductor", "material": "Au"}}
+#: bases whose walks link the light side: through a mirror, and a near-specular lobe
+DELTA_BASES = {"conductor": {"type": "conductor", "material": "Au"},
+               "polished": {"type": "roughconductor", "alpha": 0.05}}
 
 
 @pytest.fixture(autouse=True)
@@ -160,7 +161,7 @@ def test_sample_pdf_is_pdf_and_weight_estimates_eval():
     assert np.all(np.abs(m) <= 4 * e)
 
 
-@pytest.mark.parametrize("base", ["diffuse", "roughconductor", "conductor"])
+@pytest.mark.parametrize("base", ["diffuse", "roughconductor", "conductor", "polished"])
 @pytest.mark.parametrize("layers", ["", FILMS], ids=["bare", "films"])
 def test_albedo_is_the_explicit_walks(base, layers):
     """The albedo (mean sample weight) at 0, 30, 60, 80 degrees is the explicit walk's
@@ -357,8 +358,8 @@ def test_polarized_link_keeps_the_mueller_expectation():
     spec = {"type": "thinfilm_coating", "layers": "TiO2 80", "int_ior": 1.5, "alpha": 0.2,
             "coat_sigma_a": 0.2, "bsdf": {"type": "conductor", "material": "Au"}}
     linked, plain = mi.load_dict(spec), mi.load_dict(spec)
-    assert linked.coating.linked
-    plain.coating.linked = False
+    assert linked.coating.mirror
+    plain.coating.mirror = False
     for theta in (50.0,):
         out = []
         for b in (linked, plain):

@@ -28,7 +28,7 @@ combined by the power heuristic:
 **Over a pure-delta base** (a smooth ``conductor``), whose
 mirror makes the first estimate 0 and left the second alone with the top's peaked
 transmission evaluated at a random ``-y``, the light's side is linked one step earlier
-(:attr:`RoughEstimator.linked`): towards ``w* = (v_x, v_y, -v_z)``, the base's ``wi`` that
+(:attr:`RoughEstimator.mirror`): towards ``w* = (v_x, v_y, -v_z)``, the base's ``wi`` that
 the mirror sends along ``-v``, from the top's transmission at ``ω_i`` before the first
 vertex (``f_t(ω_i, -w*) cos · A(w*) B_δ(w*) · A(v) f_t(v, ω_o) cos θ_o / p_o(v)``) and from
 the underside's reflection at every vertex (``β_k g A(y) f_r(-y, -w*) cos · A(w*) B_δ(w*)
@@ -36,8 +36,16 @@ the underside's reflection at every vertex (``β_k g A(y) f_r(-y, -w*) cos · A(
 walk samples ``-w*`` there; the walk's exit after the mirror then weighs itself against
 it, ``p_w² / (p_w² + p_o(-y)²)`` with ``p_w`` the density its ``w_k`` was sampled with (the
 mirror maps the two directions with a unit Jacobian, so both densities measure the same
-path). In polarized variants each factor is the Mueller matrix of its event, in the order
-of the sampled path's (the link replaces the sampled reflection ``r`` by its value).
+path). **Over a base with a glossy lobe** the link draws that ``wi`` instead: ``w*`` from
+the base's non-delta lobes sampled at ``-v`` (density ``p̃``; the same lobe, by
+reciprocity), reached as above with ``B_δ(w*)`` replaced by ``f_b(w*, -v) cos / p̃``
+(:meth:`RoughEstimator.light_link`). Its two next-event estimates and the link are then
+three strategies for the last two directions of a path, weighed by the power heuristic of
+``p_w p_b(y | w)`` (the exit), ``p_w p_o(-y)`` (towards ``-v``) and ``p_o(-y) p̃(w | y)``
+(the link): a near-specular base, whose first two both evaluate a peaked lobe at a random
+direction, gains most. A diffuse base has no link (its next-event estimate is as broad).
+In polarized variants each factor is the Mueller matrix of its event, in the order of the
+sampled path's (the link replaces the sampled reflection ``r`` by its value).
 
 The walk then reflects at the underside, sampled from ``-y`` (the reflection lobe alone,
 its transmission being the next-event estimates' business): ``β_{k+1} = β_k g A(y) f_t
@@ -95,6 +103,14 @@ __all__ = ["ROUGH_MIXTURE", "RoughEstimator"]
 ROUGH_MIXTURE = 0.5
 
 
+def power3(p, q, r):
+    """Veach's power heuristic (exponent 2) of the strategy of density ``p`` against two
+    of densities ``q`` and ``r``; detached."""
+    p2 = dr.square(dr.detach(p))
+    total = p2 + dr.square(dr.detach(q)) + dr.square(dr.detach(r))
+    return dr.select(p2 > 0, p2 / dr.select(p2 > 0, total, 1.0), 0.0)
+
+
 class RoughEstimator(CoatedEstimator):
     """The layered BSDF of ``top`` (a :class:`~thinfilm_mi.render.layered.top.RoughTop`)
     over ``bottom`` (a :class:`~thinfilm_mi.render.layered.bottom.NestedBottom`) through
@@ -104,9 +120,12 @@ class RoughEstimator(CoatedEstimator):
         super().__init__(top, bottom, medium, mode, plugin, max_bounces)
         #: the cosine lobe's share of the sampling mixture (:data:`ROUGH_MIXTURE`)
         self.mix = opaque_float(ROUGH_MIXTURE)
-        #: whether the walk links the light side through the mirror of a pure-delta base
-        #: (module docstring)
-        self.linked = self.delta is not None and not bottom.lobes
+        #: how the walk links the light side one step early (module docstring): through the
+        #: mirror of a pure-delta base, or, over a base with a glossy lobe, by a sample of its
+        #: non-delta lobes drawn from the light's side (a diffuse base's next-event
+        #: estimate is already as broad as the link's)
+        self.mirror = self.delta is not None and not bottom.lobes
+        self.reverse = mitsuba_module().BSDFFlags.GlossyReflection in bottom.lobes
 
     def describe(self) -> str:
         """The stack, the media and the base, then the roughness, for ``to_string``."""
@@ -156,16 +175,14 @@ class RoughEstimator(CoatedEstimator):
         beta0 = mi.Spectrum(t0 * self.absorb(si, w0.z, ok0))
         zero = dr.zeros(mi.Spectrum)
         acc0, light_acc0, gathered0 = mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(zero)
-        tail, link0 = None, zero
-        if self.linked:
-            # the light side's direction reached through the mirror: the base's wi that
-            # reflects to -v, and what the light gains from it to ω_o
-            w_link = mi.Vector3f(v.x, v.y, -v.z)
-            ok_l = active & ok_o & (self.max_bounces > 0)
-            tail = self.absorb(si, w_link.z, ok_l) * self.delta.reflectance(
-                ctx_mode, si, w_link, (mi.Float(0.5), mi.Point2f(0.5, 0.5)), ok_l) * light_d
+        link = self.light_link(ctx_mode, si, v, light_d, active & ok_o & (self.max_bounces > 0),
+                               rng)
+        link0 = zero
+        if link is not None:
+            # the first vertex reached from the light side, from the top's transmission
+            w_link, tail, rev, ok_l = link
             t_l, p_l = top.lobe(si, si.wi, -w_link, ok_l, reflect=False, inside=False)
-            link0 = dr.select(ok_l, t_l * tail * power_heuristic(p_o, p_l), zero)
+            link0 = dr.select(ok_l, t_l * tail * self.link_weight(p_l, p_o, rev), zero)
             # the sum starts with it (the replay's loop takes no differentiable input:
             # its own derivative joins after the loop)
             light_acc0, gathered0 = mi.Spectrum(dr.detach(link0)), mi.Spectrum(dr.detach(link0))
@@ -174,7 +191,7 @@ class RoughEstimator(CoatedEstimator):
             dr.make_opaque(acc0, light_acc0, gathered0)
         state = (acc0, light_acc0, gathered0, dr.detach(beta0), mi.Vector3f(w0),
                  mi.Float(dr.detach(p0)), mi.UInt32(0), rng, mi.Bool(ok0))
-        side = (v, p_o, ok_o, light_d, tail)
+        side = (v, p_o, ok_o, light_d, link)
 
         def cond(acc, light_acc, gathered, beta, w, p_w, depth, rng, active):
             return active
@@ -193,6 +210,39 @@ class RoughEstimator(CoatedEstimator):
         return mi.Spectrum(out[0] + link0 + ratio(beta0) * (totals[0] - dr.detach(link0))
                            + ratio(light) * totals[1]), None
 
+    def light_link(self, ctx_mode, si, v, light, active, rng):
+        """``(w*, tail, rev, ok)``: the base's ``wi`` from which the light side's ``-v`` is
+        reached, and what the light gains from there to ``ω_o`` (``tail``); ``rev``: the
+        reverse sample's densities ``(p̃(w*), p_b(-v | w*))`` (``None`` through a mirror);
+        ``None`` where the walk links nothing (module docstring)."""
+        mi = mitsuba_module()
+        if self.mirror:
+            w_link = mi.Vector3f(v.x, v.y, -v.z)
+            reflect = self.delta.reflectance(ctx_mode, si, w_link,
+                                             (mi.Float(0.5), mi.Point2f(0.5, 0.5)), active)
+            return w_link, self.absorb(si, w_link.z, active) * reflect * light, None, active
+        if not self.reverse:
+            return None
+        base = self.base
+        with dr.suspend_grad():
+            bs, _ = base.sample(self.bottom.smooth_context(ctx_mode), base_interaction(si, -v),
+                                rng.next_float32(), self.numbers(rng), active)
+        w_link, p_rev = dr.detach(bs.wo), dr.detach(bs.pdf)
+        ok = active & (w_link.z > 0) & (p_rev > 0)
+        e, p_b = base.eval_pdf(mi.BSDFContext(ctx_mode), base_interaction(si, w_link), -v, ok)
+        tail = self.absorb(si, w_link.z, ok) * e * light / dr.select(ok, p_rev, 1.0)
+        return w_link, tail, (p_rev, dr.detach(p_b)), ok
+
+    @staticmethod
+    def link_weight(p_l, p_o, rev):
+        """The link's MIS weight: against the walk's own step of density ``p_l`` to the
+        same direction (through a mirror), or, with the reverse sample's densities ``rev``,
+        against the walk's exit and its next-event estimate there."""
+        if rev is None:
+            return power_heuristic(p_o, p_l)
+        p_rev, p_b = rev
+        return power3(p_o * p_rev, p_l * p_b, p_l * p_o)
+
     def vertex(self, ctx_mode, si, wo, side, totals, acc, light_acc, gathered, beta, w,
                p_w, depth, rng, active):
         """One base vertex of :meth:`run` (``p_w``: the density ``w`` was sampled with):
@@ -202,13 +252,19 @@ class RoughEstimator(CoatedEstimator):
         (:meth:`walk`)."""
         mi = mitsuba_module()
         top, base = self.top, self.base
-        v, p_o, ok_o, light, tail = side
+        v, p_o, ok_o, light, link = side
         ctx = mi.BSDFContext(ctx_mode)
+        ctx_s = self.bottom.smooth_context(ctx_mode)
         zero = dr.zeros(mi.Spectrum)
         si_b = base_interaction(si, w)
         e, p_b = base.eval_pdf(ctx, si_b, -v, active & ok_o)
-        nee = dr.select(active & ok_o, beta * e * light * power_heuristic(p_o, dr.detach(p_b)),
-                        zero)
+        if self.reverse:
+            # the reverse sample would reach w from -v with this density
+            q = base.pdf(ctx_s, base_interaction(si, -v), w, active & ok_o)
+            w_nee = power3(p_w * p_o, p_w * dr.detach(p_b), p_o * dr.detach(q))
+        else:
+            w_nee = power_heuristic(p_o, dr.detach(p_b))
+        nee = dr.select(active & ok_o, beta * e * light * w_nee, zero)
         bs, g = base.sample(ctx, si_b, rng.next_float32(), self.numbers(rng), active)
         y = dr.detach(bs.wo)
         alive = active & (y.z > 0) & (bs.pdf > 0)
@@ -219,10 +275,16 @@ class RoughEstimator(CoatedEstimator):
             g = dr.select(delta, g, base.eval(ctx, si_b, y, alive) / pdf)
         e_y, _ = top.lobe(si, -y, wo, alive, reflect=False, inside=True)
         _, p_y = top.lobe(si, wo, -y, alive, reflect=False, inside=False, want_value=False)
-        # a delta vertex's exit is the walk's alone, or, linked, weighed against the link
-        # that reached it from the light side (its density that of the sampled w)
-        mis_delta = power_heuristic(p_w, dr.detach(p_y)) if self.linked else 1.0
-        mis = dr.select(delta, mis_delta, power_heuristic(dr.detach(bs.pdf), dr.detach(p_y)))
+        # a delta vertex's exit is the walk's alone, or, through a mirror, weighed against
+        # the link that reached it from the light side (its density that of the sampled w)
+        mis_delta = power_heuristic(p_w, dr.detach(p_y)) if self.mirror else 1.0
+        if self.reverse:
+            q = base.pdf(ctx_s, base_interaction(si, y), w, alive & logical_not(delta))
+            mis_lobe = power3(p_w * dr.detach(bs.pdf), p_w * dr.detach(p_y),
+                              dr.detach(p_y) * dr.detach(q))
+        else:
+            mis_lobe = power_heuristic(dr.detach(bs.pdf), dr.detach(p_y))
+        mis = dr.select(delta, mis_delta, mis_lobe)
         through = g * self.absorb(si, y.z, alive)
         exit_ = dr.select(alive, beta * through * e_y * mis, zero)
         z, r, p_z, ok_r = top.sample(si, -y, self.numbers(rng), alive, True, True)
@@ -230,21 +292,21 @@ class RoughEstimator(CoatedEstimator):
         depth = depth + 1
         active = alive & ok_r & (depth < self.max_bounces)
         step = through * r * self.absorb(si, w_next.z, active)
-        link = zero
-        if self.linked:
+        linked = zero
+        if link is not None:
             # the next vertex reached from the light side: the underside reflects towards
-            # the direction the mirror sends to -v
-            ok_l = alive & ok_o & (depth < self.max_bounces)
-            f_l, p_l = top.lobe(si, -y, mi.Vector3f(-v.x, -v.y, v.z), ok_l, reflect=True,
-                                inside=True)
-            link = dr.select(ok_l, beta * through * f_l * tail * power_heuristic(p_o, p_l),
-                             zero)
-        light_acc = mi.Spectrum(light_acc + dr.detach(nee + link))
-        gathered = mi.Spectrum(gathered + dr.detach(nee + exit_ + link))
+            # the base's wi from which -v is reached
+            w_link, tail, rev, ok_link = link
+            ok_l = alive & ok_link & (depth < self.max_bounces)
+            f_l, p_l = top.lobe(si, -y, -w_link, ok_l, reflect=True, inside=True)
+            linked = dr.select(ok_l, beta * through * f_l * tail
+                               * self.link_weight(p_l, p_o, rev), zero)
+        light_acc = mi.Spectrum(light_acc + dr.detach(nee + linked))
+        gathered = mi.Spectrum(gathered + dr.detach(nee + exit_ + linked))
         if totals is None:
             acc = gathered
         else:
-            acc = mi.Spectrum(acc + nee + exit_ + link
+            acc = mi.Spectrum(acc + nee + exit_ + linked
                               + dr.select(active, ratio(step) * (totals[0] - gathered), zero))
         beta = mi.Spectrum(dr.select(active, beta * dr.detach(step), zero))
         beta, active = roulette(beta, depth, rng, active, self.mode.polarized)
