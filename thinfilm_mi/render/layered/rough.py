@@ -175,6 +175,9 @@ class RoughEstimator(CoatedEstimator):
         beta0 = mi.Spectrum(t0 * self.absorb(si, w0.z, ok0))
         zero = dr.zeros(mi.Spectrum)
         acc0, light_acc0, gathered0 = mi.Spectrum(zero), mi.Spectrum(zero), mi.Spectrum(zero)
+        if self.mode.polarized:
+            # Mueller matrices that start as literals fill in along the loop (walk.py)
+            dr.make_opaque(acc0, light_acc0, gathered0)
         link = self.light_link(ctx_mode, si, v, light_d, active & ok_o & (self.max_bounces > 0),
                                rng)
         link0 = zero
@@ -185,10 +188,8 @@ class RoughEstimator(CoatedEstimator):
             link0 = dr.select(ok_l, t_l * tail * self.link_weight(p_l, p_o, rev), zero)
             # the sum starts with it (the replay's loop takes no differentiable input:
             # its own derivative joins after the loop)
-            light_acc0, gathered0 = mi.Spectrum(dr.detach(link0)), mi.Spectrum(dr.detach(link0))
-        if self.mode.polarized:
-            # Mueller matrices that start as literals fill in along the loop (walk.py)
-            dr.make_opaque(acc0, light_acc0, gathered0)
+            light_acc0 = mi.Spectrum(light_acc0 + dr.detach(link0))
+            gathered0 = mi.Spectrum(gathered0 + dr.detach(link0))
         state = (acc0, light_acc0, gathered0, dr.detach(beta0), mi.Vector3f(w0),
                  mi.Float(dr.detach(p0)), mi.UInt32(0), rng, mi.Bool(ok0))
         side = (v, p_o, ok_o, light_d, link)
