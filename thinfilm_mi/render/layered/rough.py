@@ -247,10 +247,10 @@ class RoughEstimator(CoatedEstimator):
     def vertex(self, ctx_mode, si, wo, side, totals, acc, light_acc, gathered, beta, w,
                p_w, depth, rng, active):
         """One base vertex of :meth:`run` (``p_w``: the density ``w`` was sampled with):
-        its two next-event estimates, the base's sample, the underside's reflection, over
-        a pure-delta base the link to the light side through the next vertex, and Russian
-        roulette; in the replay (``totals`` given) the vertex's gradient terms
-        (:meth:`walk`)."""
+        its two next-event estimates, the base's sample, the underside's reflection, the
+        link to the light side through the next vertex (over a mirror or glossy base,
+        :meth:`light_link`), and Russian roulette; in the replay (``totals`` given) the
+        vertex's gradient terms (:meth:`walk`)."""
         mi = mitsuba_module()
         top, base = self.top, self.base
         v, p_o, ok_o, light, link = side
