@@ -361,8 +361,7 @@ def conductor_spectra(material: Any) -> dict:
     is a constant already). Raises :class:`MaterialError` where no grid is that close."""
     mat = resolve(material)
     if isinstance(mat, ConstantMaterial):
-        value = complex(mat.index(np.array([550.0]))[0])
-        return {"eta": value.real, "k": value.imag}
+        return {"eta": mat.constant.real, "k": mat.constant.imag}
     fit = mat.uniform_resampling()
     if fit is None:
         raise MaterialError(f"conductor_spectra: material {material!r} has no uniform grid "

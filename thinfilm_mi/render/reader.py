@@ -169,7 +169,7 @@ class PluginProperties:
     def indices(self, *named: tuple[str, Any]) -> list[SpectralIndex]:
         """The non-absorbing media of an interface, read together and in order: one
         :meth:`index` per ``(name, default)`` (e.g. ``int_ior`` and ``ext_ior``)."""
-        return [real_index(self.props.get(name, default), name) for name, default in named]
+        return [self.index(name, default) for name, default in named]
 
     def substrate(self, default: str = "Au") -> SpectralIndex:
         """A conductor's substrate: ``material`` or ``eta`` + ``k`` (textures checked over
@@ -249,7 +249,7 @@ class PluginProperties:
         options = self.stack_options()
         films = self.films()
         if ambient is None:
-            ambient = real_index(self.props.get("ext_ior", DEFAULT_EXT_IOR), "ext_ior")
+            ambient = self.index("ext_ior", DEFAULT_EXT_IOR)
         return StackSpec(films, ambient, substrate, options)
 
     def check_unqueried(self) -> None:

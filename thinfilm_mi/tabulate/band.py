@@ -129,6 +129,7 @@ from thinfilm_mi.tabulate.base import (
     film_gather,
     opaque_float,
     side_indices,
+    unique_wavelengths,
     with_ghosts,
 )
 from thinfilm_mi.tabulate.bilinear import SPLINE_SHARE, resample
@@ -599,7 +600,7 @@ class Rows:
     def _exact(self, xs: np.ndarray, r: np.ndarray, nu: np.ndarray):
         """Exact ``R`` [, ``T``] at rows ``xs[r[i]]`` and wavenumbers ``nu[i]``, and
         the per-point ``cos``."""
-        wl, inv = np.unique(1.0 / nu, return_inverse=True)
+        wl, inv = unique_wavelengths(1.0 / nu)
         if wl.size == 1:     # a 1-element buffer would trace as a scalar: another kernel
             wl = np.repeat(wl, 2)
         idx = side_indices(self.side, wl)
