@@ -103,14 +103,6 @@ __all__ = ["ROUGH_MIXTURE", "RoughEstimator"]
 ROUGH_MIXTURE = 0.5
 
 
-def power3(p, q, r):
-    """Veach's power heuristic (exponent 2) of the strategy of density ``p`` against two
-    of densities ``q`` and ``r``; detached."""
-    p2 = dr.square(dr.detach(p))
-    total = p2 + dr.square(dr.detach(q)) + dr.square(dr.detach(r))
-    return dr.select(p2 > 0, p2 / dr.select(p2 > 0, total, 1.0), 0.0)
-
-
 class RoughEstimator(CoatedEstimator):
     """The layered BSDF of ``top`` (a :class:`~thinfilm_mi.render.layered.top.RoughTop`)
     over ``bottom`` (a :class:`~thinfilm_mi.render.layered.bottom.NestedBottom`) through
@@ -242,7 +234,7 @@ class RoughEstimator(CoatedEstimator):
         if rev is None:
             return power_heuristic(p_o, p_l)
         p_rev, p_b = rev
-        return power3(p_o * p_rev, p_l * p_b, p_l * p_o)
+        return power_heuristic(p_o * p_rev, p_l * p_b, p_l * p_o)
 
     def vertex(self, ctx_mode, si, wo, side, totals, acc, light_acc, gathered, beta, w,
                p_w, depth, rng, active):
@@ -262,7 +254,7 @@ class RoughEstimator(CoatedEstimator):
         if self.reverse:
             # the reverse sample would reach w from -v with this density
             q = base.pdf(ctx_s, base_interaction(si, -v), w, active & ok_o)
-            w_nee = power3(p_w * p_o, p_w * dr.detach(p_b), p_o * dr.detach(q))
+            w_nee = power_heuristic(p_w * p_o, p_w * dr.detach(p_b), p_o * dr.detach(q))
         else:
             w_nee = power_heuristic(p_o, dr.detach(p_b))
         nee = dr.select(active & ok_o, beta * e * light * w_nee, zero)
@@ -281,7 +273,7 @@ class RoughEstimator(CoatedEstimator):
         mis_delta = power_heuristic(p_w, dr.detach(p_y)) if self.mirror else 1.0
         if self.reverse:
             q = base.pdf(ctx_s, base_interaction(si, y), w, alive & logical_not(delta))
-            mis_lobe = power3(p_w * dr.detach(bs.pdf), p_w * dr.detach(p_y),
+            mis_lobe = power_heuristic(p_w * dr.detach(bs.pdf), p_w * dr.detach(p_y),
                               dr.detach(p_y) * dr.detach(q))
         else:
             mis_lobe = power_heuristic(dr.detach(bs.pdf), dr.detach(p_y))

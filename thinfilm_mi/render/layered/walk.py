@@ -304,11 +304,14 @@ def ratio(x):
     return dr.select(live, x / dr.select(live, dr.detach(x), 1.0), 0.0)
 
 
-def power_heuristic(p, q):
-    """Veach's power heuristic (exponent 2) of the strategy of density ``p`` against one
-    of density ``q``; detached."""
-    p2, q2 = dr.square(dr.detach(p)), dr.square(dr.detach(q))
-    return dr.select(p2 > 0, p2 / dr.select(p2 > 0, p2 + q2, 1.0), 0.0)
+def power_heuristic(p, *others):
+    """Veach's power heuristic (exponent 2) of the strategy of density ``p`` against the
+    others' densities; detached."""
+    p2 = dr.square(dr.detach(p))
+    total = p2
+    for q in others:
+        total = total + dr.square(dr.detach(q))
+    return dr.select(p2 > 0, p2 / dr.select(p2 > 0, total, 1.0), 0.0)
 
 
 def roulette(beta, depth, rng, active, polarized: bool):
