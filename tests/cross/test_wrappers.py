@@ -99,6 +99,15 @@ def outputs(bsdf, si, s1, s2, wo_eval):
                 f_pdf=np.broadcast_to(np_(pdf), (n,)))
 
 
+def paired_outputs(ours, theirs, wi):
+    """:func:`outputs` of both BSDFs at the incident directions ``wi`` with the same random
+    outgoing directions, sample numbers and uv."""
+    wo = unit(RNG.normal(size=(N, 3)))
+    s1, s2, uv = RNG.random(N), RNG.random((N, 2)), RNG.random((N, 2))
+    return (outputs(ours, interaction(wi, uv), s1, s2, wo),
+            outputs(theirs, interaction(wi, uv), s1, s2, wo))
+
+
 @pytest.mark.parametrize("wrapper", ["none", "blendbsdf", "twosided", "mask", "bumpmap",
                                      "normalmap"])
 
@@ -112,10 +121,7 @@ def test_wrapped_plugin_matches_wrapped_mitsuba_plugin_without_films(kind, wrapp
     if kind not in TRANSMISSIVE and wrapper != "twosided":
         wi[:, 2] = np.abs(wi[:, 2])       # include grazing and, below, back-side lanes
         wi[: N // 16, 2] *= -1
-    wo = unit(RNG.normal(size=(N, 3)))
-    s1, s2, uv = RNG.random(N), RNG.random((N, 2)), RNG.random((N, 2))
-    a = outputs(ours, interaction(wi, uv), s1, s2, wo)
-    b = outputs(theirs, interaction(wi, uv), s1, s2, wo)
+    a, b = paired_outputs(ours, theirs, wi)
     # float32 recursion against Mitsuba's float32 Fresnel: ~1e-6 relative; microfacet
     # weights reach ~10, so 2e-4 relative with a 2e-5 floor.
     np.testing.assert_allclose(a["w"], b["w"], rtol=2e-4, atol=2e-5)
@@ -161,10 +167,7 @@ def test_coated_plugin_matches_coated_mitsuba_plugin(kind, coating):
     ours, theirs = (mi.load_dict(wrap(coating, d)) for d in PAIRS[kind])
     wi = unit(RNG.normal(size=(N, 3)))
     wi[:, 2] = np.abs(wi[:, 2])
-    wo = unit(RNG.normal(size=(N, 3)))
-    s1, s2, uv = RNG.random(N), RNG.random((N, 2)), RNG.random((N, 2))
-    a = outputs(ours, interaction(wi, uv), s1, s2, wo)
-    b = outputs(theirs, interaction(wi, uv), s1, s2, wo)
+    a, b = paired_outputs(ours, theirs, wi)
     for key in ("w", "f"):
         assert np.all(np.isfinite(a[key])), key
         d = (a[key] - b[key]).mean(axis=0)
