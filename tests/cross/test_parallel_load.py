@@ -1,57 +1,121 @@
-"""Parallel scene loading with thin-film plugins (issue: a use-after-free of
-Mitsuba's FileResolver).
+"""Scene loading with thin-film plugins, on Mitsuba's loader threads or not.
 
-Before the fix the plugin constructors built helper spectra with
-``mi.load_dict``, which installs a copy of the global FileResolver and frees it
-on return; C++ plugins resolving file names on other loader threads read the
-freed copy. The child script (``tests/support/parallel_load_child.py``) widens that window;
-with the old constructors about one fresh process in four failed
-(``std::bad_alloc``, ``basic_string::_M_create`` or SIGSEGV; measured 13-25 % over
-16-40 processes), so 12 processes all passing had a chance of ~3 % (0.75^12)
-before the fix. After it, none may fail. The cause itself (a constructor that calls
-``mi.load_*``) is checked without chance by
-:func:`test_no_plugin_constructor_swaps_the_file_resolver`, so the stress test need not
-be long enough to find it alone.
+* A constructor that calls ``mi.load_*`` installs a copy of the global FileResolver
+  and frees it on return, under C++ plugins resolving file names on other loader
+  threads (``std::bad_alloc`` or SIGSEGV in about one fresh process in four, before
+  the fix): checked without chance, on the syntax tree and with spies.
+* A constructor of ours that waits for a kernel on a loader thread ran another
+  object's constructor nested inside that wait (one SIGSEGV in the test suite, under
+  ``texture_range``; ``thinfilm_mi/render/gc_guard.py``): a scene that names one of
+  our plugins loads on the calling thread, which is checked without chance by
+  recording where the constructors run.
 """
 from __future__ import annotations
 
 import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
+import threading
 
 import numpy as np
+import pytest
 
 from tests.support import ROOT
 
 HERE = ROOT / "tests" / "support"
-PROCESSES = 12
+
+# four coated-diffuse BSDFs whose reflectance (an RGB spectrum, a checkerboard) each
+# constructor evaluates in a kernel: under Mitsuba's parallel loader they ran on its
+# threads, nested in one another (every load of the fig. 10 scenes did)
+_FOUR = "".join(
+    f'<shape type="sphere"><point name="center" value="{i}, 0, 0"/>'
+    '<bsdf type="thinfilm_diffuse"><string name="layers" value="SiO2 300; Au 5"/>'
+    + ('<texture type="checkerboard" name="reflectance"/>' if i == 3 else
+       f'<rgb name="reflectance" value="0.{i + 2}, 0.3, 0.4"/>') + "</bsdf></shape>"
+    for i in range(4))
+XML = f'<scene version="3.0.0">{_FOUR}</scene>'
 
 
-def _load_once(_, variant="llvm_ad_spectral"):
-    out = subprocess.run([sys.executable, str(HERE / "parallel_load_child.py"), str(ROOT),
-                          variant], capture_output=True, text=True, timeout=300)
-    return out.returncode, out.stdout.strip()[-400:], out.stderr.strip()[-400:]
+def _as_dict():
+    return {"type": "scene", **{
+        f"s{i}": {"type": "sphere", "center": [i, 0, 0],
+                  "bsdf": {"type": "twosided", "bsdf": {
+                      "type": "thinfilm_diffuse", "layers": "SiO2 300; Au 5",
+                      "reflectance": {"type": "rgb", "value": [0.2 + 0.1 * i, 0.3, 0.4]}}}}
+        for i in range(4)}}
 
 
-def test_parallel_scene_loading_with_every_plugin_and_bitmaps_never_fails():
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        results = list(pool.map(_load_once, range(PROCESSES)))
-    failed = [r for r in results if r[0] != 0 or not r[1].startswith("ok")]
-    assert not failed, f"{len(failed)} of {PROCESSES} parallel loads failed: {failed[:3]}"
-    # every plugin type was built in the parallel load
-    kinds = set(results[0][1].split()[1:])
-    assert {"ThinFilmConductor", "ThinFilmDielectric", "ThinFilmDiffuse",
-            "ThinFilmRoughConductor", "ThinFilmRoughDielectric"} <= kinds
+@pytest.mark.parametrize("how", ["load_string", "load_file", "load_dict", "load_scene"])
+def test_a_scene_of_ours_builds_each_plugin_on_the_calling_thread_never_nested(
+        how, tmp_path, monkeypatch):
+    """``parallel=True`` given, positionally for ``load_file``: our constructors still run
+    on the thread that loads, one after the other (each evaluates a texture's range in a
+    kernel: :func:`~thinfilm_mi.render.textures.texture_range`, recorded here)."""
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_spectral")
+    import thinfilm_mi  # noqa: F401
+    from thinfilm_mi.batch import scene as tf_scene
+    from thinfilm_mi.render import textures
+
+    seen, depth = [], threading.local()
+    original = textures.texture_range
+
+    def spy(*args, **kwargs):
+        seen.append((threading.get_ident(), getattr(depth, "n", 0)))
+        depth.n = getattr(depth, "n", 0) + 1
+        try:
+            return original(*args, **kwargs)
+        finally:
+            depth.n -= 1
+    monkeypatch.setattr(textures, "texture_range", spy)
+    path = tmp_path / "four.xml"
+    path.write_text(XML)
+    loaded = {"load_string": lambda: mi.load_string(XML, parallel=True),
+              "load_file": lambda: mi.load_file(str(path), True),
+              "load_dict": lambda: mi.load_dict(_as_dict(), parallel=True),
+              "load_scene": lambda: tf_scene.load_scene(path)}[how]()
+    assert len(loaded.shapes()) == 4
+    assert len(seen) >= 4   # every constructor checked its reflectance
+    assert {t for t, _ in seen} == {threading.get_ident()}, "a constructor ran on a loader thread"
+    assert max(d for _, d in seen) == 0, "a constructor ran nested in another's kernel wait"
 
 
-def test_parallel_loading_builds_colour_tables_safely():
-    """llvm_ad_rgb: every constructor builds colour tables (float64 kernel launches,
-    the shared table cache) on Mitsuba's loader threads at once. 8 fresh processes
-    (~1.3 s each) must all load."""
-    with ThreadPoolExecutor(max_workers=2) as pool:
-        results = list(pool.map(lambda i: _load_once(i, "llvm_ad_rgb"), range(8)))
-    failed = [r for r in results if r[0] != 0 or not r[1].startswith("ok")]
-    assert not failed, f"{len(failed)} of 8 parallel loads failed: {failed[:3]}"
+def test_names_ours_finds_our_plugins_wherever_a_scene_names_them(tmp_path):
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_rgb")
+    from thinfilm_mi.render.gc_guard import names_ours
+
+    assert names_ours(_as_dict()) and names_ours(XML)   # nested in twosided; in XML
+    assert not names_ours({"type": "scene", "s": {"type": "sphere", "bsdf": {"type": "diffuse"}}})
+    assert not names_ours('<scene version="3.0.0"><shape type="sphere"/></scene>')
+    # a parameter may name the plugin; an include may hide one (not followed)
+    assert names_ours('<scene version="3.0.0"><bsdf type="$b"/></scene>', {"b": "thinfilm_conductor"})
+    assert names_ours('<scene version="3.0.0"><include filename="more.xml"/></scene>')
+    (tmp_path / "ours.xml").write_text(XML)
+    (tmp_path / "native.xml").write_text('<scene version="3.0.0"><shape type="sphere"/></scene>')
+    assert names_ours(tmp_path / "ours.xml") and names_ours(str(tmp_path / "ours.xml"))
+    assert not names_ours(tmp_path / "native.xml")
+    # a relative name, through Mitsuba's file resolver (shipped scenes; demo.xml names ours)
+    kept = mi.FileResolver(mi.file_resolver())
+    mi.file_resolver().prepend(str(ROOT / "scenes"))
+    try:
+        assert names_ours("demo.xml")
+    finally:
+        mi.set_file_resolver(kept)
+    # what Mitsuba will refuse, or an object already built, builds nothing of ours
+    assert not names_ours(tmp_path / "missing.xml") and not names_ours(None)
+    assert not names_ours(mi.load_dict({"type": "diffuse"}))
+
+
+def test_a_native_load_keeps_its_positional_arguments():
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_rgb")
+    import thinfilm_mi  # noqa: F401
+
+    assert mi.load_dict({"type": "diffuse"}, True, False).class_name() == "SmoothDiffuse"
+    assert mi.load_dict({"type": "thinfilm_conductor"}, True, False) is not None
 
 
 def test_library_and_plugins_never_call_load_dict():

@@ -359,14 +359,14 @@ def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
         raise UsageError(f"scene file not found: {path}")
     if not path.is_file():
         raise UsageError(f"scene file is not a file: {path}")
-    # Mitsuba's default, parallel instantiation: the thin-film constructors make
-    # no nested mi.load_dict (see thinfilm_mi.render.textures), so they are safe beside
-    # C++ plugins resolving files on other loader threads.
     config = mi.parser.ParserConfig(variant or mi.variant())
     try:
         with _files_beside(path), gc_guard.loading():   # not beside another thread's render
             state = mi.parser.parse_file(config, str(path), **dict(params or {}))
             _apply_overrides(state, size, spp, log)
+            # our constructors one after the other, never one nested in another's kernel
+            # wait on a loader thread (render/gc_guard.py)
+            config.parallel = not gc_guard.parsed_names_ours(state)
             mi.parser.transform_all(config, state)
             scene = mi.parser.instantiate(config, state)
     except RenderError:

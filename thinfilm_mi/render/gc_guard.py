@@ -57,6 +57,18 @@ plugin's constructor starts inside another load must not wait for a render that 
 for the outer load). Importing the package wraps Mitsuba's ``load_dict``, ``load_file``
 and ``load_string`` in :func:`loading`, as ``mi.render`` in :func:`rendering`.
 
+The third hazard (upstream too): Mitsuba loads a scene's objects as tasks of the thread pool
+that runs Dr.Jit's kernels, and a thread that waits for a kernel runs queued tasks meanwhile.
+A constructor of ours that evaluates a kernel at load (a texture's range, a table) so runs
+another object's constructor nested on its own thread, inside that wait; one such nesting
+crashed a worker of the test suite (SIGSEGV under ``texture_range``, constructors nested two
+deep on a loader thread). A scene that names one of our plugins (:func:`names_ours`) is
+therefore loaded with ``parallel=False``: its constructors run one after the other on the
+calling thread (:func:`parsed_names_ours` decides for a scene parsed by
+:mod:`mitsuba.parser`, as :func:`thinfilm_mi.batch.scene.load_scene` does). Our
+constructors hold the GIL, so they gain little from the loader's threads; scenes without
+our plugins load as Mitsuba decides.
+
 Limits: a render started another way (the integrator's own ``render``, or a
 ``render`` bound before this package was imported) is covered from the first
 traced call of a method of ours, not before it; a thread that has a profile
@@ -68,7 +80,8 @@ which none traces defer collection until there is one; objects the user froze wi
 counting (``del scene``) on one thread while another thread renders is outside a
 garbage collector's reach: only the upstream fix covers it. Scalar variants make no
 symbolic calls and never defer. A load made through ``mitsuba.parser`` directly, or
-through a ``load_*`` bound before this package was imported, does not take its turn. What
+through a ``load_*`` bound before this package was imported, does not take its turn, and
+runs our constructors on Mitsuba's loader threads unless told otherwise. What
 the guard costs is measured in ``benchmarks/gc_guard_bench.py``.
 """
 from __future__ import annotations
@@ -81,10 +94,13 @@ import sys
 import threading
 
 __all__ = ["install", "installed", "deferred_collections", "loading", "rendering", "watch_traces",
-           "TRACED_METHODS", "LOADS"]
+           "names_ours", "parsed_names_ours", "TRACED_METHODS", "LOADS", "OURS"]
 
 #: Mitsuba's functions that load a scene or an object (each takes its turn: :func:`loading`)
 LOADS = ("load_dict", "load_file", "load_string")
+
+#: what the type names of this package's plugins start with
+OURS = "thinfilm_"
 
 #: the methods Mitsuba calls on a Python BSDF or texture inside a symbolic call
 TRACED_METHODS = ("sample", "eval", "pdf", "eval_pdf", "eval_pdf_sample", "eval_diffuse_reflectance",
@@ -247,7 +263,7 @@ def install() -> None:
             os.register_at_fork(after_in_child=_after_fork)
         _cover("render", rendering)
         for name in LOADS:
-            _cover(name, loading)
+            _cover(name, loading, _serial_if_ours)
 
 
 def _after_fork() -> None:
@@ -259,10 +275,11 @@ def _after_fork() -> None:
         _guard.forget_threads()
 
 
-def _cover(name: str, block) -> None:
+def _cover(name: str, block, adjust=None) -> None:
     """Replace ``mitsuba.<name>`` (under every name Mitsuba's modules give it) by a wrapper
     that runs it inside ``block()`` (:func:`rendering` or :func:`loading`), so that a
-    user's call on any thread is covered from its start. Idempotent."""
+    user's call on any thread is covered from its start; ``adjust(args, kwargs)`` returns
+    the arguments to call it with. Idempotent."""
     import mitsuba
 
     original = getattr(mitsuba, name, None)
@@ -271,6 +288,8 @@ def _cover(name: str, block) -> None:
 
     @functools.wraps(original)
     def covered(*args, **kwargs):
+        if adjust is not None:
+            args, kwargs = adjust(args, kwargs)
         with block():
             return original(*args, **kwargs)
 
@@ -279,6 +298,55 @@ def _cover(name: str, block) -> None:
         if ((module_name == "mitsuba" or module_name.startswith("mitsuba."))
                 and getattr(module, name, None) is original):
             setattr(module, name, covered)
+
+
+def _serial_if_ours(args: tuple, kwargs: dict) -> tuple[tuple, dict]:
+    """A load's arguments, with ``parallel=False`` where its scene names one of our plugins
+    (see the module docstring: no constructor nested in another's kernel wait). Mitsuba's
+    loads take ``(scene, parallel, optimize)`` positionally."""
+    if not args or not names_ours(args[0], kwargs):
+        return args, kwargs
+    given = dict(zip(("parallel", "optimize"), args[1:3]))
+    return args[:1], {**kwargs, **given, "parallel": False}
+
+
+def names_ours(scene, kwargs: dict | None = None) -> bool:
+    """Whether loading ``scene`` may build one of this package's plugins: a dict (at any
+    depth) whose ``type`` starts with :data:`OURS`, or an XML string or file (a path;
+    Mitsuba's file resolver finds relative ones) whose text or substituted parameters
+    (``kwargs``, the ``$name`` values) name one, or that includes other files (not
+    followed: assumed to). Anything else (an object already built, a file that cannot
+    be read, for Mitsuba to refuse) is not."""
+    values = [str(v) for v in (kwargs or {}).values()]
+    if isinstance(scene, dict):
+        stack = [scene]
+        while stack:
+            d = stack.pop()
+            if str(d.get("type", "")).startswith(OURS):
+                return True
+            stack.extend(v for v in d.values() if isinstance(v, dict))
+        return False
+    if not isinstance(scene, (str, os.PathLike)):
+        return False
+    text = str(scene)
+    if "<" not in text:   # a file name
+        try:
+            import mitsuba
+            path = os.fspath(scene)
+            if not os.path.exists(path):
+                path = str(mitsuba.file_resolver().resolve(path))
+            with open(path, encoding="utf-8", errors="replace") as f:
+                text = f.read()
+        except (OSError, RuntimeError, TypeError, ValueError):
+            return False
+    return any(OURS in t for t in [text, *values]) or "<include" in text
+
+
+def parsed_names_ours(state) -> bool:
+    """Whether a parsed scene (a ``mitsuba.parser`` state, its includes and parameters
+    resolved) builds one of this package's plugins: to be instantiated with
+    ``ParserConfig.parallel`` false (see the module docstring)."""
+    return any(node.props.plugin_name().startswith(OURS) for node in state.nodes)
 
 
 def installed() -> bool:
