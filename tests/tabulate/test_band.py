@@ -79,6 +79,34 @@ def test_band_limited_values_match_a_brute_force_convolution(monkeypatch):
         np.testing.assert_allclose(vals[i, bins, 0], ref, atol=1e-4, rtol=0)
 
 
+def test_sample_is_the_gaussian_sum_of_the_bins_anywhere(monkeypatch):
+    """``Rows.sample`` (the Gaussian summed over a row's bins by a recurrence) against the
+    sum written out with one exponential a bin, at random wavenumbers inside the bins'
+    extent, near its ends and beyond them (no bins there: zero), over rows whose points
+    differ. The recurrence's rounding grows by ~1e-16 a bin over 2 reach + 2 bins, hence
+    1e-12 of the largest value."""
+    side = _resonant_side(monkeypatch)
+    rows = band_tables.Rows(side, axes.BAND, 1.0)
+    xs = np.array([0.0, 0.45])
+    rows.compute(xs)
+    raw = np.stack([rows._bins_of[k] for k in rows._keys(xs)])
+    rng = np.random.default_rng(3)
+    nu = rows.wavenumbers
+    span = nu[0] - nu[-1]
+    nus = np.stack([rng.uniform(nu[-1] - 0.2 * span, nu[0] + 0.2 * span, 400) for _ in xs])
+    got = rows.sample(xs, nus)
+    g = np.exp(-0.5 * ((nus[..., None] - nu[None, None, :]) / rows.sig) ** 2) / (
+        rows.sig * math.sqrt(2.0 * math.pi))
+    # the bins within the Gaussian's reach: bins k0 - reach .. k0 + reach + 1 of bin k0
+    k0 = np.floor((rows.top - nus) / rows.w + rows.b0)[..., None]
+    b = np.arange(nu.size)[None, None, :]
+    g *= (b >= k0 - rows.reach) & (b <= k0 + rows.reach + 1)
+    ref = np.einsum("rkb,rbc->rkc", g, raw)
+    np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12 * np.abs(ref).max())
+    beyond = (nus > nu[0] + (rows.reach + 2) * rows.w) | (nus < nu[-1] - (rows.reach + 2) * rows.w)
+    assert beyond.any() and not np.any(got[beyond])
+
+
 def test_a_resonant_stack_gets_a_verified_band_limited_table(monkeypatch):
     """The 10-film stack on a metal, which no table of the exact values resolves,
     gets a band-limited one at the default target; its lookups agree with

@@ -833,20 +833,29 @@ class Rows:
         bins, to rounding)."""
         keys = self._keys(xs)
         self.compute(keys)
+        J, nb = self.reach, self.nb
+        # each row's bins between 2J + 2 zeros at either end, as wide as the bins a point
+        # reaches: a point's bins all lie in its row, a point beyond them reads zeros
         raw = np.stack([self._bins_of[k] for k in keys])                 # (R, nb, C)
+        R, C, pad = raw.shape[0], raw.shape[2], 2 * J + 2
+        flat = np.pad(raw, ((0, 0), (pad, pad), (0, 0))).reshape(-1, C)
         p = (self.top - np.asarray(nus, np.float64)) / self.w + self.b0  # bin coordinates
-        k0 = np.floor(p).astype(np.int64)
-        R, K = p.shape
-        flat = raw.reshape(R * self.nb, -1)
-        base = (np.arange(R) * self.nb)[:, None]
-        norm = 1.0 / (self.sig * math.sqrt(2.0 * math.pi))
-        out = np.zeros((R, K, flat.shape[1]))
-        for j in range(-self.reach, self.reach + 2):
-            b = k0 + j
-            inside = (b >= 0) & (b < self.nb)
-            g = np.exp(-0.5 * ((p - b) * (self.w / self.sig)) ** 2) * norm * inside
-            out += g[..., None] * flat.take((base + np.clip(b, 0, self.nb - 1)).ravel(),
-                                            axis=0).reshape(R, K, -1)
+        k0 = np.floor(p)
+        f = p - k0                                                       # in [0, 1)
+        # bin k0 - J, padded
+        first = np.clip(k0 + (pad - J), 0, nb + pad).astype(np.int64)
+        first += (np.arange(R) * (nb + 2 * pad))[:, None]
+        # the Gaussian at bins k0 + j, j = -J .. J + 1, by a recurrence in j (two
+        # products a bin instead of an exponential): g_{j+1} = g_j r_j, r_{j+1} = r_j e^{-s²}
+        s2 = (self.w / self.sig) ** 2
+        g = np.exp(-0.5 * s2 * (f + J) ** 2) / (self.sig * math.sqrt(2.0 * math.pi))
+        r = np.exp(s2 * (f + J) - 0.5 * s2)
+        decay = math.exp(-s2)
+        out = np.zeros((R, p.shape[1], C))
+        for j in range(2 * J + 2):
+            out += g[..., None] * flat.take(first + j, axis=0)
+            g *= r
+            r *= decay
         return out
 
     # -- colour check -------------------------------------------------------------
