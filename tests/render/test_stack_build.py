@@ -219,3 +219,26 @@ def test_a_mirrored_plan_without_the_ambient_sides_table_is_planned_side_by_side
     assert alone.sides[True].table is not None and not alone.sides[True].transmission
     assert alone.sides[False].loop is not None and alone.sides[True].loop is None
     assert alone.gave_up == {False} and alone.failed == []
+
+
+def test_a_side_that_cannot_be_tabulated_is_named_and_the_other_keeps_its_table(monkeypatch):
+    """``tabulate=true`` over an absorbing stack on glass (the paper's Fig. 8c): where the
+    side lit from the substrate cannot be tabulated (there, beyond the critical angle,
+    the metal films' plasmon dip is narrower than a table within ``table_error`` in
+    ``MAX_TEXELS`` can follow: ~2 s to find out, so its build is made to fail here), the
+    warning names that side and the plan is mixed: the ambient side reads its table."""
+    from thinfilm_mi.render.stack_plan import StackOptions
+    real = stack_build.side_table
+
+    def fail_inside(facts, options, side, quantity=None):
+        if side.n0 is not facts.stack.ambient:
+            return None, {"result": "over budget"}
+        return real(facts, options, side) if quantity is None else real(facts, options, side, quantity)
+    monkeypatch.setattr(stack_build, "side_table", fail_inside)
+    stack = _films((1.46, 500), ("Au", 20), ("Al", 10), substrate=1.6)
+    options = StackOptions(tabulate=True, sides={False: True, True: True})
+    with pytest.warns(UserWarning, match=r"the side of the stack \[.*\] lit from the substrate "
+                                         r"cannot be tabulated .*; that side is evaluated exactly"):
+        plan = stack_build.build_tables(_plan(stack, options))
+    assert plan.sides[False].table is not None and plan.sides[True].table is None
+    assert plan.failed == [True]

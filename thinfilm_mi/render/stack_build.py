@@ -89,10 +89,14 @@ def build_tables(plan: StackPlan) -> StackPlan:
     if option.required and failed:
         why = "; ".join(sorted({str((sides[i].build_report or {}).get("result"))
                                 for i in failed}))
-        warnings.warn(f"{stack.plugin}: the stack {stack.describe()} cannot be tabulated "
+        # a side that was tabulated keeps its table (the plan is then mixed)
+        what, rest = (f"the stack {stack.describe()}", "it is") if len(failed) == len(sides) else (
+            f"the side of the stack {stack.describe()} lit from the "
+            f"{'substrate' if failed[0] else 'ambient'}", "that side is")
+        warnings.warn(f"{stack.plugin}: {what} cannot be tabulated "
                       f"within table_error={options.table_error:g} in {MAX_TEXELS} "
                       f"texels and {option.budget_scale:g}x the build budget of 'auto' "
-                      f"({why}); it is evaluated exactly", stacklevel=4)
+                      f"({why}); {rest} evaluated exactly", stacklevel=4)
     return replace(plan, sides=sides, mirrored=mirrored, failed=failed,
                    gave_up=plan.gave_up | set(failed))
 
