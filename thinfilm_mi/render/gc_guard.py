@@ -81,7 +81,9 @@ counting (``del scene``) on one thread while another thread renders is outside a
 garbage collector's reach: only the upstream fix covers it. Scalar variants make no
 symbolic calls and never defer. A load made through ``mitsuba.parser`` directly, or
 through a ``load_*`` bound before this package was imported, does not take its turn, and
-runs our constructors on Mitsuba's loader threads unless told otherwise. What
+runs our constructors on Mitsuba's loader threads unless told otherwise; a scene without
+our plugins that another thread loads in parallel meanwhile can still have one of its
+constructors run inside one of ours. What
 the guard costs is measured in ``benchmarks/gc_guard_bench.py``.
 """
 from __future__ import annotations
