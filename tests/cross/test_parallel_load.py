@@ -134,12 +134,12 @@ def test_library_and_plugins_never_call_load_dict():
 
 
 def test_no_plugin_constructor_swaps_the_file_resolver(monkeypatch):
-    """Deterministic companion of the stress test (whose failure rate before the fix
-    depended on machine load: ~25 % of processes on an idle 2-core machine, ~0-6 %
-    with both cores busy): every plugin type, with every kind of index, factor,
-    roughness and thickness texture, is built through Mitsuba's parser while
-    ``load_dict``/``load_string``/``load_file`` are spies; the constructors must not
-    call them (each installs and frees a FileResolver copy)."""
+    """The cause a stress test once found by chance (~25 % of fresh processes on an
+    idle 2-core machine, ~0-6 % with both cores busy), checked without it: every plugin
+    type, with every kind of index, factor, roughness and thickness texture, is built
+    through Mitsuba's parser while ``load_dict``/``load_string``/``load_file`` are
+    spies; the constructors must not call them (each installs and frees a FileResolver
+    copy, which loader threads of a scene loaded in parallel may be reading)."""
     import mitsuba as mi
 
     mi.set_variant("llvm_ad_spectral")
@@ -174,6 +174,7 @@ def test_no_plugin_constructor_swaps_the_file_resolver(monkeypatch):
         f'<shape type="sphere"><point name="center" value="{i}, 0, 0"/>{b}</shape>'
         for i, b in enumerate(bsdfs)) + "</scene>"
     config = mi.parser.ParserConfig("llvm_ad_spectral")
+    config.parallel = False   # as the package loads a scene of ours (no nested constructors)
     state = mi.parser.parse_string(config, xml)
     mi.parser.transform_all(config, state)
     scene = mi.parser.instantiate(config, state)
