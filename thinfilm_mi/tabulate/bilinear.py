@@ -108,8 +108,13 @@ def _verified(spline: Table, side: SideData, grids) -> list:
         s = np.concatenate([su + i * m for i in range(axis.segments)])[None, :]
         if axis.needs_n_exit:     # the coordinate's angle depends on the indices at λ
             n0, _, ne = side_indices(side, v_nodes_wl(tv, spline.nv))
-            cos = axis.nodes_cos(s, np.asarray(n0, np.float64)[:, None],
-                                 np.asarray(ne).real[:, None], spline.nu, ghost=0)
+            n0 = np.broadcast_to(np.asarray(n0, np.float64), tv.shape)
+            ne = np.broadcast_to(np.asarray(ne).real, tv.shape)
+            # one row of cosines per distinct pair of indices (media of constant index:
+            # one for every wavelength), the same numbers as a row per wavelength
+            pairs, row = np.unique(np.stack([n0, ne]), axis=1, return_inverse=True)
+            cos = axis.nodes_cos(s, pairs[0][:, None], pairs[1][:, None], spline.nu,
+                                 ghost=0)[row.ravel()]
         else:
             cos = axis.nodes_cos(s, 1.0, 1.0, spline.nu, ghost=0)
         out.append(cos >= GRAZING_COS)
