@@ -1,6 +1,7 @@
 """Test helpers for the files that evaluate thin-film stacks in LLVM kernels."""
 from __future__ import annotations
 
+import contextlib
 import gc
 
 import drjit as dr
@@ -24,27 +25,44 @@ def compiled(history):
             and not k.get("cache_hit", False) and not k.get("cache_disk", False)]
 
 
+@contextlib.contextmanager
+def same_instances():
+    """No BSDF instance freed by the garbage collector while the block runs: garbage is
+    collected first, then automatic collection is off until the block ends.
+
+    A render traces every live instance of a Python BSDF, those of a scene an earlier
+    test dropped included, so a dropped scene freed between two renders changes the
+    render kernel as an edit must not. A ``gc.collect()`` before the renders alone was
+    not enough (two such failures in one full run of the suite, on one worker): an
+    automatic pass during a render is deferred by ``thinfilm_mi.render.gc_guard``, whose
+    owed collection at the render's end then frees what became garbage since."""
+    enabled = gc.isenabled()
+    gc.collect()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def assert_edits_render_from_cache(scene, params, edits: dict) -> None:
     """Apply ``edits`` (key -> value) to ``params`` of ``scene``: the render after them runs
     every JIT kernel from the cache (the edited values are opaque inputs, nothing
-    recompiles) and differs from the render before them (the edits took effect).
-
-    Garbage is collected first: a render traces every live instance of a Python BSDF,
-    those of a scene an earlier test dropped included, so a collection between the two
-    renders (a dropped scene freed) would change the kernel as an edit must not (seen
-    once in a full run of the suite, on a worker that had run other renders before)."""
-    gc.collect()
-    first = np.array(mi.render(scene, seed=1))
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    try:
-        dr.kernel_history()  # clear
-        for key, value in edits.items():
-            params[key] = value
-        params.update()
-        second = np.array(mi.render(scene, seed=1))
-        history = dr.kernel_history()
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    recompiles) and differs from the render before them (the edits took effect). The
+    renders see the same BSDF instances (:func:`same_instances`)."""
+    with same_instances():
+        first = np.array(mi.render(scene, seed=1))
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        try:
+            dr.kernel_history()  # clear
+            for key, value in edits.items():
+                params[key] = value
+            params.update()
+            second = np.array(mi.render(scene, seed=1))
+            history = dr.kernel_history()
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, False)
     jit = [k for k in history if k["type"] == dr.KernelType.JIT]
     assert jit, "no kernel ran"
     assert all(k.get("cache_hit") for k in jit), "a parameter edit recompiled the render kernel"
