@@ -80,6 +80,53 @@ def test_a_scene_of_ours_builds_each_plugin_on_the_calling_thread_never_nested(
     assert max(d for _, d in seen) == 0, "a constructor ran nested in another's kernel wait"
 
 
+# a scene to render: a coated conductor sphere (the film loop read from buffers) under a sky
+RENDERED = ('<scene version="3.0.0"><integrator type="path"><integer name="max_depth" value="3"/>'
+            '</integrator><sensor type="perspective"><film type="hdrfilm">'
+            '<integer name="width" value="8"/><integer name="height" value="8"/></film>'
+            '<sampler type="independent"><integer name="sample_count" value="1"/></sampler>'
+            '<transform name="to_world"><lookat origin="0, 0, 4" target="0, 0, 0" up="0, 1, 0"/>'
+            '</transform></sensor><emitter type="constant"/><shape type="sphere">'
+            '<bsdf type="thinfilm_conductor"><string name="layers" value="1.46 300; 0.42+2.47j 15"/>'
+            '<string name="tabulate" value="false"/></bsdf></shape></scene>')
+
+
+@pytest.mark.parametrize("how", ["load_string", "load_file", "load_dict", "load_scene"])
+def test_the_first_render_of_a_scene_loaded_on_one_thread_runs_every_later_renders_kernel(
+        how, tmp_path):
+    """Loaded on one thread and rendered in the load's Dr.Jit scope, the first render's
+    expressions merged with the constructors' (common subexpressions): it compiled a kernel
+    no later render ran, and every later render compiled another (a thickness edit then
+    recompiled wherever the second kernel was not yet in the kernel cache on disk). A new
+    scope after the load (``gc_guard.after_serial_load``) gives every render one kernel,
+    compared by hash (a kernel read from the disk cache counts as a hit): the second render
+    runs no kernel the first did not."""
+    import mitsuba as mi
+
+    mi.set_variant("llvm_ad_spectral")
+    import thinfilm_mi  # noqa: F401
+    from tests.support.kernels import render_kernels, same_instances
+    from thinfilm_mi.batch import scene as tf_scene
+
+    path = tmp_path / "rendered.xml"
+    path.write_text(RENDERED)
+    as_dict = {"type": "scene", "integrator": {"type": "path", "max_depth": 3},
+               "sensor": {"type": "perspective",
+                          "to_world": mi.ScalarTransform4f().look_at([0, 0, 4], [0, 0, 0], [0, 1, 0]),
+                          "film": {"type": "hdrfilm", "width": 8, "height": 8},
+                          "sampler": {"type": "independent", "sample_count": 1}},
+               "sky": {"type": "constant"},
+               "ball": {"type": "sphere", "bsdf": {"type": "thinfilm_conductor", "tabulate": False,
+                                                   "layers": "1.46 300; 0.42+2.47j 15"}}}
+    scene = {"load_string": lambda: mi.load_string(RENDERED), "load_file": lambda: mi.load_file(str(path)),
+             "load_dict": lambda: mi.load_dict(as_dict),
+             "load_scene": lambda: tf_scene.load_scene(path)}[how]()
+    with same_instances():
+        kernels = [render_kernels(scene)[1] for _ in range(2)]
+    # (the first may also evaluate what the load left unevaluated, in kernels of its own)
+    assert set(kernels[1]) <= set(kernels[0]), "the first render ran a kernel no later render runs"
+
+
 def test_names_ours_finds_our_plugins_wherever_a_scene_names_them(tmp_path):
     import mitsuba as mi
 

@@ -369,6 +369,8 @@ def load_scene(path: str | os.PathLike, params: Mapping[str, str] | None = None,
             config.parallel = not gc_guard.parsed_names_ours(state)
             mi.parser.transform_all(config, state)
             scene = mi.parser.instantiate(config, state)
+            if not config.parallel:
+                gc_guard.after_serial_load()
     except RenderError:
         raise
     except Exception as e:  # Mitsuba reports parse, parameter and plugin errors as exceptions

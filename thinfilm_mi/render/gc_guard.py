@@ -65,7 +65,8 @@ crashed a worker of the test suite (SIGSEGV under ``texture_range``, constructor
 deep on a loader thread). A scene that names one of our plugins (:func:`names_ours`) is
 therefore loaded with ``parallel=False``: its constructors run one after the other on the
 calling thread (:func:`parsed_names_ours` decides for a scene parsed by
-:mod:`mitsuba.parser`, as :func:`thinfilm_mi.batch.scene.load_scene` does). Our
+:mod:`mitsuba.parser`, as :func:`thinfilm_mi.batch.scene.load_scene` does), and a new
+Dr.Jit scope starts after it (:func:`after_serial_load`), as after a parallel load. Our
 constructors hold the GIL, so they gain little from the loader's threads; scenes without
 our plugins load as Mitsuba decides.
 
@@ -96,7 +97,8 @@ import sys
 import threading
 
 __all__ = ["install", "installed", "deferred_collections", "loading", "rendering", "watch_traces",
-           "names_ours", "parsed_names_ours", "TRACED_METHODS", "LOADS", "OURS"]
+           "names_ours", "parsed_names_ours", "after_serial_load", "TRACED_METHODS", "LOADS",
+           "OURS"]
 
 #: Mitsuba's functions that load a scene or an object (each takes its turn: :func:`loading`)
 LOADS = ("load_dict", "load_file", "load_string")
@@ -265,7 +267,7 @@ def install() -> None:
             os.register_at_fork(after_in_child=_after_fork)
         _cover("render", rendering)
         for name in LOADS:
-            _cover(name, loading, _serial_if_ours)
+            _cover(name, loading, _load)
 
 
 def _after_fork() -> None:
@@ -277,11 +279,11 @@ def _after_fork() -> None:
         _guard.forget_threads()
 
 
-def _cover(name: str, block, adjust=None) -> None:
+def _cover(name: str, block, call=None) -> None:
     """Replace ``mitsuba.<name>`` (under every name Mitsuba's modules give it) by a wrapper
     that runs it inside ``block()`` (:func:`rendering` or :func:`loading`), so that a
-    user's call on any thread is covered from its start; ``adjust(args, kwargs)`` returns
-    the arguments to call it with. Idempotent."""
+    user's call on any thread is covered from its start; ``call(original, args, kwargs)``
+    makes the call where given. Idempotent."""
     import mitsuba
 
     original = getattr(mitsuba, name, None)
@@ -290,10 +292,8 @@ def _cover(name: str, block, adjust=None) -> None:
 
     @functools.wraps(original)
     def covered(*args, **kwargs):
-        if adjust is not None:
-            args, kwargs = adjust(args, kwargs)
         with block():
-            return original(*args, **kwargs)
+            return original(*args, **kwargs) if call is None else call(original, args, kwargs)
 
     covered.__wrapped_by_gc_guard__ = True
     for module_name, module in list(sys.modules.items()):
@@ -302,14 +302,30 @@ def _cover(name: str, block, adjust=None) -> None:
             setattr(module, name, covered)
 
 
-def _serial_if_ours(args: tuple, kwargs: dict) -> tuple[tuple, dict]:
-    """A load's arguments, with ``parallel=False`` where its scene names one of our plugins
-    (see the module docstring: no constructor nested in another's kernel wait). Mitsuba's
-    loads take ``(scene, parallel, optimize)`` positionally."""
+def _load(original, args: tuple, kwargs: dict):
+    """A Mitsuba load, with ``parallel=False`` where its scene names one of our plugins
+    (see the module docstring: no constructor nested in another's kernel wait), then
+    :func:`after_serial_load`. Mitsuba's loads take ``(scene, parallel, optimize)``
+    positionally."""
     if not args or not names_ours(args[0], kwargs):
-        return args, kwargs
+        return original(*args, **kwargs)
     given = dict(zip(("parallel", "optimize"), args[1:3]))
-    return args[:1], {**kwargs, **given, "parallel": False}
+    loaded = original(*args[:1], **{**kwargs, **given, "parallel": False})
+    after_serial_load()
+    return loaded
+
+
+def after_serial_load() -> None:
+    """Start a new Dr.Jit scope after a scene loaded on one thread, as Mitsuba's parallel
+    loader does after its last object: without it the first render traced in the load's
+    scope, where Dr.Jit merged its expressions with the constructors', and compiled a
+    kernel that no later render reused (every later render compiled another)."""
+    import drjit
+    import mitsuba
+
+    backend = drjit.backend_v(mitsuba.Float)
+    if backend != drjit.JitBackend.Invalid:
+        drjit.detail.new_scope(backend)
 
 
 def names_ours(scene, kwargs: dict | None = None) -> bool:
