@@ -9,6 +9,9 @@
   ``texture_range``; ``thinfilm_mi/render/gc_guard.py``): a scene that names one of
   our plugins loads on the calling thread, which is checked without chance by
   recording where the constructors run.
+* Loaded so, a scene's first render traced in the load's Dr.Jit scope and compiled a
+  kernel no later render ran: a new scope starts after the load, which is checked by the
+  kernels' hashes of two renders.
 """
 from __future__ import annotations
 
