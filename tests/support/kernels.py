@@ -32,10 +32,11 @@ def same_instances():
 
     A render traces every live instance of a Python BSDF, those of a scene an earlier
     test dropped included, so a dropped scene freed between two renders changes the
-    render kernel as an edit must not. A ``gc.collect()`` before the renders alone was
-    not enough (two such failures in one full run of the suite, on one worker): an
-    automatic pass during a render is deferred by ``thinfilm_mi.render.gc_guard``, whose
-    owed collection at the render's end then frees what became garbage since."""
+    render kernel as an edit must not. A ``gc.collect()`` before the renders alone is not
+    enough: an automatic pass during a render is deferred by
+    ``thinfilm_mi.render.gc_guard``, whose owed collection at the render's end then frees
+    what became garbage since (a dropped scene made after the collection, under
+    ``gc.set_threshold(10)``, changed the second render's kernel)."""
     enabled = gc.isenabled()
     gc.collect()
     gc.disable()
