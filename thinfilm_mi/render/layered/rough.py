@@ -274,7 +274,7 @@ class RoughEstimator(CoatedEstimator):
         if self.reverse:
             q = base.pdf(ctx_s, base_interaction(si, y), w, alive & logical_not(delta))
             mis_lobe = power_heuristic(p_w * dr.detach(bs.pdf), p_w * dr.detach(p_y),
-                              dr.detach(p_y) * dr.detach(q))
+                                       dr.detach(p_y) * dr.detach(q))
         else:
             mis_lobe = power_heuristic(dr.detach(bs.pdf), dr.detach(p_y))
         mis = dr.select(delta, mis_delta, mis_lobe)
